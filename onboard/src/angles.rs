@@ -1,0 +1,1 @@
+//! Passing-angle calculator (DESIGN.md section 6 step 8).

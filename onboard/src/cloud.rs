@@ -1,0 +1,1 @@
+//! Point clouds: the shared point type and PLY/PCD/XYZ input and output.

@@ -1,0 +1,7 @@
+//! passangle onboard library: sensor decoding, the point-cloud pipeline, the angle calculator, links
+//! and the run recorder (DESIGN.md section 6). Everything here except the thin IO adapters is a pure
+//! function of its inputs: no clocks, no IO in the pipeline or the angle calculator.
+
+pub mod angles;
+pub mod cloud;
+pub mod vlp16;
