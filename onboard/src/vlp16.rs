@@ -1,1 +1,0 @@
-//! VLP-16 decoding, frame assembly and sources (DESIGN.md section 6 step 1).
