@@ -1,1 +1,0 @@
-//! Point clouds: the shared point type and PLY/PCD/XYZ input and output.

@@ -1,0 +1,355 @@
+//! Point clouds: the shared point type and PLY / PCD / XYZ / CSV input and output.
+//!
+//! A [`Cloud`] is a plain list of points in metres (`points_m`). The frame is whatever the producer
+//! says it is; the angle calculator expects the vehicle-cloud frame of DESIGN.md section 8 (z roughly
+//! up, x roughly toward the vehicle front) but tolerates tilt, yaw and offsets.
+//!
+//! Reading is split the usual way: [`parse_cloud`] is a pure function over bytes (it never panics on
+//! any input: every length and count is checked before it is used, see the `never panics` property
+//! test and the `cloud_parse` fuzz target), and [`read_cloud`] is the thin file adapter that adds the
+//! path to every error. Points whose x, y or z is not finite (NaN, inf) are dropped and counted in
+//! [`ReadStats::dropped_non_finite`]; an empty result is an error ([`ParseError::Empty`]).
+//!
+//! Supported inputs:
+//! - PLY: `ascii`, `binary_little_endian`, `binary_big_endian`; any numeric type for x, y, z; other
+//!   properties, list properties and other elements (faces, before or after the vertices) are skipped.
+//! - PCD (v0.7 and older headers): `ascii`, `binary`, `binary_compressed` (LZF, decoded here).
+//! - `.xyz` / `.csv` / `.txt`: one point per line, separated by whitespace, commas or semicolons; `#`
+//!   comments; an optional header line naming the `x`, `y`, `z` columns.
+//!
+//! Writers: [`write_ply`] (ascii or binary little endian, `double` x y z) and [`write_xyz`].
+
+mod lzf;
+mod pcd;
+mod ply;
+mod text;
+
+use std::fmt;
+use std::io::{self, Write};
+use std::path::{Path, PathBuf};
+
+/// A point cloud: points in metres, in the frame the producer documents.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Cloud {
+    /// Points `[x, y, z]` in metres.
+    pub points_m: Vec<[f64; 3]>,
+}
+
+/// File formats the reader understands.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum CloudFormat {
+    /// Stanford PLY.
+    Ply,
+    /// Point Cloud Library PCD.
+    Pcd,
+    /// Delimited text: whitespace, comma or semicolon separated x y z per line.
+    Text,
+}
+
+impl fmt::Display for CloudFormat {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            CloudFormat::Ply => "PLY",
+            CloudFormat::Pcd => "PCD",
+            CloudFormat::Text => "text",
+        })
+    }
+}
+
+/// What the reader saw, for the user and the report.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ReadStats {
+    /// The format that was parsed.
+    pub format: CloudFormat,
+    /// The encoding inside that format (`ascii`, `binary_little_endian`, `binary_compressed`, ...).
+    pub encoding: &'static str,
+    /// Points (records) present in the file, finite or not.
+    pub points_in_file: usize,
+    /// Points dropped because x, y or z was NaN or infinite.
+    pub dropped_non_finite: usize,
+}
+
+/// A malformed or unsupported cloud. Line numbers are 1-based and count header lines too.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum ParseError {
+    /// The bytes are not a PLY, PCD or text cloud the reader recognises.
+    #[error("unknown cloud format (expected PLY, PCD, or x y z text)")]
+    UnknownFormat,
+    /// The header is malformed; the message names the field.
+    #[error("header line {line}: {message}")]
+    Header {
+        /// 1-based header line.
+        line: usize,
+        /// What was wrong.
+        message: String,
+    },
+    /// A text data line is malformed.
+    #[error("line {line}: {message}")]
+    Data {
+        /// 1-based line in the file.
+        line: usize,
+        /// What was wrong.
+        message: String,
+    },
+    /// Binary data ends before the header's point count.
+    #[error(
+        "truncated data: header declares {declared} {what}, the data holds only {complete} complete ones"
+    )]
+    Truncated {
+        /// What was being read (`vertices`, `points`, `faces`).
+        what: &'static str,
+        /// Count declared in the header.
+        declared: usize,
+        /// Complete records present.
+        complete: usize,
+    },
+    /// A compressed block could not be decoded.
+    #[error("compressed data: {0}")]
+    Compressed(String),
+    /// The cloud holds no finite point.
+    #[error(
+        "empty cloud: {points_in_file} points in the file, {dropped_non_finite} dropped as NaN/inf, none left"
+    )]
+    Empty {
+        /// Points in the file.
+        points_in_file: usize,
+        /// Points dropped as non-finite.
+        dropped_non_finite: usize,
+    },
+}
+
+/// Reading a cloud file failed.
+#[derive(Debug, thiserror::Error)]
+pub enum CloudError {
+    /// The file could not be read.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The IO error.
+        source: io::Error,
+    },
+    /// The file's content is malformed.
+    #[error("{path}: {source}")]
+    Parse {
+        /// The file.
+        path: PathBuf,
+        /// What was wrong, and where.
+        source: ParseError,
+    },
+}
+
+/// Guess the format from the file extension, then from the first bytes.
+pub fn detect_format(path: Option<&Path>, bytes: &[u8]) -> Option<CloudFormat> {
+    let ext = path
+        .and_then(Path::extension)
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase);
+    match ext.as_deref() {
+        Some("ply") => return Some(CloudFormat::Ply),
+        Some("pcd") => return Some(CloudFormat::Pcd),
+        Some("xyz" | "csv" | "txt" | "pts") => return Some(CloudFormat::Text),
+        _ => {}
+    }
+    if bytes.starts_with(b"ply") {
+        return Some(CloudFormat::Ply);
+    }
+    let head = &bytes[..bytes.len().min(256)];
+    let head = String::from_utf8_lossy(head);
+    if head.starts_with("# .PCD") || head.starts_with("VERSION") || head.starts_with("FIELDS") {
+        return Some(CloudFormat::Pcd);
+    }
+    let first = head.trim_start().chars().next()?;
+    (first.is_ascii_digit()
+        || matches!(first, '-' | '+' | '.' | '#')
+        || first.is_ascii_alphabetic())
+    .then_some(CloudFormat::Text)
+}
+
+/// Parse a cloud from bytes. Pure; never panics.
+pub fn parse_cloud(bytes: &[u8], format: CloudFormat) -> Result<(Cloud, ReadStats), ParseError> {
+    let raw = match format {
+        CloudFormat::Ply => ply::parse(bytes)?,
+        CloudFormat::Pcd => pcd::parse(bytes)?,
+        CloudFormat::Text => text::parse(bytes)?,
+    };
+    finish(raw, format)
+}
+
+/// Read a cloud file; the format comes from the extension, else from the first bytes.
+pub fn read_cloud(path: &Path) -> Result<(Cloud, ReadStats), CloudError> {
+    let bytes = std::fs::read(path).map_err(|source| CloudError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    let parse_err = |source| CloudError::Parse {
+        path: path.to_path_buf(),
+        source,
+    };
+    let format =
+        detect_format(Some(path), &bytes).ok_or_else(|| parse_err(ParseError::UnknownFormat))?;
+    parse_cloud(&bytes, format).map_err(parse_err)
+}
+
+/// PLY body encodings the writer can produce.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum PlyEncoding {
+    /// Human-readable, one vertex per line.
+    Ascii,
+    /// Compact binary, little endian.
+    BinaryLittleEndian,
+}
+
+/// Write a cloud as PLY with `double` x, y, z (read back bit-exactly by [`parse_cloud`]).
+pub fn write_ply<W: Write>(mut out: W, cloud: &Cloud, encoding: PlyEncoding) -> io::Result<()> {
+    let format = match encoding {
+        PlyEncoding::Ascii => "ascii",
+        PlyEncoding::BinaryLittleEndian => "binary_little_endian",
+    };
+    write!(
+        out,
+        "ply\nformat {format} 1.0\ncomment passangle cloud, metres\nelement vertex {}\n\
+         property double x\nproperty double y\nproperty double z\nend_header\n",
+        cloud.points_m.len()
+    )?;
+    for p in &cloud.points_m {
+        match encoding {
+            PlyEncoding::Ascii => writeln!(out, "{} {} {}", p[0], p[1], p[2])?,
+            PlyEncoding::BinaryLittleEndian => {
+                for v in p {
+                    out.write_all(&v.to_le_bytes())?;
+                }
+            }
+        }
+    }
+    out.flush()
+}
+
+/// Write a cloud as `x y z` text lines (shortest round-trip decimal form).
+pub fn write_xyz<W: Write>(mut out: W, cloud: &Cloud) -> io::Result<()> {
+    for p in &cloud.points_m {
+        writeln!(out, "{} {} {}", p[0], p[1], p[2])?;
+    }
+    out.flush()
+}
+
+/// Points as parsed, before non-finite ones are dropped.
+struct RawCloud {
+    points: Vec<[f64; 3]>,
+    encoding: &'static str,
+}
+
+fn finish(raw: RawCloud, format: CloudFormat) -> Result<(Cloud, ReadStats), ParseError> {
+    let points_in_file = raw.points.len();
+    let mut points_m = raw.points;
+    points_m.retain(|p| p.iter().all(|v| v.is_finite()));
+    let dropped_non_finite = points_in_file - points_m.len();
+    if points_m.is_empty() {
+        return Err(ParseError::Empty {
+            points_in_file,
+            dropped_non_finite,
+        });
+    }
+    Ok((
+        Cloud { points_m },
+        ReadStats {
+            format,
+            encoding: raw.encoding,
+            points_in_file,
+            dropped_non_finite,
+        },
+    ))
+}
+
+/// Scalar types shared by PLY and PCD binary bodies.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Scalar {
+    I8,
+    U8,
+    I16,
+    U16,
+    I32,
+    U32,
+    I64,
+    U64,
+    F32,
+    F64,
+}
+
+impl Scalar {
+    fn size(self) -> usize {
+        match self {
+            Scalar::I8 | Scalar::U8 => 1,
+            Scalar::I16 | Scalar::U16 => 2,
+            Scalar::I32 | Scalar::U32 | Scalar::F32 => 4,
+            Scalar::I64 | Scalar::U64 | Scalar::F64 => 8,
+        }
+    }
+
+    /// Decode one value; `bytes` must hold at least `size()` bytes (callers check), else NaN.
+    fn read(self, bytes: &[u8], big_endian: bool) -> f64 {
+        fn arr<const N: usize>(b: &[u8], be: bool) -> Option<[u8; N]> {
+            let mut a: [u8; N] = b.get(..N)?.try_into().ok()?;
+            if be {
+                a.reverse();
+            }
+            Some(a)
+        }
+        let v = match self {
+            Scalar::I8 => arr::<1>(bytes, false).map(|a| f64::from(i8::from_le_bytes(a))),
+            Scalar::U8 => arr::<1>(bytes, false).map(|a| f64::from(a[0])),
+            Scalar::I16 => arr::<2>(bytes, big_endian).map(|a| f64::from(i16::from_le_bytes(a))),
+            Scalar::U16 => arr::<2>(bytes, big_endian).map(|a| f64::from(u16::from_le_bytes(a))),
+            Scalar::I32 => arr::<4>(bytes, big_endian).map(|a| f64::from(i32::from_le_bytes(a))),
+            Scalar::U32 => arr::<4>(bytes, big_endian).map(|a| f64::from(u32::from_le_bytes(a))),
+            Scalar::I64 => arr::<8>(bytes, big_endian).map(|a| i64::from_le_bytes(a) as f64),
+            Scalar::U64 => arr::<8>(bytes, big_endian).map(|a| u64::from_le_bytes(a) as f64),
+            Scalar::F32 => arr::<4>(bytes, big_endian).map(|a| f64::from(f32::from_le_bytes(a))),
+            Scalar::F64 => arr::<8>(bytes, big_endian).map(f64::from_le_bytes),
+        };
+        v.unwrap_or(f64::NAN)
+    }
+}
+
+/// Split off the header: lines up to and including the one for which `is_last` holds.
+/// Returns the header lines and the byte offset of the body. Header size is capped at 1 MiB.
+fn split_header(
+    bytes: &[u8],
+    is_last: impl Fn(&str) -> bool,
+) -> Result<(Vec<&str>, usize), ParseError> {
+    const MAX_HEADER: usize = 1 << 20;
+    let mut lines = Vec::new();
+    let mut start = 0;
+    loop {
+        let rest = bytes.get(start..).unwrap_or_default();
+        let Some(len) = rest.iter().position(|&b| b == b'\n') else {
+            return Err(ParseError::Header {
+                line: lines.len() + 1,
+                message: "header ends before its last line (end_header / DATA)".into(),
+            });
+        };
+        if start + len > MAX_HEADER {
+            return Err(ParseError::Header {
+                line: lines.len() + 1,
+                message: "header longer than 1 MiB".into(),
+            });
+        }
+        let line = std::str::from_utf8(&rest[..len]).map_err(|_| ParseError::Header {
+            line: lines.len() + 1,
+            message: "header line is not UTF-8 text".into(),
+        })?;
+        let line = line.trim_end_matches('\r');
+        start += len + 1;
+        lines.push(line);
+        if is_last(line) {
+            return Ok((lines, start));
+        }
+    }
+}
+
+fn parse_f64(token: &str) -> Option<f64> {
+    token.parse::<f64>().ok()
+}
+
+#[cfg(test)]
+mod tests;
