@@ -1,0 +1,296 @@
+//! Radio link: handheld <-> onboard, transparent serial radio at 57600 baud, slow and lossy.
+//!
+//! Every command is sent with [`Flags::ACK_REQUESTED`](crate::frame::Flags) and retransmitted until
+//! acked. The one command that moves the robot, [`SignedStart`], is authenticated (see
+//! [`crate::auth`]); a refused command is answered with [`Refused`]. Results are resent until the
+//! handheld sends [`ResultAck`]; the cloud preview goes as [`CloudChunk`]s and the handheld asks for
+//! the missing ones with [`ResendChunks`].
+
+use postcard::experimental::max_size::MaxSize;
+use serde::{Deserialize, Serialize};
+
+use crate::auth::Authenticated;
+use crate::bounded::{List, Text};
+use crate::common::{Heartbeat, Hello, LogLine};
+use crate::message::{bit_set, message_set, wire_enum};
+
+wire_enum! {
+    /// Which standard's zone limits the approach and departure search.
+    pub enum Zone {
+        /// Ahead of (behind) the tyre's contact, CFR / SAE J1100 style.
+        Tyre = 1,
+        /// Ahead of (behind) the axle, EU style.
+        Axle = 2,
+    }
+}
+
+/// Start a measurement run (carried inside [`SignedStart`]).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, MaxSize)]
+pub struct StartMeasurement {
+    /// Free-form vehicle identifier (plate, VIN, test number), up to 32 bytes.
+    pub vehicle_id: Text<32>,
+    /// Constant drive speed under the vehicle, m/s.
+    pub speed_mps: f32,
+    /// Distance to drive, m.
+    pub distance_m: f32,
+    /// Zone convention for the angles.
+    pub zone: Zone,
+}
+
+/// [`StartMeasurement`] with its authentication envelope: the only radio command that moves the robot.
+pub type SignedStart = Authenticated<StartMeasurement>;
+
+/// Abort the running measurement: the robot stops first. Not authenticated, on purpose: stopping
+/// is always allowed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, MaxSize)]
+pub struct Abort {
+    /// Run to abort (0 = whatever is running).
+    pub run_id: u32,
+}
+
+/// The handheld has the result of `run_id`; the onboard stops resending it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, MaxSize)]
+pub struct ResultAck {
+    /// The run.
+    pub run_id: u32,
+}
+
+/// Ask for cloud preview chunks again.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize, MaxSize)]
+pub struct ResendChunks {
+    /// The run.
+    pub run_id: u32,
+    /// Chunk indices wanted (at most 32 per request).
+    pub indices: List<u16, 32>,
+}
+
+/// Ask for a [`RobotStatus`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, MaxSize)]
+pub struct StatusRequest {}
+
+/// Ask for the result (and preview) of an earlier run again.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, MaxSize)]
+pub struct FetchRun {
+    /// The run.
+    pub run_id: u32,
+}
+
+wire_enum! {
+    /// Phase of a measurement run.
+    pub enum Phase {
+        /// No run.
+        Idle = 1,
+        /// Pre-run checks: sensors alive, firmware hello, faults.
+        Checks = 2,
+        /// Driving under the vehicle.
+        Driving = 3,
+        /// Stopping the robot.
+        Stopping = 4,
+        /// Building the cloud and computing the angles.
+        Processing = 5,
+        /// Result ready and being delivered.
+        Done = 6,
+        /// Aborted by the operator.
+        Aborted = 7,
+        /// Failed (see the log lines).
+        Failed = 8,
+    }
+}
+
+/// Run progress, 2 Hz while a run is active.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, MaxSize)]
+pub struct Progress {
+    /// The run.
+    pub run_id: u32,
+    /// Phase.
+    pub phase: Phase,
+    /// Percent of the phase done (0..=100).
+    pub percent: u8,
+    /// Distance driven so far, m.
+    pub travelled_m: f32,
+    /// Lidar frames recorded so far.
+    pub lidar_frames: u32,
+}
+
+bit_set! {
+    /// Quality warnings attached to a result.
+    pub struct ResultWarnings(u16) {
+        /// Fewer tyres than four were fitted.
+        const MISSING_TYRE = 0;
+        /// Few points support a limiting feature.
+        const LOW_SUPPORT = 1;
+        /// The tyre fits have a large residual.
+        const POOR_TYRE_FIT = 2;
+        /// The run was shorter than requested.
+        const SHORT_RUN = 3;
+        /// Lidar packets were dropped or malformed.
+        const LIDAR_LOSS = 4;
+        /// The cloud's drift check failed.
+        const DRIFT = 5;
+    }
+}
+
+/// The measurement result (radians inside; the handheld shows degrees).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, MaxSize)]
+pub struct MeasurementResult {
+    /// The run.
+    pub run_id: u32,
+    /// Vehicle identifier from the start command.
+    pub vehicle_id: Text<32>,
+    /// Approach angle, rad.
+    pub approach_rad: f32,
+    /// Departure angle, rad.
+    pub departure_rad: f32,
+    /// Ramp breakover angle, rad.
+    pub breakover_rad: f32,
+    /// Smallest ground clearance between the axles, m.
+    pub ground_clearance_m: f32,
+    /// Wheelbase from the tyre fits, m.
+    pub wheelbase_m: f32,
+    /// Track from the tyre fits, m.
+    pub track_m: f32,
+    /// Points supporting the approach-limiting feature.
+    pub approach_support: u16,
+    /// Points supporting the departure-limiting feature.
+    pub departure_support: u16,
+    /// Points supporting the breakover-limiting feature.
+    pub breakover_support: u16,
+    /// RMS residual of the tyre fits, m.
+    pub tyre_fit_rms_m: f32,
+    /// Quality warnings.
+    pub warnings: ResultWarnings,
+    /// Points in the full cloud (kept on the robot).
+    pub cloud_points: u32,
+    /// Number of [`CloudChunk`]s of the preview.
+    pub preview_chunks: u16,
+}
+
+/// Points of the cloud preview per chunk.
+pub const CHUNK_POINTS: usize = 30;
+
+/// One chunk of the decimated, quantised cloud preview.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize, MaxSize)]
+pub struct CloudChunk {
+    /// The run.
+    pub run_id: u32,
+    /// Chunk index, 0-based.
+    pub index: u16,
+    /// Number of chunks.
+    pub count: u16,
+    /// Points in the vehicle frame, millimetres (x, y, z), i16: +-32.767 m.
+    pub points_mm: List<[i16; 3], CHUNK_POINTS>,
+}
+
+/// The robot's state for `passangle status`.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, MaxSize)]
+pub struct RobotStatus {
+    /// Current phase.
+    pub phase: Phase,
+    /// Current or last run.
+    pub run_id: u32,
+    /// The firmware answered `Hello` and reports status.
+    pub firmware_ok: bool,
+    /// Lidar packets arrive.
+    pub lidar_ok: bool,
+    /// Depth frames arrive.
+    pub camera_ok: bool,
+    /// Firmware interlocks blocking motion (see [`crate::mcu::Interlocks`]).
+    pub interlocks: crate::mcu::Interlocks,
+    /// Results waiting for the handheld's ack.
+    pub pending_results: u16,
+    /// Free space for recordings, MiB (saturating).
+    pub disk_free_mib: u32,
+}
+
+wire_enum! {
+    /// Why the onboard refused a command.
+    pub enum RefuseReason {
+        /// The authentication tag is wrong (wrong key, or tampered).
+        BadTag = 1,
+        /// The counter is not newer than the last accepted one: a replay.
+        Replay = 2,
+        /// A run is already active.
+        Busy = 3,
+        /// Firmware interlocks or failed checks block motion.
+        Interlocked = 4,
+        /// A parameter is out of range (named in `detail`).
+        InvalidParameter = 5,
+        /// No such run.
+        UnknownRun = 6,
+        /// The sender speaks another protocol version.
+        VersionMismatch = 7,
+        /// The message did not decode.
+        Malformed = 8,
+    }
+}
+
+/// A command was refused.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize, MaxSize)]
+pub struct Refused {
+    /// Id of the refused message.
+    pub msg_id: u16,
+    /// Its sequence number.
+    pub seq: u16,
+    /// Why.
+    pub reason: RefuseReason,
+    /// Detail for the operator (field name, interlock names).
+    pub detail: Text<48>,
+}
+
+crate::message::impl_message! {
+    SignedStart => crate::ids::START_MEASUREMENT,
+    Abort => crate::ids::ABORT,
+    ResultAck => crate::ids::RESULT_ACK,
+    ResendChunks => crate::ids::RESEND_CHUNKS,
+    StatusRequest => crate::ids::STATUS_REQUEST,
+    FetchRun => crate::ids::FETCH_RUN,
+    Progress => crate::ids::PROGRESS,
+    MeasurementResult => crate::ids::RESULT,
+    CloudChunk => crate::ids::CLOUD_CHUNK,
+    RobotStatus => crate::ids::ROBOT_STATUS,
+    Refused => crate::ids::REFUSED,
+}
+
+message_set! {
+    /// Everything the onboard accepts from the handheld.
+    pub enum ToOnboard {
+        /// Handshake.
+        Hello(Hello),
+        /// Liveness.
+        Heartbeat(Heartbeat),
+        /// Authenticated start.
+        Start(SignedStart),
+        /// Abort.
+        Abort(Abort),
+        /// Result received.
+        ResultAck(ResultAck),
+        /// Preview chunks wanted again.
+        ResendChunks(ResendChunks),
+        /// Status wanted.
+        StatusRequest(StatusRequest),
+        /// An earlier run wanted.
+        FetchRun(FetchRun),
+    }
+}
+
+message_set! {
+    /// Everything the handheld accepts from the onboard.
+    pub enum ToHandheld {
+        /// Handshake answer.
+        Hello(Hello),
+        /// Liveness.
+        Heartbeat(Heartbeat),
+        /// Run progress.
+        Progress(Progress),
+        /// Result.
+        Result(MeasurementResult),
+        /// Cloud preview chunk.
+        CloudChunk(CloudChunk),
+        /// Robot status.
+        Status(RobotStatus),
+        /// Refused command.
+        Refused(Refused),
+        /// Log line.
+        LogLine(LogLine),
+    }
+}
