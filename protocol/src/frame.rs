@@ -397,7 +397,7 @@ mod tests {
         let mut got = Vec::new();
         for chunk in stream.chunks(3) {
             d.feed_all(chunk, |r| {
-                got.push(r.map(|f| (f.header.seq, f.payload.to_vec())))
+                got.push(r.map(|f| (f.header.seq, f.payload.to_vec())));
             });
         }
         assert_eq!(got.len(), 3);
