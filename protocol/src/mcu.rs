@@ -261,3 +261,7 @@ message_set! {
         LogLine(LogLine),
     }
 }
+
+// Every message of every set fits the links' receive buffer (a compile-time check).
+const _: () = assert!(ToFirmware::MAX_FRAME_LEN <= crate::frame::MAX_FRAME_LEN);
+const _: () = assert!(FromFirmware::MAX_FRAME_LEN <= crate::frame::MAX_FRAME_LEN);

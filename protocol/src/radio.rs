@@ -165,8 +165,9 @@ pub struct MeasurementResult {
     pub preview_chunks: u16,
 }
 
-/// Points of the cloud preview per chunk.
-pub const CHUNK_POINTS: usize = 30;
+/// Points of the cloud preview per chunk (i16 varints take up to 3 bytes each, so 24 points fit
+/// the payload limit in the worst case).
+pub const CHUNK_POINTS: usize = 24;
 
 /// One chunk of the decimated, quantised cloud preview.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize, MaxSize)]
@@ -294,3 +295,7 @@ message_set! {
         LogLine(LogLine),
     }
 }
+
+// Every message of every set fits the links' receive buffer (a compile-time check).
+const _: () = assert!(ToOnboard::MAX_FRAME_LEN <= crate::frame::MAX_FRAME_LEN);
+const _: () = assert!(ToHandheld::MAX_FRAME_LEN <= crate::frame::MAX_FRAME_LEN);
