@@ -93,8 +93,8 @@ impl Default for Config {
                 sign: [1, -1, 1, -1],
             },
             pid: PidGains {
-                kp: 0.6,
-                ki: 12.0,
+                kp: 2.0,
+                ki: 20.0,
                 kd: 0.0,
                 kd_filter_s: 0.002,
                 integral_limit_a: 6.0,
