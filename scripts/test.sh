@@ -1,0 +1,55 @@
+#!/usr/bin/env bash
+# Runs every test tier of passangle on this machine, installing what a fresh Debian/Ubuntu machine
+# lacks first. This is the README's test command and what CI runs (.ci/run).
+#
+#   scripts/test.sh            everything below
+#   scripts/test.sh --quick    host tests only (fmt, clippy, cargo test --workspace)
+#
+# Tiers: (1) formatting and lints; (2) host tests: `cargo test --workspace` (protocol, firmware
+# control logic, onboard pipeline, simulator, end-to-end scenarios on the in-process CAN bus);
+# (3) no_std checks for the thumbv7em-none-eabihf target and the STM32 release build with its size
+# report; (4) the firmware-in-the-loop tests over real SocketCAN vcan0 inside a qemu guest.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+quick=0
+[[ "${1:-}" == "--quick" ]] && quick=1
+
+step() { printf '\n==> %s\n' "$*"; }
+
+step "toolchain"
+if ! command -v cargo >/dev/null; then
+    echo "error: cargo not found. Install Rust with rustup (https://rustup.rs), then re-run." >&2
+    exit 1
+fi
+# rust-toolchain.toml pins stable with rustfmt, clippy and the thumb target; make sure they are here.
+rustup component add rustfmt clippy >/dev/null
+rustup target add thumbv7em-none-eabihf >/dev/null
+cargo --version
+
+step "format"
+cargo fmt --all -- --check
+
+step "clippy (pedantic, warnings are errors)"
+cargo clippy --workspace --all-targets -- -D warnings
+
+step "host tests: cargo test --workspace"
+cargo test --workspace
+
+[[ $quick == 1 ]] && exit 0
+
+step "no_std: protocol and control for thumbv7em-none-eabihf"
+cargo build -p protocol --target thumbv7em-none-eabihf --no-default-features
+cargo build -p control --target thumbv7em-none-eabihf
+
+if [[ -f firmware/ci.sh ]]; then
+    step "STM32 firmware release build and size report"
+    bash firmware/ci.sh
+fi
+
+if [[ -f hil-sim/vcan-vm/ci.sh ]]; then
+    step "firmware in the loop over SocketCAN vcan0 (qemu guest)"
+    bash hil-sim/vcan-vm/ci.sh
+fi
+
+step "all tiers passed"
