@@ -1,0 +1,384 @@
+//! Robot poses over time: the input of every sensor model.
+//!
+//! Sensors never compute motion themselves; they ask a [`Trajectory`] for `world_from_robot` at the
+//! instant of each firing or exposure. Two implementations:
+//! - [`StraightRun`]: the scenario's analytic motion (constant-speed straight line with an optional
+//!   acceleration ramp, lateral offset, yaw misalignment, wheel slip and seeded pitch/roll vibration).
+//!   It is a pure function of time, so any instant can be evaluated in any order.
+//! - [`SampledTrajectory`]: time-stamped poses (e.g. from the simulated ESCs and firmware later),
+//!   linearly interpolated.
+//!
+//! # Robot frame
+//! x forward, y left, z up; origin on the ground below the robot's centre. A pose's
+//! `position_m` is that origin in the world (vehicle) frame.
+//!
+//! # Ground-truth file (CSV)
+//! [`write_truth_csv`] writes one line per sample after a `#` comment header:
+//! `time_s,x_m,y_m,z_m,roll_rad,pitch_rad,yaw_rad,wheel_distance_m`. Time is simulation time in
+//! seconds since the scenario start (the sensors' clocks are offset from it by fixed amounts given in
+//! their own files); the pose is `world_from_robot` in the vehicle frame; `wheel_distance_m` is the
+//! distance the wheel encoders would report (it exceeds the true distance by the slip).
+
+use std::f64::consts::TAU;
+use std::io::Write;
+
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+use crate::geometry::{Pose, Vec3};
+
+/// A robot pose as a function of simulation time.
+pub trait Trajectory {
+    /// `world_from_robot` at `t_s` seconds since the scenario start.
+    fn pose_at(&self, t_s: f64) -> Pose;
+
+    /// Distance the wheel encoders report at `t_s` (equal to the true path length without slip).
+    fn wheel_distance_at(&self, t_s: f64) -> f64;
+}
+
+/// Small pitch and roll oscillation: a sum of sinusoids with seeded frequencies and phases whose RMS
+/// equals the requested sigma. Smooth, bounded and evaluable at any time (unlike white noise).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Vibration {
+    /// `(pitch amplitude rad, roll amplitude rad, frequency Hz, pitch phase rad, roll phase rad)`.
+    components: Vec<[f64; 5]>,
+}
+
+impl Vibration {
+    /// Number of sinusoids summed per axis.
+    pub const COMPONENTS: usize = 4;
+
+    /// A vibration with RMS `pitch_sigma_rad` / `roll_sigma_rad`, frequencies drawn uniformly in
+    /// 3..15 Hz from `seed`.
+    pub fn new(pitch_sigma_rad: f64, roll_sigma_rad: f64, seed: u64) -> Self {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let k = Self::COMPONENTS as f64;
+        // Each sinusoid of amplitude A has RMS A / sqrt(2); K of them: A = sigma * sqrt(2 / K).
+        let scale = (2.0 / k).sqrt();
+        let components = (0..Self::COMPONENTS)
+            .map(|_| {
+                [
+                    pitch_sigma_rad * scale,
+                    roll_sigma_rad * scale,
+                    rng.random_range(3.0..15.0),
+                    rng.random_range(0.0..TAU),
+                    rng.random_range(0.0..TAU),
+                ]
+            })
+            .collect();
+        Self { components }
+    }
+
+    /// No vibration.
+    pub fn none() -> Self {
+        Self {
+            components: Vec::new(),
+        }
+    }
+
+    /// `(pitch_rad, roll_rad)` at `t_s`.
+    pub fn at(&self, t_s: f64) -> (f64, f64) {
+        self.components.iter().fold((0.0, 0.0), |(p, r), c| {
+            let w = TAU * c[2] * t_s;
+            (p + c[0] * (w + c[3]).sin(), r + c[1] * (w + c[4]).sin())
+        })
+    }
+}
+
+/// The scenario's analytic motion: a straight run along `heading_rad` from `start_m`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct StraightRun {
+    /// Start position of the robot origin, world frame (z is normally 0).
+    pub start_m: Vec3,
+    /// Direction of travel, radians from the world x axis.
+    pub heading_rad: f64,
+    /// Robot body yaw relative to the direction of travel (a mecanum robot can crab), radians.
+    pub yaw_misalignment_rad: f64,
+    /// Cruise speed commanded to the wheels, m/s.
+    pub speed_mps: f64,
+    /// Acceleration from rest to cruise, m/s^2; 0 or less means cruising from t = 0.
+    pub accel_mps2: f64,
+    /// Longitudinal slip ratio: true distance = (1 - slip) * wheel distance.
+    pub slip: f64,
+    /// Pitch/roll vibration.
+    pub vibration: Vibration,
+}
+
+impl StraightRun {
+    /// Distance commanded to the wheels after `t_s` (trapezoid profile without the stop).
+    fn commanded_distance(&self, t_s: f64) -> f64 {
+        let t = t_s.max(0.0);
+        if self.accel_mps2 <= 0.0 {
+            return self.speed_mps * t;
+        }
+        let t_ramp = self.speed_mps / self.accel_mps2;
+        if t < t_ramp {
+            0.5 * self.accel_mps2 * t * t
+        } else {
+            0.5 * self.speed_mps * t_ramp + self.speed_mps * (t - t_ramp)
+        }
+    }
+
+    /// Time needed for the wheels to cover `distance_m`.
+    pub fn time_for_wheel_distance(&self, distance_m: f64) -> f64 {
+        if self.speed_mps <= 0.0 {
+            return 0.0;
+        }
+        if self.accel_mps2 <= 0.0 {
+            return distance_m / self.speed_mps;
+        }
+        let t_ramp = self.speed_mps / self.accel_mps2;
+        let d_ramp = 0.5 * self.speed_mps * t_ramp;
+        if distance_m < d_ramp {
+            (2.0 * distance_m / self.accel_mps2).sqrt()
+        } else {
+            t_ramp + (distance_m - d_ramp) / self.speed_mps
+        }
+    }
+}
+
+impl Trajectory for StraightRun {
+    fn pose_at(&self, t_s: f64) -> Pose {
+        let s = (1.0 - self.slip) * self.commanded_distance(t_s);
+        let (sin_h, cos_h) = self.heading_rad.sin_cos();
+        let (pitch_rad, roll_rad) = self.vibration.at(t_s);
+        Pose {
+            position_m: self.start_m + Vec3::new(s * cos_h, s * sin_h, 0.0),
+            roll_rad,
+            pitch_rad,
+            yaw_rad: self.heading_rad + self.yaw_misalignment_rad,
+        }
+    }
+
+    fn wheel_distance_at(&self, t_s: f64) -> f64 {
+        self.commanded_distance(t_s)
+    }
+}
+
+/// Time-stamped poses, linearly interpolated (yaw along the shorter arc); clamped at both ends.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SampledTrajectory {
+    samples: Vec<(f64, Pose, f64)>,
+}
+
+/// Why samples could not form a trajectory.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum TrajectoryError {
+    /// No samples.
+    #[error("a sampled trajectory needs at least one sample")]
+    Empty,
+    /// Times must be finite and strictly increasing.
+    #[error("sample {index}: time {time_s} s is not finite or not after the previous sample")]
+    NotIncreasing {
+        /// Index of the offending sample.
+        index: usize,
+        /// Its time.
+        time_s: f64,
+    },
+}
+
+impl SampledTrajectory {
+    /// Build from `(time_s, pose, wheel_distance_m)` samples with strictly increasing times.
+    pub fn new(samples: Vec<(f64, Pose, f64)>) -> Result<Self, TrajectoryError> {
+        if samples.is_empty() {
+            return Err(TrajectoryError::Empty);
+        }
+        for (i, s) in samples.iter().enumerate() {
+            if !s.0.is_finite() || (i > 0 && s.0 <= samples[i - 1].0) {
+                return Err(TrajectoryError::NotIncreasing {
+                    index: i,
+                    time_s: s.0,
+                });
+            }
+        }
+        Ok(Self { samples })
+    }
+
+    /// Sample another trajectory every `step_s` over `[0, duration_s]`.
+    pub fn sample(source: &impl Trajectory, duration_s: f64, step_s: f64) -> Self {
+        let n = (duration_s / step_s).ceil().max(0.0) as usize;
+        let samples = (0..=n)
+            .map(|k| {
+                let t = (k as f64 * step_s).min(duration_s.max(0.0));
+                (t, source.pose_at(t), source.wheel_distance_at(t))
+            })
+            .collect::<Vec<_>>();
+        let mut samples = samples;
+        samples.dedup_by(|a, b| a.0 <= b.0);
+        Self { samples }
+    }
+
+    /// The samples.
+    pub fn samples(&self) -> &[(f64, Pose, f64)] {
+        &self.samples
+    }
+
+    fn bracket(&self, t_s: f64) -> (usize, usize, f64) {
+        let n = self.samples.len();
+        let i = self.samples.partition_point(|s| s.0 <= t_s);
+        if i == 0 {
+            return (0, 0, 0.0);
+        }
+        if i >= n {
+            return (n - 1, n - 1, 0.0);
+        }
+        let (t0, t1) = (self.samples[i - 1].0, self.samples[i].0);
+        (i - 1, i, (t_s - t0) / (t1 - t0))
+    }
+}
+
+fn lerp_angle(a: f64, b: f64, f: f64) -> f64 {
+    let d = (b - a + std::f64::consts::PI).rem_euclid(TAU) - std::f64::consts::PI;
+    a + f * d
+}
+
+impl Trajectory for SampledTrajectory {
+    fn pose_at(&self, t_s: f64) -> Pose {
+        let (i, j, f) = self.bracket(t_s);
+        let (a, b) = (&self.samples[i].1, &self.samples[j].1);
+        Pose {
+            position_m: a.position_m + (b.position_m - a.position_m) * f,
+            roll_rad: lerp_angle(a.roll_rad, b.roll_rad, f),
+            pitch_rad: lerp_angle(a.pitch_rad, b.pitch_rad, f),
+            yaw_rad: lerp_angle(a.yaw_rad, b.yaw_rad, f),
+        }
+    }
+
+    fn wheel_distance_at(&self, t_s: f64) -> f64 {
+        let (i, j, f) = self.bracket(t_s);
+        self.samples[i].2 + f * (self.samples[j].2 - self.samples[i].2)
+    }
+}
+
+/// Write the ground-truth CSV (format in the module docs), one line every `step_s` over
+/// `[0, duration_s]`.
+pub fn write_truth_csv(
+    out: &mut impl Write,
+    trajectory: &impl Trajectory,
+    duration_s: f64,
+    step_s: f64,
+) -> std::io::Result<()> {
+    writeln!(
+        out,
+        "# passangle-sim ground truth: world_from_robot in the vehicle frame (x front, y left, z up, m, rad)"
+    )?;
+    writeln!(
+        out,
+        "# time_s is simulation time since the scenario start; wheel_distance_m is what the encoders report"
+    )?;
+    writeln!(
+        out,
+        "time_s,x_m,y_m,z_m,roll_rad,pitch_rad,yaw_rad,wheel_distance_m"
+    )?;
+    let n = (duration_s / step_s).round().max(0.0) as u64;
+    for k in 0..=n {
+        let t = k as f64 * step_s;
+        let p = trajectory.pose_at(t);
+        let q = p.position_m;
+        writeln!(
+            out,
+            "{t:.6},{:.6},{:.6},{:.6},{:.7},{:.7},{:.7},{:.6}",
+            q.x,
+            q.y,
+            q.z,
+            p.roll_rad,
+            p.pitch_rad,
+            p.yaw_rad,
+            trajectory.wheel_distance_at(t)
+        )?;
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn run() -> StraightRun {
+        StraightRun {
+            start_m: Vec3::new(2.0, 0.1, 0.0),
+            heading_rad: std::f64::consts::PI,
+            yaw_misalignment_rad: 0.02,
+            speed_mps: 0.3,
+            accel_mps2: 0.5,
+            slip: 0.05,
+            vibration: Vibration::new(0.002, 0.001, 9),
+        }
+    }
+
+    #[test]
+    fn straight_run_moves_at_slipped_speed_after_the_ramp() {
+        let r = run();
+        let (a, b) = (r.pose_at(10.0), r.pose_at(11.0));
+        let v = (b.position_m - a.position_m).norm();
+        assert!((v - 0.3 * 0.95).abs() < 1e-12, "{v}");
+        assert!(
+            b.position_m.x < a.position_m.x,
+            "heading 180 degrees drives toward -x"
+        );
+        assert!((r.wheel_distance_at(11.0) - r.wheel_distance_at(10.0) - 0.3).abs() < 1e-12);
+        assert!((a.yaw_rad - (std::f64::consts::PI + 0.02)).abs() < 1e-12);
+        let t = r.time_for_wheel_distance(3.0);
+        assert!((r.wheel_distance_at(t) - 3.0).abs() < 1e-12);
+        assert!(
+            (r.time_for_wheel_distance(0.01) - 0.2).abs() < 1e-12,
+            "inside the ramp"
+        );
+    }
+
+    #[test]
+    fn vibration_has_the_requested_rms_and_is_reproducible() {
+        let v = Vibration::new(0.01, 0.02, 3);
+        assert_eq!(v, Vibration::new(0.01, 0.02, 3));
+        assert_ne!(v, Vibration::new(0.01, 0.02, 4));
+        let n = 200_000;
+        let (mut sp, mut sr) = (0.0, 0.0);
+        for k in 0..n {
+            let (p, r) = v.at(f64::from(k) * 1e-3);
+            sp += p * p;
+            sr += r * r;
+        }
+        let (rp, rr) = ((sp / f64::from(n)).sqrt(), (sr / f64::from(n)).sqrt());
+        assert!(
+            (rp - 0.01).abs() < 0.001 && (rr - 0.02).abs() < 0.002,
+            "{rp} {rr}"
+        );
+    }
+
+    #[test]
+    fn sampled_trajectory_interpolates_and_rejects_bad_times() {
+        let r = run();
+        let s = SampledTrajectory::sample(&r, 5.0, 0.01);
+        let (a, b) = (s.pose_at(3.333), r.pose_at(3.333));
+        assert!((a.position_m - b.position_m).norm() < 1e-4);
+        assert!((s.pose_at(-1.0).position_m - r.pose_at(0.0).position_m).norm() < 1e-12);
+        assert_eq!(SampledTrajectory::new(vec![]), Err(TrajectoryError::Empty));
+        let p = Pose::default();
+        assert_eq!(
+            SampledTrajectory::new(vec![(0.0, p, 0.0), (0.0, p, 0.0)]),
+            Err(TrajectoryError::NotIncreasing {
+                index: 1,
+                time_s: 0.0
+            })
+        );
+        // Yaw interpolates across the +-pi seam along the short way.
+        let p0 = Pose { yaw_rad: 3.1, ..p };
+        let p1 = Pose { yaw_rad: -3.1, ..p };
+        let t = SampledTrajectory::new(vec![(0.0, p0, 0.0), (1.0, p1, 0.0)]).expect("valid");
+        assert!(t.pose_at(0.5).yaw_rad.abs() > 3.1);
+    }
+
+    #[test]
+    fn truth_csv_has_header_and_one_line_per_sample() {
+        let mut out = Vec::new();
+        write_truth_csv(&mut out, &run(), 1.0, 0.01).expect("in memory");
+        let text = String::from_utf8(out).expect("ascii");
+        let data: Vec<&str> = text.lines().filter(|l| !l.starts_with('#')).collect();
+        assert_eq!(
+            data[0],
+            "time_s,x_m,y_m,z_m,roll_rad,pitch_rad,yaw_rad,wheel_distance_m"
+        );
+        assert_eq!(data.len(), 102);
+        assert_eq!(data[101].split(',').count(), 8);
+    }
+}

@@ -1,0 +1,654 @@
+//! The simulated world and its ray caster: a flat ground, four tyres, the body prisms and the parts of
+//! one [`Vehicle`], all in the vehicle frame (see [`crate::vehicle`]).
+//!
+//! Every primitive is intersected analytically (no triangle meshes): the ground is the plane z = 0, a
+//! tyre is a y-axis cylinder with flat sidewall annuli and a recessed rim disc, a body prism is a
+//! side-view polygon extruded along y (the ray is clipped to the y slab, then crossed with the
+//! polygon's edges in the x-z plane), parts are axis-aligned boxes and finite cylinders. Each
+//! primitive carries a bounding box that rejects most rays cheaply; a scene has ~10 primitives, so no
+//! hierarchy is needed. [`Scene::cast`] returns the nearest hit with its surface normal and which
+//! surface it was; [`Scene::distance_to_surface`] is an independent distance function used by tests
+//! to check that simulated points lie on the surface they were cast on.
+//!
+//! Known approximation: the rim disc spans the full tyre radius in its recessed plane instead of
+//! having an inner lip, so a ray entering the rim opening obliquely stops on the disc slightly
+//! outside the rim radius.
+
+use crate::geometry::Vec3;
+use crate::vehicle::{Axis, Part, RIM_INSET_M, Vehicle};
+
+/// What kind of surface a ray hit.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum SurfaceKind {
+    /// The ground plane.
+    Ground,
+    /// A tyre (index: front-left, front-right, rear-left, rear-right).
+    Tyre,
+    /// A body prism (index into [`Vehicle::body_prisms`]).
+    Body,
+    /// An optional part (index into `Vehicle::parts`).
+    Part,
+}
+
+/// Which surface a ray hit.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct SurfaceId {
+    /// The kind of surface.
+    pub kind: SurfaceKind,
+    /// Index within that kind.
+    pub index: u16,
+}
+
+/// A ray hit.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Hit {
+    /// Distance along the (unit) ray direction, metres.
+    pub range_m: f64,
+    /// Unit surface normal, facing the ray's origin.
+    pub normal: Vec3,
+    /// The surface.
+    pub surface: SurfaceId,
+}
+
+#[derive(Clone, Copy, Debug)]
+struct Aabb {
+    min: Vec3,
+    max: Vec3,
+}
+
+impl Aabb {
+    /// Whether the ray enters the box before `t_max` (slab test with precomputed inverse direction).
+    fn hit(&self, o: Vec3, inv: Vec3, t_max: f64) -> bool {
+        let (mut t0, mut t1) = (0.0f64, t_max);
+        for (o, inv, lo, hi) in [
+            (o.x, inv.x, self.min.x, self.max.x),
+            (o.y, inv.y, self.min.y, self.max.y),
+            (o.z, inv.z, self.min.z, self.max.z),
+        ] {
+            let (a, b) = ((lo - o) * inv, (hi - o) * inv);
+            let (a, b) = if a < b { (a, b) } else { (b, a) };
+            // NaN (0 * inf when the origin lies on a slab plane) keeps the previous bound.
+            t0 = if a > t0 { a } else { t0 };
+            t1 = if b < t1 { b } else { t1 };
+        }
+        t0 <= t1
+    }
+}
+
+#[derive(Clone, Debug)]
+struct TyrePrim {
+    centre: Vec3,
+    radius: f64,
+    half_width: f64,
+    rim_radius: f64,
+    bounds: Aabb,
+}
+
+#[derive(Clone, Debug)]
+struct Prism {
+    /// Side-view polygon (x, z), closed implicitly.
+    poly: Vec<[f64; 2]>,
+    half_width: f64,
+    bounds: Aabb,
+}
+
+#[derive(Clone, Debug)]
+enum PartPrim {
+    Box {
+        min: Vec3,
+        max: Vec3,
+    },
+    Cylinder {
+        axis: Axis,
+        centre: Vec3,
+        radius: f64,
+        half_length: f64,
+        bounds: Aabb,
+    },
+}
+
+/// A scene ready for ray casting. Build it once per vehicle with [`Scene::from_vehicle`].
+#[derive(Clone, Debug)]
+pub struct Scene {
+    tyres: Vec<TyrePrim>,
+    prisms: Vec<Prism>,
+    parts: Vec<PartPrim>,
+}
+
+/// Base diffuse reflectivity of each kind of surface on the VLP-16's 0..100 calibrated scale
+/// (assumed typical values: dark rubber, dusty concrete, painted or coated steel, bare metal).
+pub fn base_reflectivity(kind: SurfaceKind) -> f64 {
+    match kind {
+        SurfaceKind::Ground => 25.0,
+        SurfaceKind::Tyre => 6.0,
+        SurfaceKind::Body => 40.0,
+        SurfaceKind::Part => 60.0,
+    }
+}
+
+impl Scene {
+    /// Build the scene of a (validated) vehicle.
+    pub fn from_vehicle(vehicle: &Vehicle) -> Self {
+        let t = &vehicle.tyre;
+        let tyres = vehicle
+            .tyre_centres()
+            .iter()
+            .map(|&[x, y, z]| {
+                let hw = t.width_m / 2.0;
+                TyrePrim {
+                    centre: Vec3::new(x, y, z),
+                    radius: t.radius_m,
+                    half_width: hw,
+                    rim_radius: t.rim_radius_m,
+                    bounds: Aabb {
+                        min: Vec3::new(x - t.radius_m, y - hw, z - t.radius_m),
+                        max: Vec3::new(x + t.radius_m, y + hw, z + t.radius_m),
+                    },
+                }
+            })
+            .collect();
+        let prisms = vehicle
+            .body_prisms()
+            .into_iter()
+            .map(|(_, poly, width)| {
+                let hw = width / 2.0;
+                let (mut min, mut max) = (
+                    Vec3::new(f64::INFINITY, -hw, f64::INFINITY),
+                    Vec3::new(f64::NEG_INFINITY, hw, f64::NEG_INFINITY),
+                );
+                for &[x, z] in &poly {
+                    min.x = min.x.min(x);
+                    min.z = min.z.min(z);
+                    max.x = max.x.max(x);
+                    max.z = max.z.max(z);
+                }
+                Prism {
+                    poly,
+                    half_width: hw,
+                    bounds: Aabb { min, max },
+                }
+            })
+            .collect();
+        let parts = vehicle.parts.iter().map(part_prim).collect();
+        Self {
+            tyres,
+            prisms,
+            parts,
+        }
+    }
+
+    /// Cast a ray from `origin` along the unit vector `dir`; the nearest hit closer than `max_range_m`.
+    pub fn cast(&self, origin: Vec3, dir: Vec3, max_range_m: f64) -> Option<Hit> {
+        let inv = Vec3::new(1.0 / dir.x, 1.0 / dir.y, 1.0 / dir.z);
+        let mut best: Option<Hit> = None;
+        let mut t_max = max_range_m;
+        let mut keep = |t: f64, normal: Vec3, kind: SurfaceKind, index: usize, t_max: &mut f64| {
+            if t > 0.0 && t < *t_max {
+                *t_max = t;
+                let normal = if normal.dot(dir) > 0.0 {
+                    -normal
+                } else {
+                    normal
+                };
+                best = Some(Hit {
+                    range_m: t,
+                    normal,
+                    surface: SurfaceId {
+                        kind,
+                        index: index as u16,
+                    },
+                });
+            }
+        };
+        if dir.z < 0.0 && origin.z > 0.0 {
+            keep(
+                -origin.z / dir.z,
+                Vec3::new(0.0, 0.0, 1.0),
+                SurfaceKind::Ground,
+                0,
+                &mut t_max,
+            );
+        }
+        for (i, ty) in self.tyres.iter().enumerate() {
+            if ty.bounds.hit(origin, inv, t_max)
+                && let Some((t, n)) = hit_tyre(ty, origin, dir, t_max)
+            {
+                keep(t, n, SurfaceKind::Tyre, i, &mut t_max);
+            }
+        }
+        for (i, pr) in self.prisms.iter().enumerate() {
+            if pr.bounds.hit(origin, inv, t_max)
+                && let Some((t, n)) = hit_prism(pr, origin, dir, t_max)
+            {
+                keep(t, n, SurfaceKind::Body, i, &mut t_max);
+            }
+        }
+        for (i, part) in self.parts.iter().enumerate() {
+            let found = match part {
+                PartPrim::Box { min, max } => {
+                    if (Aabb {
+                        min: *min,
+                        max: *max,
+                    })
+                    .hit(origin, inv, t_max)
+                    {
+                        hit_box(*min, *max, origin, dir)
+                    } else {
+                        None
+                    }
+                }
+                PartPrim::Cylinder {
+                    axis,
+                    centre,
+                    radius,
+                    half_length,
+                    bounds,
+                } => {
+                    if bounds.hit(origin, inv, t_max) {
+                        hit_cylinder(*axis, *centre, *radius, *half_length, origin, dir)
+                    } else {
+                        None
+                    }
+                }
+            };
+            if let Some((t, n)) = found {
+                keep(t, n, SurfaceKind::Part, i, &mut t_max);
+            }
+        }
+        best
+    }
+
+    /// Distance from `p` to the surface `id` (independent of the ray caster; for tests and checks).
+    pub fn distance_to_surface(&self, id: SurfaceId, p: Vec3) -> f64 {
+        let i = usize::from(id.index);
+        match id.kind {
+            SurfaceKind::Ground => p.z.abs(),
+            SurfaceKind::Tyre => self
+                .tyres
+                .get(i)
+                .map_or(f64::INFINITY, |t| tyre_distance(t, p)),
+            SurfaceKind::Body => self
+                .prisms
+                .get(i)
+                .map_or(f64::INFINITY, |pr| prism_distance(pr, p)),
+            SurfaceKind::Part => self
+                .parts
+                .get(i)
+                .map_or(f64::INFINITY, |pa| part_distance(pa, p)),
+        }
+    }
+}
+
+fn part_prim(part: &Part) -> PartPrim {
+    match part {
+        Part::Box { min_m, max_m, .. } => PartPrim::Box {
+            min: v3(*min_m),
+            max: v3(*max_m),
+        },
+        Part::Cylinder {
+            axis,
+            centre_m,
+            radius_m,
+            length_m,
+            ..
+        } => {
+            let c = v3(*centre_m);
+            let (r, h) = (*radius_m, length_m / 2.0);
+            let half = match axis {
+                Axis::X => Vec3::new(h, r, r),
+                Axis::Y => Vec3::new(r, h, r),
+                Axis::Z => Vec3::new(r, r, h),
+            };
+            PartPrim::Cylinder {
+                axis: *axis,
+                centre: c,
+                radius: r,
+                half_length: h,
+                bounds: Aabb {
+                    min: c - half,
+                    max: c + half,
+                },
+            }
+        }
+    }
+}
+
+fn v3(a: [f64; 3]) -> Vec3 {
+    Vec3::new(a[0], a[1], a[2])
+}
+
+/// Smallest positive root of the ray against a circle of radius `r` in a 2-D projection
+/// (`o`, `d` the projected origin relative to the centre and the projected direction).
+fn circle_entry(ox: f64, oz: f64, dx: f64, dz: f64, r: f64) -> Option<f64> {
+    let a = dx * dx + dz * dz;
+    if a < 1e-18 {
+        return None;
+    }
+    let b = ox * dx + oz * dz;
+    let c = ox * ox + oz * oz - r * r;
+    let disc = b * b - a * c;
+    if disc < 0.0 || c < 0.0 {
+        return None; // missed, or the origin is inside the circle (we only model outside hits)
+    }
+    let t = (-b - disc.sqrt()) / a;
+    (t > 0.0).then_some(t)
+}
+
+fn hit_tyre(ty: &TyrePrim, o: Vec3, d: Vec3, t_max: f64) -> Option<(f64, Vec3)> {
+    let c = ty.centre;
+    let mut best: Option<(f64, Vec3)> = None;
+    let mut consider = |t: f64, n: Vec3| {
+        if t > 0.0 && t < best.map_or(t_max, |b| b.0) {
+            best = Some((t, n));
+        }
+    };
+    if let Some(t) = circle_entry(o.x - c.x, o.z - c.z, d.x, d.z, ty.radius) {
+        let p = o + d * t;
+        if (p.y - c.y).abs() <= ty.half_width {
+            consider(t, Vec3::new(p.x - c.x, 0.0, p.z - c.z) * (1.0 / ty.radius));
+        }
+    }
+    if d.y.abs() > 1e-12 {
+        let (r2, rim2) = (ty.radius * ty.radius, ty.rim_radius * ty.rim_radius);
+        for side in [-1.0, 1.0] {
+            for (offset, lo2) in [(ty.half_width, rim2), (ty.half_width - RIM_INSET_M, 0.0)] {
+                let t = (c.y + side * offset - o.y) / d.y;
+                let p = o + d * t;
+                let rho2 = (p.x - c.x).powi(2) + (p.z - c.z).powi(2);
+                if rho2 >= lo2 && rho2 <= r2 {
+                    consider(t, Vec3::new(0.0, side, 0.0));
+                }
+            }
+        }
+    }
+    best
+}
+
+/// Point-in-polygon (even-odd rule) in the x-z plane.
+fn inside_polygon(poly: &[[f64; 2]], x: f64, z: f64) -> bool {
+    let mut inside = false;
+    let mut j = poly.len() - 1;
+    for i in 0..poly.len() {
+        let ([xi, zi], [xj, zj]) = (poly[i], poly[j]);
+        if (zi > z) != (zj > z) && x < (xj - xi) * (z - zi) / (zj - zi) + xi {
+            inside = !inside;
+        }
+        j = i;
+    }
+    inside
+}
+
+fn hit_prism(pr: &Prism, o: Vec3, d: Vec3, t_max: f64) -> Option<(f64, Vec3)> {
+    let hw = pr.half_width;
+    // Clip the ray to the slab |y| <= hw.
+    let (mut t0, mut t1, mut from_side) = (0.0f64, t_max, false);
+    if d.y.abs() < 1e-12 {
+        if o.y.abs() > hw {
+            return None;
+        }
+    } else {
+        let (a, b) = ((-hw - o.y) / d.y, (hw - o.y) / d.y);
+        let (a, b) = if a < b { (a, b) } else { (b, a) };
+        if a > t0 {
+            t0 = a;
+            from_side = true;
+        }
+        t1 = t1.min(b);
+    }
+    if t0 >= t1 {
+        return None;
+    }
+    if from_side {
+        let p = o + d * t0;
+        if inside_polygon(&pr.poly, p.x, p.z) {
+            return Some((t0, Vec3::new(0.0, -d.y.signum(), 0.0)));
+        }
+    }
+    // First crossing of a polygon edge within (t0, t1).
+    let mut best: Option<(f64, Vec3)> = None;
+    let n = pr.poly.len();
+    for i in 0..n {
+        let ([ax, az], [bx, bz]) = (pr.poly[i], pr.poly[(i + 1) % n]);
+        let (ex, ez) = (bx - ax, bz - az);
+        let denom = d.x * ez - d.z * ex;
+        if denom.abs() < 1e-15 {
+            continue;
+        }
+        let (wx, wz) = (ax - o.x, az - o.z);
+        let t = (wx * ez - wz * ex) / denom;
+        let s = (wx * d.z - wz * d.x) / denom;
+        if (0.0..=1.0).contains(&s) && t > t0 && t < t1 && t < best.map_or(f64::INFINITY, |b| b.0) {
+            best = Some((t, Vec3::new(ez, 0.0, -ex).normalized()));
+        }
+    }
+    best
+}
+
+fn hit_box(min: Vec3, max: Vec3, o: Vec3, d: Vec3) -> Option<(f64, Vec3)> {
+    let (mut t0, mut t1) = (0.0f64, f64::INFINITY);
+    let mut normal = Vec3::ZERO;
+    let axes = [
+        (o.x, d.x, min.x, max.x, Vec3::new(1.0, 0.0, 0.0)),
+        (o.y, d.y, min.y, max.y, Vec3::new(0.0, 1.0, 0.0)),
+        (o.z, d.z, min.z, max.z, Vec3::new(0.0, 0.0, 1.0)),
+    ];
+    for (o, d, lo, hi, axis) in axes {
+        if d.abs() < 1e-15 {
+            if o < lo || o > hi {
+                return None;
+            }
+            continue;
+        }
+        let (a, b) = ((lo - o) / d, (hi - o) / d);
+        let (a, b) = if a < b { (a, b) } else { (b, a) };
+        if a > t0 {
+            t0 = a;
+            normal = axis;
+        }
+        t1 = t1.min(b);
+    }
+    (t0 > 0.0 && t0 <= t1).then_some((t0, normal))
+}
+
+/// Split `v` into (along the axis, first cross coordinate, second cross coordinate).
+fn axis_split(axis: Axis, v: Vec3) -> (f64, f64, f64) {
+    match axis {
+        Axis::X => (v.x, v.y, v.z),
+        Axis::Y => (v.y, v.x, v.z),
+        Axis::Z => (v.z, v.x, v.y),
+    }
+}
+
+fn axis_join(axis: Axis, a: f64, u: f64, v: f64) -> Vec3 {
+    match axis {
+        Axis::X => Vec3::new(a, u, v),
+        Axis::Y => Vec3::new(u, a, v),
+        Axis::Z => Vec3::new(u, v, a),
+    }
+}
+
+fn hit_cylinder(axis: Axis, c: Vec3, r: f64, h: f64, o: Vec3, d: Vec3) -> Option<(f64, Vec3)> {
+    let (oa, ou, ov) = axis_split(axis, o - c);
+    let (da, du, dv) = axis_split(axis, d);
+    let mut best: Option<(f64, Vec3)> = None;
+    if let Some(t) = circle_entry(ou, ov, du, dv, r)
+        && (oa + da * t).abs() <= h
+    {
+        best = Some((
+            t,
+            axis_join(axis, 0.0, ou + du * t, ov + dv * t) * (1.0 / r),
+        ));
+    }
+    if da.abs() > 1e-15 {
+        for side in [-1.0, 1.0] {
+            let t = (side * h - oa) / da;
+            let (u, v) = (ou + du * t, ov + dv * t);
+            if t > 0.0 && u * u + v * v <= r * r && t < best.map_or(f64::INFINITY, |b| b.0) {
+                best = Some((t, axis_join(axis, side, 0.0, 0.0)));
+            }
+        }
+    }
+    best
+}
+
+/// Distance from a point to a solid's surface given its signed "excess" along two independent
+/// directions (`da`, `dr` <= 0 inside): inside, the nearer face; outside, the Euclidean corner distance.
+fn two_way_distance(da: f64, dr: f64) -> f64 {
+    if da <= 0.0 && dr <= 0.0 {
+        (-da).min(-dr)
+    } else {
+        da.max(0.0).hypot(dr.max(0.0))
+    }
+}
+
+fn tyre_distance(t: &TyrePrim, p: Vec3) -> f64 {
+    let q = p - t.centre;
+    let rho = q.x.hypot(q.z);
+    let tread = (q.y.abs() - t.half_width).max(0.0).hypot(rho - t.radius);
+    let wall = (q.y.abs() - t.half_width)
+        .abs()
+        .hypot((t.rim_radius - rho).max(rho - t.radius).max(0.0));
+    let rim = (q.y.abs() - (t.half_width - RIM_INSET_M))
+        .abs()
+        .hypot((rho - t.radius).max(0.0));
+    tread.min(wall).min(rim)
+}
+
+fn prism_distance(pr: &Prism, p: Vec3) -> f64 {
+    let n = pr.poly.len();
+    let edge = (0..n)
+        .map(|i| {
+            crate::vehicle::segment_point_distance(pr.poly[i], pr.poly[(i + 1) % n], [p.x, p.z])
+        })
+        .fold(f64::INFINITY, f64::min);
+    let inside = inside_polygon(&pr.poly, p.x, p.z);
+    two_way_distance(p.y.abs() - pr.half_width, if inside { -edge } else { edge })
+}
+
+fn part_distance(part: &PartPrim, p: Vec3) -> f64 {
+    match part {
+        PartPrim::Box { min, max } => {
+            let c = (*min + *max) * 0.5;
+            let h = (*max - *min) * 0.5;
+            let q = p - c;
+            let e = Vec3::new(q.x.abs() - h.x, q.y.abs() - h.y, q.z.abs() - h.z);
+            if e.x <= 0.0 && e.y <= 0.0 && e.z <= 0.0 {
+                -(e.x.max(e.y).max(e.z))
+            } else {
+                Vec3::new(e.x.max(0.0), e.y.max(0.0), e.z.max(0.0)).norm()
+            }
+        }
+        PartPrim::Cylinder {
+            axis,
+            centre,
+            radius,
+            half_length,
+            ..
+        } => {
+            let (a, u, v) = axis_split(*axis, p - *centre);
+            two_way_distance(a.abs() - half_length, u.hypot(v) - radius)
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::vehicle::tests::test_sedan;
+    use rand::{Rng, SeedableRng};
+
+    fn scene() -> Scene {
+        Scene::from_vehicle(&test_sedan())
+    }
+
+    #[test]
+    fn straight_down_hits_ground_and_straight_up_hits_underside() {
+        let s = scene();
+        let o = Vec3::new(-1.4, 0.0, 0.1);
+        let down = s.cast(o, Vec3::new(0.0, 0.0, -1.0), 100.0).expect("ground");
+        assert_eq!(down.surface.kind, SurfaceKind::Ground);
+        assert!((down.range_m - 0.1).abs() < 1e-12);
+        let up = s
+            .cast(o, Vec3::new(0.0, 0.0, 1.0), 100.0)
+            .expect("underside");
+        assert_eq!(
+            up.surface,
+            SurfaceId {
+                kind: SurfaceKind::Body,
+                index: 1
+            }
+        );
+        assert!(
+            (up.range_m - 0.04).abs() < 1e-12,
+            "floor at 0.14 m: {}",
+            up.range_m
+        );
+        assert!((up.normal.z + 1.0).abs() < 1e-3);
+    }
+
+    #[test]
+    fn sideways_ray_hits_the_inner_sidewall_or_tread_of_the_left_front_tyre() {
+        let s = scene();
+        let hit = s
+            .cast(Vec3::new(0.0, 0.0, 0.33), Vec3::new(0.0, 1.0, 0.0), 100.0)
+            .expect("tyre");
+        assert_eq!(
+            hit.surface,
+            SurfaceId {
+                kind: SurfaceKind::Tyre,
+                index: 0
+            }
+        );
+        // Through the rim opening onto the recessed rim disc: y = track/2 - width/2 + inset.
+        assert!(
+            (hit.range_m - (0.79 - 0.1125 + RIM_INSET_M)).abs() < 1e-12,
+            "{}",
+            hit.range_m
+        );
+        let hit = s
+            .cast(Vec3::new(0.0, 0.0, 0.05), Vec3::new(0.0, 1.0, 0.0), 100.0)
+            .expect("tyre");
+        assert!(
+            (hit.range_m - (0.79 - 0.1125)).abs() < 1e-12,
+            "sidewall: {}",
+            hit.range_m
+        );
+    }
+
+    #[test]
+    fn rays_into_the_sky_return_nothing() {
+        let s = scene();
+        assert!(
+            s.cast(Vec3::new(5.0, 0.0, 0.1), Vec3::new(0.0, 0.0, 1.0), 100.0)
+                .is_none()
+        );
+    }
+
+    #[test]
+    fn every_hit_lies_on_the_surface_it_reports() {
+        let s = scene();
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+        let mut kinds = std::collections::HashSet::new();
+        for _ in 0..20_000 {
+            let o = Vec3::new(
+                rng.random_range(-4.5..2.0),
+                rng.random_range(-0.6..0.6),
+                rng.random_range(0.05..0.13),
+            );
+            let d = Vec3::new(
+                rng.random_range(-1.0..1.0),
+                rng.random_range(-1.0..1.0),
+                rng.random_range(-1.0..1.0),
+            )
+            .normalized();
+            if let Some(hit) = s.cast(o, d, 100.0) {
+                let p = o + d * hit.range_m;
+                let dist = s.distance_to_surface(hit.surface, p);
+                assert!(dist < 1e-9, "{:?} at {p:?}: {dist}", hit.surface);
+                assert!(hit.normal.dot(d) <= 0.0);
+                kinds.insert(hit.surface.kind);
+            }
+        }
+        assert_eq!(kinds.len(), 4, "all surface kinds were hit: {kinds:?}");
+    }
+}
