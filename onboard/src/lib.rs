@@ -4,4 +4,5 @@
 
 pub mod angles;
 pub mod cloud;
+pub mod pcap;
 pub mod vlp16;

@@ -35,7 +35,8 @@ pub const CHANNELS_PER_BLOCK: usize = 32;
 pub const LASERS: usize = 16;
 /// The block flag 0xFFEE as it appears on the wire (bytes FF EE), read as a little-endian u16.
 pub const BLOCK_FLAG: u16 = 0xEEFF;
-/// Azimuths are in hundredths of a degree, `0..AZIMUTH_RAW_MAX`.
+/// Azimuths are in hundredths of a degree, `0..=AZIMUTH_RAW_MAX`. Real sensors occasionally send
+/// exactly 36000 (the VeloView sample capture has one), which is accepted and means 0.
 pub const AZIMUTH_RAW_MAX: u16 = 36_000;
 /// Distance unit: 2 mm.
 pub const DISTANCE_RESOLUTION_M: f32 = 0.002;
@@ -81,8 +82,8 @@ pub enum PacketError {
         /// The flag read (little-endian).
         flag: u16,
     },
-    /// A block azimuth is not below 36000 (360.00 degrees).
-    #[error("block {block}: azimuth {azimuth_raw} (0.01 deg) is not below 36000")]
+    /// A block azimuth is above 36000 (360.00 degrees).
+    #[error("block {block}: azimuth {azimuth_raw} (0.01 deg) is above 36000")]
     AzimuthOutOfRange {
         /// Block index 0..12.
         block: u8,
@@ -238,7 +239,7 @@ impl<T: AsRef<[u8]>> Vlp16Packet<T> {
                 });
             }
             let azimuth_raw = self.azimuth_raw(block);
-            if azimuth_raw >= AZIMUTH_RAW_MAX {
+            if azimuth_raw > AZIMUTH_RAW_MAX {
                 return Err(PacketError::AzimuthOutOfRange {
                     block: block as u8,
                     azimuth_raw,
@@ -269,7 +270,7 @@ impl<T: AsRef<[u8]>> Vlp16Packet<T> {
         )
     }
 
-    /// Azimuth of `block` in hundredths of a degree (valid: below 36000).
+    /// Azimuth of `block` in hundredths of a degree (valid: 0..=36000, 36000 meaning 0).
     pub fn azimuth_raw(&self, block: usize) -> u16 {
         check_indices(block, 0);
         read_u16(
@@ -372,7 +373,7 @@ pub struct ChannelRepr {
 /// One data block: azimuth and 32 channel records (two firing sequences of 16 lasers).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct BlockRepr {
-    /// Azimuth of the block's first firing, hundredths of a degree, 0..36000.
+    /// Azimuth of the block's first firing, hundredths of a degree, 0..=36000 (36000 = 0).
     pub azimuth_raw: u16,
     /// Records 0..16 are sequence 0 (lasers 0..16), 16..32 sequence 1.
     pub channels: [ChannelRepr; CHANNELS_PER_BLOCK],
@@ -428,7 +429,7 @@ impl DataPacketRepr {
     }
 
     /// Writes every byte of the packet. `packet` must be exactly [`DATA_PACKET_LEN`] bytes long
-    /// (build it with [`Vlp16Packet::new_checked`]). Azimuths at or above 36000 are written as
+    /// (build it with [`Vlp16Packet::new_checked`]). Azimuths above 36000 are written as
     /// given, which is how a test builds a malformed packet.
     pub fn emit<T: AsRef<[u8]> + AsMut<[u8]>>(&self, packet: &mut Vlp16Packet<T>) {
         for (b, block) in self.blocks.iter().enumerate() {
@@ -523,12 +524,14 @@ mod tests {
         assert!(err.to_string().contains("block 7"));
         let mut bad = good;
         bad[202..204].copy_from_slice(&36_000u16.to_le_bytes());
+        assert!(DataPacketRepr::parse(&Vlp16Packet::new_unchecked(&bad[..])).is_ok());
+        bad[202..204].copy_from_slice(&36_001u16.to_le_bytes());
         let err = DataPacketRepr::parse(&Vlp16Packet::new_unchecked(&bad[..])).unwrap_err();
         assert_eq!(
             err,
             PacketError::AzimuthOutOfRange {
                 block: 2,
-                azimuth_raw: 36_000
+                azimuth_raw: 36_001
             }
         );
         let mut bad = good;
@@ -553,7 +556,7 @@ mod tests {
 
     fn arb_repr() -> impl Strategy<Value = DataPacketRepr> {
         let block = (
-            0..AZIMUTH_RAW_MAX,
+            0..=AZIMUTH_RAW_MAX,
             prop::collection::vec(any::<(u16, u8)>(), 32),
         )
             .prop_map(|(azimuth_raw, channels)| {
