@@ -7,6 +7,7 @@
 
 use crate::kinematics::{Geometry, Wheel};
 use crate::pid::PidGains;
+use protocol::mcu::McuConfig;
 
 /// Which ESC drives which wheel, and in which direction.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -262,6 +263,90 @@ impl Config {
 
 // Tests compare exact values on purpose (the code under test lands on them exactly) and build
 // synthetic encoder counts with plain casts.
+impl Config {
+    /// This configuration with the fields the MCU link can set replaced by `mcu`'s (the rest keep
+    /// their values). Validate the result before using it.
+    #[must_use]
+    pub fn with_mcu(&self, mcu: &McuConfig) -> Self {
+        let ms = |v: u16| u64::from(v) * 1000;
+        Self {
+            geometry: Geometry {
+                half_wheelbase_m: mcu.half_length_m,
+                half_track_m: mcu.half_width_m,
+                wheel_radius_m: mcu.wheel_radius_m,
+            },
+            wheels: WheelMap {
+                esc_id: mcu.esc_ids,
+                sign: mcu.wheel_signs,
+            },
+            pid: PidGains {
+                kp: mcu.speed_kp,
+                ki: mcu.speed_ki,
+                kd: mcu.speed_kd,
+                output_limit_a: mcu.current_limit_a,
+                ..self.pid
+            },
+            max_speed_mps: mcu.max_speed_mps,
+            max_accel_mps2: mcu.max_accel_mps2,
+            heartbeat_timeout_us: ms(mcu.heartbeat_timeout_ms),
+            feedback_timeout_us: ms(mcu.feedback_timeout_ms),
+            odometry_period_us: ms(mcu.odometry_period_ms),
+            over_temperature_c: mcu.over_temperature_c,
+            over_current_a: mcu.over_current_a,
+            stall_time_us: ms(mcu.stall_timeout_ms),
+            ..*self
+        }
+    }
+
+    /// The MCU-link view of this configuration (times rounded down to whole milliseconds).
+    pub fn to_mcu(&self) -> McuConfig {
+        let ms = |us: u64| u16::try_from(us / 1000).unwrap_or(u16::MAX);
+        McuConfig {
+            wheel_radius_m: self.geometry.wheel_radius_m,
+            half_length_m: self.geometry.half_wheelbase_m,
+            half_width_m: self.geometry.half_track_m,
+            esc_ids: self.wheels.esc_id,
+            wheel_signs: self.wheels.sign,
+            current_limit_a: self.pid.output_limit_a,
+            speed_kp: self.pid.kp,
+            speed_ki: self.pid.ki,
+            speed_kd: self.pid.kd,
+            max_speed_mps: self.max_speed_mps,
+            max_accel_mps2: self.max_accel_mps2,
+            heartbeat_timeout_ms: ms(self.heartbeat_timeout_us),
+            feedback_timeout_ms: ms(self.feedback_timeout_us),
+            odometry_period_ms: ms(self.odometry_period_us),
+            over_temperature_c: self.over_temperature_c,
+            over_current_a: self.over_current_a,
+            stall_timeout_ms: ms(self.stall_time_us),
+        }
+    }
+}
+
+impl ConfigError {
+    /// The name of the wrong field as `McuConfig` spells it (for `Rejected.field`).
+    pub fn mcu_field(&self) -> &'static str {
+        match self {
+            Self::BadEscIds => "esc_ids",
+            Self::BadSigns => "wheel_signs",
+            Self::OutOfRange(field) => match *field {
+                "geometry.wheel_radius_m" => "wheel_radius_m",
+                "geometry.half_wheelbase_m" => "half_length_m",
+                "geometry.half_track_m" => "half_width_m",
+                "pid.output_limit_a" => "current_limit_a",
+                "pid.kp" => "speed_kp",
+                "pid.ki" => "speed_ki",
+                "pid.kd" => "speed_kd",
+                "heartbeat_timeout_us" => "heartbeat_timeout_ms",
+                "feedback_timeout_us" => "feedback_timeout_ms",
+                "odometry_period_us" => "odometry_period_ms",
+                "stall_time_us" => "stall_timeout_ms",
+                other => other,
+            },
+        }
+    }
+}
+
 #[cfg(test)]
 #[allow(
     clippy::float_cmp,
@@ -308,6 +393,34 @@ mod tests {
         let mut c = Config::default();
         c.wheels.sign = [1, 0, 1, -1];
         assert_eq!(c.validate(), Err(ConfigError::BadSigns));
+    }
+
+    #[test]
+    fn mcu_round_trip_and_field_names() {
+        let c = Config::default();
+        assert_eq!(c.with_mcu(&c.to_mcu()), c);
+        let mut m = c.to_mcu();
+        m.half_length_m = -1.0;
+        let err = c.with_mcu(&m).validate().unwrap_err();
+        assert_eq!(err.mcu_field(), "half_length_m");
+        let mut m = c.to_mcu();
+        m.esc_ids = [5, 6, 7, 8];
+        assert_eq!(
+            c.with_mcu(&m).validate().unwrap_err().mcu_field(),
+            "esc_ids"
+        );
+        let mut m = c.to_mcu();
+        m.heartbeat_timeout_ms = 5;
+        assert_eq!(
+            c.with_mcu(&m).validate().unwrap_err().mcu_field(),
+            "heartbeat_timeout_ms"
+        );
+        let mut m = c.to_mcu();
+        m.stall_timeout_ms = 250;
+        m.current_limit_a = 8.0;
+        let c2 = c.with_mcu(&m);
+        assert_eq!((c2.stall_time_us, c2.pid.output_limit_a), (250_000, 8.0));
+        assert_eq!(c2.validate(), Ok(()));
     }
 
     #[test]

@@ -9,7 +9,10 @@
 //! - [`odometry`]: rotor-angle unwrapping, gear ratio, integrated pose and twist;
 //! - [`safety`]: per-ESC fault monitors, named interlocks, bus state;
 //! - [`config`]: the tuning knobs and their validation;
-//! - [`machine`]: the drive state machine tying the above together (`command` + `step`).
+//! - [`machine`]: the drive state machine tying the above together (`command` + `step`);
+//! - [`link`]: MCU-link frames in (shared deframer, `protocol::mcu`), replies and rejections out;
+//! - [`controller`]: [`Controller::step`]`(now_us, &Inputs) -> Outputs`, the one call the
+//!   embassy shell and the simulator make every millisecond.
 //!
 //! Units are SI with the unit in the name (`vx_mps`, `stamp_us`); wheel speeds are output-shaft
 //! rad/s, positive when the wheel rolls the robot forward; rpm only at the ESC boundary. All times
@@ -18,7 +21,9 @@
 #![warn(clippy::cast_possible_truncation, clippy::cast_sign_loss)]
 
 pub mod config;
+pub mod controller;
 pub mod kinematics;
+pub mod link;
 pub mod machine;
 pub mod odometry;
 pub mod pid;
@@ -26,8 +31,7 @@ pub mod profile;
 pub mod safety;
 
 pub use config::{Config, ConfigError, WheelMap};
+pub use controller::{Controller, Inputs, LedPattern, Outputs};
 pub use kinematics::{Geometry, Twist, Wheel};
-pub use machine::{
-    Command, DriveCommand, EscSample, Machine, Mode, Reject, SafetyStatus, StepOutput,
-};
+pub use machine::{Command, DriveCommand, EscSample, Machine, Mode, Reject, StepOutput};
 pub use safety::{BusState, EscFaults, Interlocks};

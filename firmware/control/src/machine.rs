@@ -10,17 +10,19 @@
 //!
 //! Modes: `Idle` (currents zero) -> `Driving` (ramping to / cruising at the commanded twist) ->
 //! `Stopping` (ramping to zero after `Stop` or a lost heartbeat) -> `Holding` (zero speed held by
-//! the PIDs for `hold_after_stop_us`) -> `Idle`. `Faulted` (currents zero) whenever an ESC fault or
-//! a bus-off is latched; only an accepted `ClearFaults` leaves it, to `Idle`.
+//! the PIDs for `hold_after_stop_us`) -> `Idle`. `Stop { immediate: true }` goes straight to
+//! `Idle`. `Faulted` (currents zero) whenever an ESC fault or a bus-off is latched; only an
+//! accepted `ClearFaults` leaves it, to `Idle`. The safety rules are tabled in [`crate::safety`].
 
 use protocol::esc::EscFeedback;
+use protocol::mcu::{DriveMode, EscStatus, Odometry as OdometryReport, Status};
 
 use crate::config::{Config, ConfigError};
 use crate::kinematics::{self, Twist};
 use crate::odometry::{self, EncoderUnwrap, Odometry, Pose};
 use crate::pid::Pid;
 use crate::profile::{Limits, Ramp};
-use crate::safety::{BusState, EscFaults, EscMonitor, Interlocks};
+use crate::safety::{BusState, EscFaults, EscMonitor, HARD_INTERLOCKS, Interlocks, interlocks_of};
 
 /// Longest step used for integration and PID `dt`; a longer gap (a stalled task) is clamped so a
 /// late step cannot produce a large integral jump.
@@ -55,8 +57,14 @@ pub struct DriveCommand {
 pub enum Command {
     /// Ramp to and hold a twist.
     Drive(DriveCommand),
-    /// Ramp to zero with the current ramp limits, then hold and go idle.
-    Stop,
+    /// The onboard computer said `Hello` with our protocol version.
+    Hello,
+    /// Ramp to zero with the current ramp limits, then hold and go idle; or, with `immediate`,
+    /// zero the currents now (the wheels coast).
+    Stop {
+        /// Zero currents at once instead of ramping.
+        immediate: bool,
+    },
     /// The onboard computer is alive.
     Heartbeat,
     /// Clear latched faults whose cause is gone.
@@ -129,19 +137,6 @@ impl Mode {
     }
 }
 
-/// A snapshot of the safety state, for status reports.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct SafetyStatus {
-    /// Motion mode.
-    pub mode: Mode,
-    /// Everything that blocks motion now.
-    pub interlocks: Interlocks,
-    /// Latched faults per ESC slot (ESC id 1..=4 at index 0..=3).
-    pub esc_faults: [EscFaults; 4],
-    /// Bus-off events since boot.
-    pub bus_off_count: u16,
-}
-
 /// What one step produces.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct StepOutput {
@@ -166,12 +161,15 @@ pub struct Machine {
     limits: [Limits; 3],
     odometry: Odometry,
     last_heartbeat_us: Option<u64>,
+    host_seen: bool,
+    /// Latched `HEARTBEAT_LOST`, `CAN_BUS_OFF` and `STOP_REQUESTED`.
     latched: Interlocks,
     bus: BusState,
     bus_off_count: u16,
     last_step_us: Option<u64>,
     hold_until_us: u64,
     setpoint: Twist,
+    command_a: [f32; 4],
     unknown_esc_frames: u32,
 }
 
@@ -193,12 +191,14 @@ impl Machine {
             }; 3],
             odometry: Odometry::new(),
             last_heartbeat_us: None,
-            latched: Interlocks::default(),
+            host_seen: false,
+            latched: Interlocks::EMPTY,
             bus: BusState::Active,
             bus_off_count: 0,
             last_step_us: None,
             hold_until_us: 0,
             setpoint: Twist::ZERO,
+            command_a: [0.0; 4],
             unknown_esc_frames: 0,
         })
     }
@@ -238,39 +238,102 @@ impl Machine {
             .is_some_and(|t| now_us.saturating_sub(t) < self.config.heartbeat_timeout_us)
     }
 
-    fn esc_faults_by_wheel(&self) -> impl Iterator<Item = EscFaults> + '_ {
-        self.escs.iter().map(EscMonitor::faults)
+    /// Latched faults that zero the currents (ESC faults of ESCs that have reported, bus-off).
+    fn hard_faults(&self) -> Interlocks {
+        let mut i = Interlocks::EMPTY;
+        for e in &self.escs {
+            i.insert(interlocks_of(e.faults()));
+        }
+        i.insert(self.latched);
+        Interlocks(i.0 & HARD_INTERLOCKS.0)
+    }
+
+    /// Per-wheel ESC faults, with `MISSING` also set (live) for ESCs that never reported.
+    fn esc_faults(&self) -> [EscFaults; 4] {
+        self.escs.map(|e| {
+            let mut f = e.faults();
+            if !e.seen() {
+                f.insert(EscFaults::MISSING);
+            }
+            f
+        })
     }
 
     /// Everything that blocks motion at `now_us`.
     pub fn interlocks(&self, now_us: u64) -> Interlocks {
-        let mut i = self.latched;
-        if !self.heartbeat_fresh(now_us) {
-            i.insert(Interlocks::HEARTBEAT_MISSING);
+        let mut i = Interlocks::EMPTY;
+        if !self.host_seen {
+            i.insert(Interlocks::NO_HOST);
         }
-        if self.escs.iter().any(|e| !e.seen()) {
-            i.insert(Interlocks::ESC_OFFLINE);
+        if self.latched.contains(Interlocks::HEARTBEAT_LOST) || !self.heartbeat_fresh(now_us) {
+            i.insert(Interlocks::HEARTBEAT_LOST);
         }
-        if self.esc_faults_by_wheel().any(|f| !f.is_empty()) {
-            i.insert(Interlocks::ESC_FAULT);
+        for f in self.esc_faults() {
+            i.insert(interlocks_of(f));
         }
+        i.insert(self.latched);
         i
     }
 
-    /// The safety snapshot at `now_us`.
-    pub fn status(&self, now_us: u64) -> SafetyStatus {
-        let mut esc_faults = [EscFaults::default(); 4];
-        for (wheel, faults) in self.esc_faults_by_wheel().enumerate() {
-            let slot = usize::from(self.config.wheels.esc_id[wheel]).wrapping_sub(1);
-            if let Some(f) = esc_faults.get_mut(slot) {
-                *f = faults;
+    /// The mode as the MCU link reports it.
+    pub fn drive_mode(&self) -> DriveMode {
+        match self.mode {
+            Mode::Idle => DriveMode::Idle,
+            Mode::Driving => {
+                let target = [self.target.vx_mps, self.target.vy_mps, self.target.wz_radps];
+                let cruising = self
+                    .ramps
+                    .iter()
+                    .zip(target)
+                    .all(|(r, t)| r.is_settled_at(t));
+                if cruising {
+                    DriveMode::Cruising
+                } else {
+                    DriveMode::Ramping
+                }
             }
+            Mode::Stopping | Mode::Holding => DriveMode::Stopping,
+            Mode::Faulted => DriveMode::Faulted,
         }
-        SafetyStatus {
-            mode: self.mode,
+    }
+
+    /// The status report at `now_us` (the link fills in its own counters).
+    pub fn status(&self, now_us: u64) -> Status {
+        let faults = self.esc_faults();
+        let esc = core::array::from_fn(|wheel| {
+            let last = self.escs[wheel].last();
+            EscStatus {
+                esc_id: self.config.wheels.esc_id[wheel],
+                faults: faults[wheel],
+                temperature_c: last.temperature_c,
+                current_a: protocol::esc::raw_to_amps(last.current_raw),
+                command_a: self.command_a[wheel],
+            }
+        });
+        Status {
+            stamp_us: now_us,
+            mode: self.drive_mode(),
             interlocks: self.interlocks(now_us),
-            esc_faults,
+            esc,
             bus_off_count: self.bus_off_count,
+            link_errors: 0,
+            rejected_count: 0,
+        }
+    }
+
+    /// The odometry report at `now_us`.
+    pub fn odometry_report(&self, now_us: u64) -> OdometryReport {
+        let pose = self.odometry.pose();
+        let twist = self.odometry.twist();
+        OdometryReport {
+            stamp_us: now_us,
+            x_m: pose.x_m,
+            y_m: pose.y_m,
+            yaw_rad: pose.yaw_rad,
+            vx_mps: twist.vx_mps,
+            vy_mps: twist.vy_mps,
+            wz_radps: twist.wz_radps,
+            wheel_speed_radps: self.odometry.wheel_radps(),
         }
     }
 
@@ -281,11 +344,24 @@ impl Machine {
                 self.last_heartbeat_us = Some(now_us);
                 Ok(())
             }
+            Command::Hello => {
+                self.host_seen = true;
+                Ok(())
+            }
             Command::Drive(drive) => self.drive(now_us, &drive),
-            Command::Stop => {
-                if matches!(self.mode, Mode::Driving) {
-                    self.target = Twist::ZERO;
-                    self.mode = Mode::Stopping;
+            Command::Stop { immediate } => {
+                self.latched.insert(Interlocks::STOP_REQUESTED);
+                match self.mode {
+                    Mode::Faulted | Mode::Idle => {}
+                    _ if immediate => {
+                        self.mode = Mode::Idle;
+                        self.rest();
+                    }
+                    Mode::Driving => {
+                        self.target = Twist::ZERO;
+                        self.mode = Mode::Stopping;
+                    }
+                    Mode::Stopping | Mode::Holding => {}
                 }
                 Ok(())
             }
@@ -321,12 +397,17 @@ impl Machine {
             return Err(Reject::OutOfRange("jerk_mps3"));
         }
         let mut blocking = self.interlocks(now_us);
-        // A lost heartbeat only asks for a new start: this drive command is that start.
-        blocking.remove(Interlocks::HEARTBEAT_LOST);
+        // A stop or a lost heartbeat only asks for a new start: this drive command is that start
+        // (the heartbeat must be flowing again).
+        blocking.remove(Interlocks::STOP_REQUESTED);
+        if self.heartbeat_fresh(now_us) {
+            blocking.remove(Interlocks::HEARTBEAT_LOST);
+        }
         if !blocking.is_empty() {
             return Err(Reject::Interlocked(blocking));
         }
         self.latched.remove(Interlocks::HEARTBEAT_LOST);
+        self.latched.remove(Interlocks::STOP_REQUESTED);
         self.target = drive.twist;
         self.limits = ramp_limits(c, drive.accel_mps2, drive.jerk_mps3);
         self.mode = Mode::Driving;
@@ -340,8 +421,7 @@ impl Machine {
         if self.bus != BusState::BusOff {
             self.latched.remove(Interlocks::CAN_BUS_OFF);
         }
-        let hard = self.interlocks(now_us);
-        let persisting = Interlocks(hard.0 & (Interlocks::ESC_FAULT.0 | Interlocks::CAN_BUS_OFF.0));
+        let persisting = self.hard_faults();
         if persisting.is_empty() && self.mode == Mode::Faulted {
             self.mode = Mode::Idle;
         }
@@ -424,9 +504,7 @@ impl Machine {
             );
             self.mode = Mode::Stopping;
         }
-        let faulted = self.esc_faults_by_wheel().any(|f| !f.is_empty())
-            || self.latched.contains(Interlocks::CAN_BUS_OFF);
-        if faulted {
+        if !self.hard_faults().is_empty() {
             self.mode = Mode::Faulted;
         }
         recover_bus
@@ -474,6 +552,7 @@ impl Machine {
                 dt_s,
             );
             let motor_amps = self.config.wheels.sign_f(wheel) * amps;
+            self.command_a[wheel] = motor_amps;
             let slot = usize::from(self.config.wheels.esc_id[wheel]).wrapping_sub(1);
             if let Some(c) = currents_raw.get_mut(slot) {
                 *c = protocol::esc::amps_to_raw(motor_amps);
@@ -491,6 +570,7 @@ impl Machine {
         }
         self.target = Twist::ZERO;
         self.setpoint = Twist::ZERO;
+        self.command_a = [0.0; 4];
     }
 }
 

@@ -52,6 +52,12 @@ impl Ramp {
         self.velocity == 0.0 && self.accel == 0.0
     }
 
+    /// Whether the ramp has landed on `target` (it lands exactly, by construction of `step`).
+    #[allow(clippy::float_cmp)]
+    pub fn is_settled_at(&self, target: f32) -> bool {
+        self.velocity == target && self.accel == 0.0
+    }
+
     /// Jumps to rest (used when a fault zeroes the currents: the setpoint must not resume from
     /// where it was).
     pub fn reset(&mut self) {

@@ -1,117 +1,55 @@
 //! Safety monitors: per-ESC fault detection, heartbeat supervision, CAN bus state, and the named
 //! interlocks that block motion.
 //!
-//! | condition | detected when | action (by [`crate::Controller`]) | cleared by |
-//! |---|---|---|---|
-//! | ESC feedback missing | a seen ESC is silent for `feedback_timeout_us` (10 ms) | zero currents at once, latch | `ClearFaults` with fresh feedback |
-//! | over-temperature | `temperature_c >= over_temperature_c` | zero currents at once, latch | `ClearFaults` once 10 C below |
-//! | over-current | `|measured current| > over_current_a` for `over_current_time_us` | zero currents at once, latch | `ClearFaults` |
-//! | stall | `|current| >= stall_current_a` and `|wheel| < stall_speed_radps` for `stall_time_us` | zero currents at once, latch | `ClearFaults` |
-//! | CAN bus-off | the shell reports bus-off | zero currents, ask the shell to recover the bus, latch | `ClearFaults` with the bus back |
-//! | heartbeat lost | no heartbeat for `heartbeat_timeout_us` (100 ms) while moving | ramp to zero, drop the drive command, latch | the next accepted drive command |
+//! | condition | detected when | action (by [`crate::machine::Machine`]) | interlock | cleared by |
+//! |---|---|---|---|---|
+//! | ESC feedback missing | a seen ESC is silent for `feedback_timeout_us` (10 ms) | zero currents at once, latch | `ESC_FEEDBACK_MISSING` | `ClearFaults` with fresh feedback |
+//! | over-temperature | `temperature_c >= over_temperature_c` | zero currents at once, latch | `ESC_OVER_TEMPERATURE` | `ClearFaults` once 10 C below |
+//! | over-current | `abs(measured current) > over_current_a` for `over_current_time_us` | zero currents at once, latch | `ESC_OVER_CURRENT` | `ClearFaults` |
+//! | stall | `abs(current) >= stall_current_a`, `abs(wheel) < stall_speed_radps` for `stall_time_us` | zero currents at once, latch | `ESC_STALLED` | `ClearFaults` |
+//! | CAN bus-off | the shell reports bus-off | zero currents, ask the shell to recover the bus, latch | `CAN_BUS_OFF` | `ClearFaults` with the bus back |
+//! | heartbeat lost | no heartbeat for `heartbeat_timeout_us` (100 ms) | ramp to zero, drop the drive command, latch | `HEARTBEAT_LOST` | heartbeats again, then a new drive command |
+//! | no host | no `Hello` since boot | block starts | `NO_HOST` | `Hello` |
+//! | stop requested | `Stop` received | ramp to zero (or zero at once if `immediate`) | `STOP_REQUESTED` | a new drive command |
 //!
-//! Each latched condition is an [`Interlocks`] bit with a name; ESC faults also carry the ESC id in
-//! [`EscFaults`] per ESC. "At once" means in the same 1 ms step that detects the condition.
+//! The interlocks and per-ESC fault bits are the MCU link's wire types ([`Interlocks`],
+//! [`EscFaults`]), each bit with a name. ESC faults are also reported per wheel with the ESC id.
+//! "At once" means in the same 1 ms step that detects the condition.
 
 use protocol::esc::EscFeedback;
 
 use crate::config::Config;
 
-/// Fault bits of one ESC (latched until cleared).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub struct EscFaults(pub u8);
+/// Fault bits of one ESC and the named interlocks are the wire types of the MCU link, so what
+/// the machine latches is exactly what the onboard computer reads, names included.
+pub use protocol::mcu::{EscFaults, Interlocks};
 
-impl EscFaults {
-    /// No feedback frame for the feedback timeout.
-    pub const FEEDBACK_TIMEOUT: Self = Self(1 << 0);
-    /// Motor temperature at or above the limit.
-    pub const OVER_TEMPERATURE: Self = Self(1 << 1);
-    /// Measured current above the over-current limit.
-    pub const OVER_CURRENT: Self = Self(1 << 2);
-    /// High current with the wheel not turning.
-    pub const STALL: Self = Self(1 << 3);
-    /// Every bit with its name, for reports.
-    pub const NAMED: [(Self, &'static str); 4] = [
-        (Self::FEEDBACK_TIMEOUT, "feedback-timeout"),
-        (Self::OVER_TEMPERATURE, "over-temperature"),
-        (Self::OVER_CURRENT, "over-current"),
-        (Self::STALL, "stall"),
-    ];
+/// Interlocks that zero the currents at once and stay latched until `ClearFaults`.
+pub const HARD_INTERLOCKS: Interlocks = Interlocks(
+    Interlocks::ESC_FEEDBACK_MISSING.0
+        | Interlocks::ESC_OVER_TEMPERATURE.0
+        | Interlocks::ESC_OVER_CURRENT.0
+        | Interlocks::ESC_STALLED.0
+        | Interlocks::CAN_BUS_OFF.0,
+);
 
-    /// Whether no bit is set.
-    pub const fn is_empty(self) -> bool {
-        self.0 == 0
+/// The interlock bits that stand for a set of ESC faults.
+pub fn interlocks_of(faults: EscFaults) -> Interlocks {
+    let mut i = Interlocks::EMPTY;
+    for (fault, interlock) in [
+        (EscFaults::MISSING, Interlocks::ESC_FEEDBACK_MISSING),
+        (
+            EscFaults::OVER_TEMPERATURE,
+            Interlocks::ESC_OVER_TEMPERATURE,
+        ),
+        (EscFaults::OVER_CURRENT, Interlocks::ESC_OVER_CURRENT),
+        (EscFaults::STALLED, Interlocks::ESC_STALLED),
+    ] {
+        if faults.contains(fault) {
+            i.insert(interlock);
+        }
     }
-    /// Whether every bit of `other` is set.
-    pub const fn contains(self, other: Self) -> bool {
-        self.0 & other.0 == other.0
-    }
-    /// Sets the bits of `other`.
-    pub fn insert(&mut self, other: Self) {
-        self.0 |= other.0;
-    }
-    /// Names of the set bits.
-    pub fn names(self) -> impl Iterator<Item = &'static str> {
-        Self::NAMED
-            .into_iter()
-            .filter(move |(b, _)| self.contains(*b))
-            .map(|(_, n)| n)
-    }
-}
-
-/// Conditions that currently block motion, each with a name (a bit set).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub struct Interlocks(pub u16);
-
-impl Interlocks {
-    /// No heartbeat from the onboard computer within the timeout (live, not latched).
-    pub const HEARTBEAT_MISSING: Self = Self(1 << 0);
-    /// The heartbeat was lost while moving; latched until the next accepted drive command.
-    pub const HEARTBEAT_LOST: Self = Self(1 << 1);
-    /// An ESC has never reported (live).
-    pub const ESC_OFFLINE: Self = Self(1 << 2);
-    /// An ESC fault is latched (see the per-ESC [`EscFaults`]).
-    pub const ESC_FAULT: Self = Self(1 << 3);
-    /// The CAN bus went bus-off; latched until cleared with the bus back.
-    pub const CAN_BUS_OFF: Self = Self(1 << 4);
-    /// Every bit with its name, for reports.
-    pub const NAMED: [(Self, &'static str); 5] = [
-        (Self::HEARTBEAT_MISSING, "heartbeat-missing"),
-        (Self::HEARTBEAT_LOST, "heartbeat-lost"),
-        (Self::ESC_OFFLINE, "esc-offline"),
-        (Self::ESC_FAULT, "esc-fault"),
-        (Self::CAN_BUS_OFF, "can-bus-off"),
-    ];
-    /// Interlocks that zero the currents at once (the rest ramp down or only block a start).
-    pub const HARD: Self = Self(Self::ESC_OFFLINE.0 | Self::ESC_FAULT.0 | Self::CAN_BUS_OFF.0);
-
-    /// Whether no bit is set.
-    pub const fn is_empty(self) -> bool {
-        self.0 == 0
-    }
-    /// Whether every bit of `other` is set.
-    pub const fn contains(self, other: Self) -> bool {
-        self.0 & other.0 == other.0
-    }
-    /// Whether any bit of `other` is set.
-    pub const fn intersects(self, other: Self) -> bool {
-        self.0 & other.0 != 0
-    }
-    /// Sets the bits of `other`.
-    pub fn insert(&mut self, other: Self) {
-        self.0 |= other.0;
-    }
-    /// Clears the bits of `other`.
-    pub fn remove(&mut self, other: Self) {
-        self.0 &= !other.0;
-    }
-    /// Names of the set bits.
-    pub fn names(self) -> impl Iterator<Item = &'static str> {
-        Self::NAMED
-            .into_iter()
-            .filter(move |(b, _)| self.contains(*b))
-            .map(|(_, n)| n)
-    }
+    i
 }
 
 /// State of the CAN controller as the shell reads it.
@@ -150,7 +88,7 @@ impl EscMonitor {
                 current_raw: 0,
                 temperature_c: 0,
             },
-            faults: EscFaults(0),
+            faults: EscFaults::EMPTY,
             over_current_since_us: None,
             stall_since_us: None,
         }
@@ -200,7 +138,7 @@ impl EscMonitor {
         if held(&mut self.stall_since_us, stalled, now_us)
             .is_some_and(|since| now_us - since >= config.stall_time_us)
         {
-            self.faults.insert(EscFaults::STALL);
+            self.faults.insert(EscFaults::STALLED);
         }
     }
 
@@ -210,7 +148,7 @@ impl EscMonitor {
             .last_seen_us
             .is_some_and(|t| now_us.saturating_sub(t) >= config.feedback_timeout_us)
         {
-            self.faults.insert(EscFaults::FEEDBACK_TIMEOUT);
+            self.faults.insert(EscFaults::MISSING);
         }
     }
 
@@ -219,9 +157,9 @@ impl EscMonitor {
         let fresh = self
             .last_seen_us
             .is_some_and(|t| now_us.saturating_sub(t) < config.feedback_timeout_us);
-        let mut keep = EscFaults::default();
-        if self.faults.contains(EscFaults::FEEDBACK_TIMEOUT) && !fresh {
-            keep.insert(EscFaults::FEEDBACK_TIMEOUT);
+        let mut keep = EscFaults::EMPTY;
+        if self.faults.contains(EscFaults::MISSING) && !fresh {
+            keep.insert(EscFaults::MISSING);
         }
         let cool = config
             .over_temperature_c
@@ -269,17 +207,19 @@ mod tests {
     }
 
     #[test]
-    fn names() {
-        let i = Interlocks(Interlocks::HEARTBEAT_LOST.0 | Interlocks::CAN_BUS_OFF.0);
-        let mut it = i.names();
-        assert_eq!(it.next(), Some("heartbeat-lost"));
-        assert_eq!(it.next(), Some("can-bus-off"));
-        assert_eq!(it.next(), None);
-        let f = EscFaults(EscFaults::STALL.0 | EscFaults::FEEDBACK_TIMEOUT.0);
+    fn esc_faults_map_to_named_interlocks() {
+        let f = EscFaults::STALLED.union(EscFaults::MISSING);
+        let i = interlocks_of(f);
         assert_eq!(
-            f.names().collect::<heapless::Vec<_, 4>>().as_slice(),
-            ["feedback-timeout", "stall"]
+            i,
+            Interlocks::ESC_FEEDBACK_MISSING.union(Interlocks::ESC_STALLED)
         );
+        assert_eq!(
+            i.names().collect::<heapless::Vec<_, 4>>().as_slice(),
+            ["ESC_FEEDBACK_MISSING", "ESC_STALLED"]
+        );
+        assert!(HARD_INTERLOCKS.contains(i));
+        assert!(!HARD_INTERLOCKS.contains(Interlocks::HEARTBEAT_LOST));
     }
 
     #[test]
@@ -295,8 +235,8 @@ mod tests {
         m.check_timeout(&c, 9_999);
         assert!(m.faults().is_empty());
         m.check_timeout(&c, 10_000);
-        assert_eq!(m.faults(), EscFaults::FEEDBACK_TIMEOUT);
-        assert_eq!(m.clear(&c, 20_000), EscFaults::FEEDBACK_TIMEOUT);
+        assert_eq!(m.faults(), EscFaults::MISSING);
+        assert_eq!(m.clear(&c, 20_000), EscFaults::MISSING);
         m.on_feedback(&c, &fb(0, 0, 30), 0.0, 20_000);
         assert!(m.clear(&c, 20_500).is_empty());
     }
@@ -345,6 +285,6 @@ mod tests {
         }
         assert!(m.faults().is_empty());
         m.on_feedback(&c, &fb(raw, 0, 30), 0.0, 800_000);
-        assert_eq!(m.faults(), EscFaults::STALL);
+        assert_eq!(m.faults(), EscFaults::STALLED);
     }
 }

@@ -8,6 +8,7 @@ use common::{Patch, STEP_US, Sim};
 use control::machine::{Command, DriveCommand};
 use control::{BusState, EscFaults, Interlocks, Mode, Reject, Twist};
 use protocol::esc::{amps_to_raw, encode_command};
+use protocol::mcu::DriveMode;
 
 const ZERO_FRAME: [u8; 8] = [0; 8];
 
@@ -63,15 +64,16 @@ fn esc_feedback_missing_zeroes_on_the_tenth_step() {
         "zero frame must go out in the step 10 ms after the last feedback"
     );
     let status = sim.machine.status(sim.now_us);
-    assert_eq!(status.esc_faults[2], EscFaults::FEEDBACK_TIMEOUT);
-    assert!(status.esc_faults[0].is_empty() && status.esc_faults[1].is_empty());
-    assert!(status.interlocks.contains(Interlocks::ESC_FAULT));
-    assert_eq!(status.mode, Mode::Faulted);
+    assert_eq!(status.esc[2].faults, EscFaults::MISSING);
+    assert!(status.esc[0].faults.is_empty() && status.esc[1].faults.is_empty());
+    assert!(status.interlocks.contains(Interlocks::ESC_FEEDBACK_MISSING));
+    assert_eq!(status.mode, DriveMode::Faulted);
+    assert_eq!(sim.machine.mode(), Mode::Faulted);
     assert_zero_for(&mut sim, 500);
     // Clearing while ESC 3 is still silent fails and names what persists.
     assert_eq!(
         sim.command(Command::ClearFaults),
-        Err(Reject::FaultsPersist(Interlocks::ESC_FAULT))
+        Err(Reject::FaultsPersist(Interlocks::ESC_FEEDBACK_MISSING))
     );
     sim.silent[2] = false;
     sim.tick();
@@ -90,7 +92,7 @@ fn over_temperature_zeroes_in_the_same_step() {
     };
     assert_eq!(ticks_until_zero_frame(&mut sim, 10), 1);
     assert_eq!(
-        sim.machine.status(sim.now_us).esc_faults[1],
+        sim.machine.status(sim.now_us).esc[1].faults,
         EscFaults::OVER_TEMPERATURE
     );
     assert_zero_for(&mut sim, 100);
@@ -116,7 +118,7 @@ fn over_current_zeroes_after_three_ms() {
     // Frames at t, t+1, t+2, t+3 ms: the condition has lasted 3 ms at the fourth.
     assert_eq!(ticks_until_zero_frame(&mut sim, 20), 4);
     assert_eq!(
-        sim.machine.status(sim.now_us).esc_faults[0],
+        sim.machine.status(sim.now_us).esc[0].faults,
         EscFaults::OVER_CURRENT
     );
     assert_zero_for(&mut sim, 100);
@@ -131,8 +133,8 @@ fn stalled_wheel_zeroes_after_the_stall_time() {
     let n = ticks_until_zero_frame(&mut sim, 1000);
     assert!((400..=410).contains(&n), "stall detected after {n} steps");
     assert_eq!(
-        sim.machine.status(sim.now_us).esc_faults[3],
-        EscFaults::STALL
+        sim.machine.status(sim.now_us).esc[3].faults,
+        EscFaults::STALLED
     );
     assert_zero_for(&mut sim, 100);
 }
@@ -152,9 +154,9 @@ fn bus_off_zeroes_at_once_asks_for_recovery_and_latches() {
     let status = sim.machine.status(sim.now_us);
     assert!(
         status
-            .esc_faults
+            .esc
             .iter()
-            .all(|f| f.contains(EscFaults::FEEDBACK_TIMEOUT))
+            .all(|e| e.faults.contains(EscFaults::MISSING))
     );
     assert!(matches!(
         sim.command(Command::ClearFaults),
@@ -206,7 +208,7 @@ fn heartbeat_loss_ramps_to_zero_and_latches_until_a_new_start() {
     );
     assert_zero_for(&mut sim, 200);
     let il = sim.machine.interlocks(sim.now_us);
-    assert!(il.contains(Interlocks::HEARTBEAT_LOST) && il.contains(Interlocks::HEARTBEAT_MISSING));
+    assert!(il.contains(Interlocks::HEARTBEAT_LOST) && il.contains(Interlocks::HEARTBEAT_LOST));
     let drive = Command::Drive(DriveCommand {
         twist: Twist::new(0.3, 0.0, 0.0),
         accel_mps2: 0.5,
@@ -214,7 +216,7 @@ fn heartbeat_loss_ramps_to_zero_and_latches_until_a_new_start() {
     });
     assert_eq!(
         sim.command(drive),
-        Err(Reject::Interlocked(Interlocks::HEARTBEAT_MISSING))
+        Err(Reject::Interlocked(Interlocks::HEARTBEAT_LOST))
     );
     // Heartbeats resume: still latched (reported) and not moving, until a new drive command.
     sim.heartbeat_every = 20;
@@ -235,7 +237,7 @@ fn heartbeat_loss_ramps_to_zero_and_latches_until_a_new_start() {
 #[test]
 fn stop_ramps_down_with_the_commanded_ramp_then_goes_idle() {
     let mut sim = cruising();
-    sim.command(Command::Stop).unwrap();
+    sim.command(Command::Stop { immediate: false }).unwrap();
     sim.run(1);
     assert_eq!(sim.machine.mode(), Mode::Stopping);
     // 0.3 m/s at 0.5 m/s^2 and 5 m/s^3: about 0.7 s; then a 0.5 s hold.
@@ -254,15 +256,27 @@ fn start_is_blocked_until_escs_and_heartbeat_are_present() {
         accel_mps2: 0.5,
         jerk_mps3: 0.0,
     });
-    let both = Interlocks(Interlocks::HEARTBEAT_MISSING.0 | Interlocks::ESC_OFFLINE.0);
-    assert_eq!(sim.command(drive), Err(Reject::Interlocked(both)));
+    let all = Interlocks::NO_HOST
+        .union(Interlocks::HEARTBEAT_LOST)
+        .union(Interlocks::ESC_FEEDBACK_MISSING);
+    assert_eq!(sim.command(drive), Err(Reject::Interlocked(all)));
     sim.silent = [false, false, true, false];
     sim.run(5);
     sim.command(Command::Heartbeat).unwrap();
+    let status = sim.machine.status(sim.now_us);
+    assert_eq!(
+        status.esc[2].faults,
+        EscFaults::MISSING,
+        "never-seen ESC 3 reported missing"
+    );
+    assert_eq!(status.esc[2].esc_id, 3);
     assert_eq!(
         sim.command(drive),
-        Err(Reject::Interlocked(Interlocks::ESC_OFFLINE))
+        Err(Reject::Interlocked(
+            Interlocks::NO_HOST.union(Interlocks::ESC_FEEDBACK_MISSING)
+        ))
     );
+    sim.command(Command::Hello).unwrap();
     sim.silent = [false; 4];
     sim.run(1);
     sim.command(Command::Heartbeat).unwrap();
@@ -313,7 +327,7 @@ fn out_of_range_commands_are_rejected_by_field() {
         over_temperature_c: 200,
         ..control::Config::default()
     };
-    sim.command(Command::Stop).unwrap();
+    sim.command(Command::Stop { immediate: false }).unwrap();
     sim.run(2000);
     assert_eq!(
         sim.command(Command::SetConfig(bad)),

@@ -6,7 +6,8 @@ mod common;
 
 use common::{Patch, Sim};
 use control::machine::{Command, DriveCommand};
-use control::{BusState, Config, Interlocks, Twist};
+use control::safety::HARD_INTERLOCKS;
+use control::{BusState, Config, Twist};
 use proptest::prelude::*;
 
 /// One thing that can happen between steps.
@@ -73,9 +74,7 @@ impl Checker {
     fn tick(&mut self) -> Result<(), TestCaseError> {
         let out = self.sim.tick();
         let status = self.sim.machine.status(self.sim.now_us);
-        let hard = status.interlocks.intersects(Interlocks(
-            Interlocks::ESC_FAULT.0 | Interlocks::CAN_BUS_OFF.0,
-        ));
+        let hard = status.interlocks.0 & HARD_INTERLOCKS.0 != 0;
         if hard {
             prop_assert_eq!(
                 out.currents_raw,
@@ -120,7 +119,7 @@ impl Checker {
                 }));
             }
             Op::Stop => {
-                let _ = self.sim.command(Command::Stop);
+                let _ = self.sim.command(Command::Stop { immediate: false });
             }
             Op::ClearFaults => {
                 if self.sim.command(Command::ClearFaults).is_ok() {

@@ -108,6 +108,7 @@ impl Sim {
 
     /// Heartbeat + a few ticks so that every ESC has reported, then a forward drive.
     pub fn start_forward(&mut self, vx_mps: f32) {
+        self.command(Command::Hello).unwrap();
         self.command(Command::Heartbeat).unwrap();
         self.run(3);
         self.command(Command::Drive(DriveCommand {
