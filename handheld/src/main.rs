@@ -1,6 +1,8 @@
 //! `passangle`: the operator's command line (measurement over the radio link) and the test engineer's
 //! offline commands.
 
+mod lidar;
+
 use clap::{Parser, Subcommand};
 
 /// passangle: automatic approach, departure and ramp breakover angles.
@@ -12,9 +14,14 @@ struct Cli {
 }
 
 #[derive(Subcommand)]
-enum Command {}
+enum Command {
+    /// Summarise a VLP-16 capture (pcap/pcapng), or dump one frame as CSV.
+    Lidar(lidar::LidarArgs),
+}
 
 fn main() -> anyhow::Result<()> {
     let cli = Cli::parse();
-    match cli.command {}
+    match cli.command {
+        Command::Lidar(args) => lidar::run(&args, &mut std::io::stdout().lock()),
+    }
 }

@@ -1,0 +1,607 @@
+//! `passangle lidar FILE.pcap`: what is in a VLP-16 capture.
+//!
+//! Prints a summary (packets, frames, points per frame, rpm, return mode, product, malformed
+//! counts), or with `--frame N --csv` one frame's points as `x,y,z,intensity,ring,time_us`
+//! (metres in the VLP-16 manual's sensor frame, microseconds since the frame's first firing).
+//! `--json` prints the summary (or the frame's summary) as JSON. Angles are degrees here, at the
+//! user boundary; the library works in radians.
+
+use std::fmt::Write as _;
+use std::io::Write;
+use std::path::PathBuf;
+
+use anyhow::{Context, bail};
+use onboard::vlp16::source::{PACKET_BUF_LEN, PacketKind, PacketSource, PcapSource, Ports};
+use onboard::vlp16::{DecodeStats, DecoderConfig, Frame, FrameAssembler};
+use serde_json::json;
+
+/// Arguments of `passangle lidar`.
+#[derive(Debug, clap::Args)]
+pub struct LidarArgs {
+    /// Capture file (pcap or pcapng; Ethernet, Linux cooked or raw IP).
+    pub file: PathBuf,
+    /// Report only frame N (counted from 0, including the partial first frame).
+    #[arg(long, value_name = "N")]
+    pub frame: Option<u64>,
+    /// With --frame: dump the frame's points as CSV `x,y,z,intensity,ring,time_us`.
+    #[arg(long, requires = "frame")]
+    pub csv: bool,
+    /// Machine-readable JSON output.
+    #[arg(long, conflicts_with = "csv")]
+    pub json: bool,
+    /// Do not add the lasers' vertical offsets (manual Table 9-1) to z.
+    #[arg(long)]
+    pub no_vertical_offset: bool,
+    /// Drop returns closer than this, metres.
+    #[arg(long, default_value_t = 0.1, value_name = "M")]
+    pub min_range: f32,
+    /// Drop returns farther than this, metres.
+    #[arg(long, default_value_t = 131.0, value_name = "M")]
+    pub max_range: f32,
+    /// Cut frames where the azimuth passes this angle, degrees in [0, 360).
+    #[arg(long, default_value_t = 0.0, value_name = "DEG")]
+    pub cut_angle: f32,
+    /// UDP port of data packets.
+    #[arg(long, default_value_t = 2368)]
+    pub data_port: u16,
+    /// UDP port of position packets.
+    #[arg(long, default_value_t = 8308)]
+    pub position_port: u16,
+}
+
+impl LidarArgs {
+    fn decoder_config(&self) -> anyhow::Result<DecoderConfig> {
+        let config = DecoderConfig {
+            min_range_m: self.min_range,
+            max_range_m: self.max_range,
+            vertical_offset: !self.no_vertical_offset,
+            cut_azimuth_rad: self.cut_angle.to_radians(),
+            ..DecoderConfig::default()
+        };
+        config
+            .check()
+            .context("--min-range/--max-range/--cut-angle")?;
+        Ok(config)
+    }
+}
+
+/// Per-frame figures kept for the summary (not the points).
+#[derive(Debug, Clone, Copy)]
+struct FrameFigures {
+    points: usize,
+    complete: bool,
+    rpm: Option<f64>,
+}
+
+/// Everything the summary reports.
+#[derive(Debug)]
+struct Summary {
+    stats: DecodeStats,
+    frames: Vec<FrameFigures>,
+    skips: onboard::vlp16::source::PcapSkips,
+    truncated: Option<String>,
+    last_position: Option<(u32, &'static str, String)>,
+}
+
+/// Runs the command, writing to `out`. A closed pipe (`passangle lidar ... | head`) ends the
+/// output quietly.
+pub fn run(args: &LidarArgs, out: &mut impl Write) -> anyhow::Result<()> {
+    match run_inner(args, out) {
+        Err(err)
+            if err
+                .downcast_ref::<std::io::Error>()
+                .is_some_and(|e| e.kind() == std::io::ErrorKind::BrokenPipe) =>
+        {
+            Ok(())
+        }
+        other => other,
+    }
+}
+
+fn run_inner(args: &LidarArgs, out: &mut impl Write) -> anyhow::Result<()> {
+    let config = args.decoder_config()?;
+    let ports = Ports {
+        data: args.data_port,
+        position: args.position_port,
+    };
+    let mut source = PcapSource::open_with_ports(&args.file, ports)?;
+    let mut assembler = FrameAssembler::new(config)?;
+    if let Some(index) = args.frame {
+        let frame = find_frame(&mut source, &mut assembler, index)?.with_context(|| {
+            format!(
+                "{} has only {} frames (counted from 0); no frame {index}",
+                args.file.display(),
+                assembler.stats().frames
+            )
+        })?;
+        return if args.csv {
+            write_csv(&frame, out)
+        } else {
+            write_frame_summary(&frame, args.json, out)
+        };
+    }
+    let summary = summarize(&mut source, &mut assembler)?;
+    if args.json {
+        let json = serde_json::to_string_pretty(&summary_json(args, &summary))?;
+        writeln!(out, "{json}")?;
+    } else {
+        out.write_all(summary_text(args, &summary).as_bytes())?;
+    }
+    Ok(())
+}
+
+/// Feeds one packet; malformed packets are counted by the assembler and skipped.
+fn feed(
+    source: &mut PcapSource,
+    assembler: &mut FrameAssembler,
+    buf: &mut [u8; PACKET_BUF_LEN],
+) -> anyhow::Result<bool> {
+    let Some(meta) = source.next_packet(buf)? else {
+        assembler.finish();
+        return Ok(false);
+    };
+    let payload = &buf[..meta.len];
+    match meta.kind {
+        PacketKind::Data => {
+            let _ = assembler.push_data(payload, meta.recv_host_ns);
+        }
+        PacketKind::Position => {
+            let _ = assembler.push_position(payload);
+        }
+    }
+    Ok(true)
+}
+
+fn find_frame(
+    source: &mut PcapSource,
+    assembler: &mut FrameAssembler,
+    index: u64,
+) -> anyhow::Result<Option<Frame>> {
+    let mut buf = [0u8; PACKET_BUF_LEN];
+    loop {
+        let more = feed(source, assembler, &mut buf)?;
+        while let Some(frame) = assembler.pop_frame() {
+            if frame.index == index {
+                return Ok(Some(frame));
+            }
+        }
+        if !more {
+            return Ok(None);
+        }
+    }
+}
+
+fn summarize(source: &mut PcapSource, assembler: &mut FrameAssembler) -> anyhow::Result<Summary> {
+    let mut buf = [0u8; PACKET_BUF_LEN];
+    let mut frames = Vec::new();
+    loop {
+        let more = feed(source, assembler, &mut buf)?;
+        while let Some(frame) = assembler.pop_frame() {
+            frames.push(FrameFigures {
+                points: frame.points.len(),
+                complete: frame.is_complete(),
+                rpm: frame.rpm(),
+            });
+        }
+        if !more {
+            break;
+        }
+    }
+    let last_position = assembler.last_position().map(|p| {
+        (
+            p.timestamp_us,
+            p.pps.name(),
+            p.nmea_sentence().unwrap_or("(not ASCII)").to_owned(),
+        )
+    });
+    Ok(Summary {
+        stats: assembler.stats().clone(),
+        frames,
+        skips: source.skips(),
+        truncated: source.truncated().map(str::to_owned),
+        last_position,
+    })
+}
+
+/// Min, mean and max of points over complete frames (all frames when none is complete).
+fn points_per_frame(frames: &[FrameFigures]) -> Option<(usize, f64, usize)> {
+    let complete: Vec<usize> = frames
+        .iter()
+        .filter(|f| f.complete)
+        .map(|f| f.points)
+        .collect();
+    let counts = if complete.is_empty() {
+        frames.iter().map(|f| f.points).collect()
+    } else {
+        complete
+    };
+    let min = *counts.iter().min()?;
+    let max = *counts.iter().max()?;
+    let mean = counts.iter().sum::<usize>() as f64 / counts.len() as f64;
+    Some((min, mean, max))
+}
+
+fn mean_rpm(frames: &[FrameFigures]) -> Option<f64> {
+    let rpms: Vec<f64> = frames
+        .iter()
+        .filter(|f| f.complete)
+        .filter_map(|f| f.rpm)
+        .collect();
+    let rpms = if rpms.is_empty() {
+        frames.iter().filter_map(|f| f.rpm).collect()
+    } else {
+        rpms
+    };
+    (!rpms.is_empty()).then(|| rpms.iter().sum::<f64>() / rpms.len() as f64)
+}
+
+const RETURN_MODES: [&str; 3] = ["strongest", "last", "dual"];
+const PRODUCTS: [&str; 2] = ["VLP-16 (0x22)", "VLP-16, firmware < 3.0.29.0 (0x21)"];
+
+fn count_map(pairs: Vec<(String, u64)>) -> serde_json::Map<String, serde_json::Value> {
+    pairs
+        .into_iter()
+        .map(|(name, n)| (name, json!(n)))
+        .collect()
+}
+
+fn named_counts(names: &[&str], counts: &[u64]) -> Vec<(String, u64)> {
+    names
+        .iter()
+        .zip(counts)
+        .filter(|(_, n)| **n > 0)
+        .map(|(s, n)| ((*s).to_owned(), *n))
+        .collect()
+}
+
+fn summary_text(args: &LidarArgs, s: &Summary) -> String {
+    let st = &s.stats;
+    let mut t = String::new();
+    let complete = s.frames.iter().filter(|f| f.complete).count();
+    let _ = writeln!(t, "file:               {}", args.file.display());
+    let _ = writeln!(t, "data packets:       {}", st.data_packets);
+    let _ = writeln!(t, "position packets:   {}", st.position_packets);
+    let _ = writeln!(
+        t,
+        "frames:             {} ({complete} complete, cut at {} deg)",
+        s.frames.len(),
+        args.cut_angle
+    );
+    let _ = writeln!(t, "points:             {}", st.points);
+    if let Some((min, mean, max)) = points_per_frame(&s.frames) {
+        let _ = writeln!(
+            t,
+            "points per frame:   min {min}, mean {mean:.0}, max {max}"
+        );
+    }
+    match mean_rpm(&s.frames) {
+        Some(rpm) => {
+            let _ = writeln!(t, "rotation:           {rpm:.1} rpm ({:.2} Hz)", rpm / 60.0);
+        }
+        None => {
+            let _ = writeln!(t, "rotation:           unknown (no frame spans time)");
+        }
+    }
+    let list = |pairs: Vec<(String, u64)>| {
+        if pairs.is_empty() {
+            "none".to_owned()
+        } else {
+            pairs
+                .iter()
+                .map(|(n, c)| format!("{n} x{c}"))
+                .collect::<Vec<_>>()
+                .join(", ")
+        }
+    };
+    let _ = writeln!(
+        t,
+        "return mode:        {}",
+        list(named_counts(&RETURN_MODES, &st.return_modes))
+    );
+    let _ = writeln!(
+        t,
+        "product:            {}",
+        list(named_counts(&PRODUCTS, &st.products))
+    );
+    let _ = writeln!(
+        t,
+        "dropped returns:    {} zero-distance, {} outside [{}, {}] m, {} dual duplicates",
+        st.zero_returns, st.out_of_range, args.min_range, args.max_range, st.dual_duplicates
+    );
+    let malformed: Vec<(String, u64)> = st
+        .malformed_data
+        .iter()
+        .map(|(r, n)| ((*r).to_owned(), *n))
+        .collect();
+    let _ = writeln!(t, "malformed data:     {}", list(malformed));
+    let _ = writeln!(t, "malformed position: {}", st.malformed_position);
+    let _ = writeln!(
+        t,
+        "skipped records:    {} not IPv4/UDP, {} other ports, {} oversized",
+        s.skips.not_udp, s.skips.other_port, s.skips.oversized
+    );
+    if let Some((ts, pps, nmea)) = &s.last_position {
+        let nmea = if nmea.is_empty() { "(none)" } else { nmea };
+        let _ = writeln!(
+            t,
+            "last position:      t = {ts} us past the hour, PPS {pps}, NMEA {nmea}"
+        );
+    }
+    if let Some(reason) = &s.truncated {
+        let _ = writeln!(t, "capture ends early: {reason}");
+    }
+    t
+}
+
+fn summary_json(args: &LidarArgs, s: &Summary) -> serde_json::Value {
+    let st = &s.stats;
+    let ppf = points_per_frame(&s.frames);
+    json!({
+        "file": args.file.display().to_string(),
+        "data_packets": st.data_packets,
+        "position_packets": st.position_packets,
+        "frames": s.frames.len(),
+        "complete_frames": s.frames.iter().filter(|f| f.complete).count(),
+        "cut_angle_deg": args.cut_angle,
+        "points": st.points,
+        "points_per_frame": ppf.map(|(min, mean, max)| json!({"min": min, "mean": mean, "max": max})),
+        "points_by_frame": s.frames.iter().map(|f| f.points).collect::<Vec<_>>(),
+        "rpm": mean_rpm(&s.frames),
+        "return_modes": count_map(named_counts(&RETURN_MODES, &st.return_modes)),
+        "products": count_map(named_counts(&PRODUCTS, &st.products)),
+        "zero_returns": st.zero_returns,
+        "out_of_range": st.out_of_range,
+        "dual_duplicates": st.dual_duplicates,
+        "malformed_data": st.malformed_data.iter().map(|(r, n)| ((*r).to_owned(), json!(n))).collect::<serde_json::Map<_, _>>(),
+        "malformed_position": st.malformed_position,
+        "skipped_not_udp": s.skips.not_udp,
+        "skipped_other_port": s.skips.other_port,
+        "skipped_oversized": s.skips.oversized,
+        "last_position": s.last_position.as_ref().map(|(ts, pps, nmea)| json!({"timestamp_us": ts, "pps": pps, "nmea": nmea})),
+        "truncated": s.truncated,
+        "vertical_offset": !args.no_vertical_offset,
+    })
+}
+
+fn write_frame_summary(frame: &Frame, as_json: bool, out: &mut impl Write) -> anyhow::Result<()> {
+    let value = json!({
+        "index": frame.index,
+        "points": frame.points.len(),
+        "packets": frame.packets,
+        "start_sensor_us": frame.start_sensor_us,
+        "start_host_ns": frame.start_host_ns,
+        "starts_at_cut": frame.starts_at_cut,
+        "ends_at_cut": frame.ends_at_cut,
+        "rpm": frame.rpm(),
+        "sweep_deg": frame.sweep_raw / 100.0,
+    });
+    if as_json {
+        writeln!(out, "{}", serde_json::to_string_pretty(&value)?)?;
+    } else {
+        let rpm = frame
+            .rpm()
+            .map_or_else(|| "unknown".to_owned(), |r| format!("{r:.1}"));
+        writeln!(
+            out,
+            "frame {}: {} points from {} packets, starts {:.0} us past the hour (sensor clock), \
+             sweeps {:.1} deg at {rpm} rpm, {}",
+            frame.index,
+            frame.points.len(),
+            frame.packets,
+            frame.start_sensor_us,
+            frame.sweep_raw / 100.0,
+            if frame.is_complete() {
+                "complete"
+            } else {
+                "partial"
+            }
+        )?;
+    }
+    Ok(())
+}
+
+fn write_csv(frame: &Frame, out: &mut impl Write) -> anyhow::Result<()> {
+    writeln!(out, "x,y,z,intensity,ring,time_us")?;
+    for p in &frame.points {
+        writeln!(
+            out,
+            "{:.4},{:.4},{:.4},{},{},{:.3}",
+            p.x_m, p.y_m, p.z_m, p.intensity, p.ring, p.time_us
+        )?;
+    }
+    if frame.points.is_empty() {
+        bail!("frame {} has no points", frame.index);
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use std::net::{Ipv4Addr, SocketAddrV4};
+
+    use onboard::pcap::PcapWriter;
+    use onboard::vlp16::{BlockRepr, ChannelRepr, DataPacketRepr, Product, ReturnMode};
+
+    use super::*;
+
+    /// A synthetic capture: `packets` single-return packets at 600 rpm (0.2 deg per cycle),
+    /// every channel at 5 m, laser id as reflectivity, starting at azimuth `start_raw`.
+    fn synthetic_capture(packets: u32, start_raw: u32) -> tempfile_path::TempPath {
+        let path = tempfile_path::TempPath::new("lidar-cli");
+        let file = std::fs::File::create(&path.0).unwrap();
+        let mut w = PcapWriter::new(std::io::BufWriter::new(file)).unwrap();
+        let src = SocketAddrV4::new(Ipv4Addr::new(192, 168, 1, 201), 2368);
+        let dst = SocketAddrV4::new(Ipv4Addr::BROADCAST, 2368);
+        for k in 0..packets {
+            let mut blocks = [BlockRepr::default(); 12];
+            for (b, block) in blocks.iter_mut().enumerate() {
+                block.azimuth_raw = ((start_raw + (k * 12 + b as u32) * 20) % 36_000) as u16;
+                for (c, ch) in block.channels.iter_mut().enumerate() {
+                    *ch = ChannelRepr {
+                        distance_raw: 2500,
+                        reflectivity: (c % 16) as u8,
+                    };
+                }
+            }
+            let repr = DataPacketRepr {
+                blocks,
+                timestamp_us: 1_000_000 + (f64::from(k) * 1327.104) as u32,
+                return_mode: ReturnMode::Strongest,
+                product: Product::Vlp16,
+            };
+            w.write_udp(
+                1_700_000_000_000_000_000 + u64::from(k) * 1_327_104,
+                src,
+                dst,
+                &repr.to_bytes(),
+            )
+            .unwrap();
+        }
+        w.write_udp(
+            1_700_000_001_000_000_000,
+            src,
+            SocketAddrV4::new(Ipv4Addr::BROADCAST, 9999),
+            b"x",
+        )
+        .unwrap();
+        w.flush().unwrap();
+        path
+    }
+
+    /// A minimal self-deleting temp file path (no extra dependency).
+    mod tempfile_path {
+        pub struct TempPath(pub std::path::PathBuf);
+        impl TempPath {
+            pub fn new(tag: &str) -> Self {
+                use std::sync::atomic::{AtomicU32, Ordering};
+                static N: AtomicU32 = AtomicU32::new(0);
+                let n = N.fetch_add(1, Ordering::Relaxed);
+                Self(
+                    std::env::temp_dir()
+                        .join(format!("passangle-{tag}-{}-{n}.pcap", std::process::id())),
+                )
+            }
+        }
+        impl Drop for TempPath {
+            fn drop(&mut self) {
+                let _ = std::fs::remove_file(&self.0);
+            }
+        }
+    }
+
+    fn args(file: PathBuf) -> LidarArgs {
+        LidarArgs {
+            file,
+            frame: None,
+            csv: false,
+            json: false,
+            no_vertical_offset: false,
+            min_range: 0.1,
+            max_range: 131.0,
+            cut_angle: 0.0,
+            data_port: 2368,
+            position_port: 8308,
+        }
+    }
+
+    fn run_to_string(args: &LidarArgs) -> anyhow::Result<String> {
+        let mut out = Vec::new();
+        run(args, &mut out)?;
+        Ok(String::from_utf8(out).unwrap())
+    }
+
+    #[test]
+    fn json_summary_counts_frames_points_and_rpm() {
+        // 0.2 deg per 110.592 us cycle (about 301 rpm): one revolution is 1800 cycles = 150
+        // packets; 400 packets starting at 300 deg give a partial frame, two complete, a tail.
+        let capture = synthetic_capture(400, 30_000);
+        let mut a = args(capture.0.clone());
+        a.json = true;
+        let v: serde_json::Value = serde_json::from_str(&run_to_string(&a).unwrap()).unwrap();
+        assert_eq!(v["data_packets"], 400);
+        assert_eq!(v["skipped_other_port"], 1);
+        assert_eq!(v["points"], 400 * 384);
+        assert_eq!(v["frames"], 4);
+        assert_eq!(v["complete_frames"], 2);
+        // A complete revolution: 1800 cycles of 0.2 deg, 2 sequences x 16 lasers each.
+        assert_eq!(v["points_per_frame"]["min"], 1800 * 32);
+        assert_eq!(v["points_per_frame"]["max"], 1800 * 32);
+        let rpm = v["rpm"].as_f64().unwrap();
+        // 0.2 deg per 110.592 us = 301.4 rpm.
+        assert!((rpm - 0.2 / 360.0 / 110.592e-6 * 60.0).abs() < 0.5, "{rpm}");
+        assert_eq!(v["products"]["VLP-16 (0x22)"], 400);
+    }
+
+    #[test]
+    fn text_summary_names_everything() {
+        let capture = synthetic_capture(20, 0);
+        let text = run_to_string(&args(capture.0.clone())).unwrap();
+        for needle in [
+            "data packets:       20",
+            "return mode:        strongest x20",
+            "malformed data:     none",
+        ] {
+            assert!(text.contains(needle), "{needle:?} missing from\n{text}");
+        }
+    }
+
+    #[test]
+    fn csv_dump_of_one_frame_and_vertical_offset_switch() {
+        let capture = synthetic_capture(400, 30_000);
+        let mut a = args(capture.0.clone());
+        a.frame = Some(1);
+        a.csv = true;
+        let csv = run_to_string(&a).unwrap();
+        let mut lines = csv.lines();
+        assert_eq!(lines.next(), Some("x,y,z,intensity,ring,time_us"));
+        let rows: Vec<Vec<f64>> = lines
+            .map(|l| l.split(',').map(|f| f.parse().unwrap()).collect())
+            .collect();
+        assert_eq!(rows.len(), 1800 * 32);
+        // First point of a frame cut at 0 deg: laser 0 (-15 deg, +11.2 mm), azimuth 0, r = 5 m.
+        let first = &rows[0];
+        let w = (-15f64).to_radians();
+        assert!(
+            (first[0] - 0.0).abs() < 2e-4 && (first[1] - 5.0 * w.cos()).abs() < 2e-4,
+            "{first:?}"
+        );
+        assert!(
+            (first[2] - (5.0 * w.sin() + 0.0112)).abs() < 2e-4,
+            "{first:?}"
+        );
+        assert_eq!((first[3], first[4], first[5]), (0.0, 0.0, 0.0));
+        a.no_vertical_offset = true;
+        let csv = run_to_string(&a).unwrap();
+        let z: f64 = csv
+            .lines()
+            .nth(1)
+            .unwrap()
+            .split(',')
+            .nth(2)
+            .unwrap()
+            .parse()
+            .unwrap();
+        assert!((z - 5.0 * w.sin()).abs() < 2e-4);
+    }
+
+    #[test]
+    fn missing_frame_and_bad_options_are_clear_errors() {
+        let capture = synthetic_capture(20, 0);
+        let mut a = args(capture.0.clone());
+        a.frame = Some(7);
+        let err = run_to_string(&a).unwrap_err().to_string();
+        assert!(
+            err.contains("has only 1 frames") && err.contains("no frame 7"),
+            "{err}"
+        );
+        let mut a = args(capture.0.clone());
+        a.min_range = 200.0;
+        let err = format!("{:#}", run_to_string(&a).unwrap_err());
+        assert!(err.contains("min_range_m"), "{err}");
+        let err = format!(
+            "{:#}",
+            run_to_string(&args("/nonexistent/x.pcap".into())).unwrap_err()
+        );
+        assert!(err.contains("/nonexistent/x.pcap"), "{err}");
+    }
+}
