@@ -4,5 +4,6 @@
 
 pub mod angles;
 pub mod cloud;
+pub mod link;
 pub mod pcap;
 pub mod vlp16;

@@ -1,0 +1,23 @@
+//! Links: the IO-free cores of the radio link (handheld <-> onboard) and the MCU link
+//! (onboard <-> firmware). The shells (serial ports, pseudo-terminals, in-memory pipes) only move
+//! bytes and time in and out.
+//!
+//! - [`reliable`]: acks, retransmits with backoff, duplicate suppression by seq, heartbeats,
+//!   liveness and a byte-rate limit; used by every end.
+//! - [`radio`]: the onboard's radio session (authenticated start, refusals, results held until
+//!   acknowledged, preview chunks with selective resend).
+//! - [`handheld`]: the handheld's radio session (signed start, preview reassembly and resend
+//!   requests, result acks).
+//! - [`mcu`]: the onboard's MCU session (hello, config, drive/stop, 20 ms heartbeat).
+//! - [`preview`]: cloud decimation, quantisation and chunking.
+//! - [`sim`]: a seeded lossy byte pipe for tests and the simulator.
+
+pub mod handheld;
+pub mod mcu;
+pub mod preview;
+pub mod radio;
+pub mod reliable;
+pub mod sim;
+
+#[cfg(test)]
+mod tests;
