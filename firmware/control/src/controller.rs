@@ -50,8 +50,13 @@ pub struct Outputs {
 impl Outputs {
     /// The 0x200 command frame for these currents, for any `embedded_can` frame type.
     pub fn command_frame<F: embedded_can::Frame>(&self) -> Result<F, EscError> {
-        protocol::esc::command_frame(CMD_ID_1_4, self.currents_raw)
+        command_frame(self.currents_raw)
     }
+}
+
+/// The 0x200 command frame (ESC ids 1..=4) for raw currents, for any `embedded_can` frame type.
+pub fn command_frame<F: embedded_can::Frame>(currents_raw: [i16; 4]) -> Result<F, EscError> {
+    protocol::esc::command_frame(CMD_ID_1_4, currents_raw)
 }
 
 /// Status LED patterns (RGB LED), highest priority first.
@@ -72,6 +77,18 @@ pub enum LedPattern {
 }
 
 impl LedPattern {
+    /// Name for logs.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::BusOff => "bus-off",
+            Self::EscFault => "esc-fault",
+            Self::WaitingForHost => "waiting-for-host",
+            Self::Stopping => "stopping",
+            Self::Driving => "driving",
+            Self::Idle => "idle",
+        }
+    }
+
     /// Which of (red, green, blue) is lit at `now_us`.
     pub fn rgb(self, now_us: u64) -> [bool; 3] {
         let fast = (now_us / 100_000).is_multiple_of(2); // 5 Hz, 50 %
