@@ -1,0 +1,56 @@
+#!/usr/bin/env bash
+# Decodes the same VLP-16 capture with passangle's decoder and with velodyne-decoder (PyPI), both
+# pinned to one core, and prints points per second for both and the ratio.
+#
+# usage: bench/vlp16_vs_peer.sh [FILE.pcap] [SECONDS]
+#   default FILE: ../shared/data/vlp16/veloview_vlp-16-test-90deg-1-50-frames.pcap (1902 packets).
+# needs: python3 with `pip install velodyne-decoder` (3.x); taskset (util-linux) if present.
+#
+# velodyne-decoder refuses packets whose product byte is 0x21 (VLP-16 firmware older than
+# 3.0.29.0, as in the VeloView capture) unless it is 0x22, so both decoders read a scratch copy
+# with that byte patched to 0x22 in every data packet; nothing else changes.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+file="${1:-../shared/data/vlp16/veloview_vlp-16-test-90deg-1-50-frames.pcap}"
+seconds="${2:-4}"
+[ -f "$file" ] || { echo "capture not found: $file" >&2; exit 1; }
+python3 -c "import velodyne_decoder" 2>/dev/null || {
+  echo "velodyne-decoder is not installed: pip install velodyne-decoder" >&2; exit 1; }
+
+scratch="$(mktemp -d)"
+trap 'rm -rf "$scratch"' EXIT
+python3 - "$file" "$scratch/capture.pcap" <<'PY'
+import struct, sys
+data = bytearray(open(sys.argv[1], "rb").read())
+assert data[:4] == b"\xd4\xc3\xb2\xa1", "classic little-endian pcap expected"
+off, patched = 24, 0
+while off + 16 <= len(data):
+    incl = struct.unpack_from("<I", data, off + 8)[0]
+    off += 16
+    if incl == 1248 and data[off + 1247] == 0x21:
+        data[off + 1247] = 0x22
+        patched += 1
+    off += incl
+open(sys.argv[2], "wb").write(data)
+print(f"scratch copy: {patched} data packets patched 0x21 -> 0x22", file=sys.stderr)
+PY
+
+pin=()
+if command -v taskset >/dev/null; then pin=(taskset -c 0); fi
+cargo build --release -q -p onboard --example bench_vlp16
+ours="$("${pin[@]}" "${CARGO_TARGET_DIR:-target}/release/examples/bench_vlp16" "$scratch/capture.pcap" "$seconds")"
+peer="$("${pin[@]}" python3 bench/peer_velodyne_decoder.py "$scratch/capture.pcap" "$((seconds / 2))")"
+echo "$ours"
+echo "$peer"
+field() { sed -n "s/.*$1=\([^ ]*\).*/\1/p"; }
+ours_pps="$(echo "$ours" | grep '^end_to_end' | field points_per_s)"
+ours_points="$(echo "$ours" | grep '^end_to_end' | field points)"
+peer_pps="$(echo "$peer" | field points_per_s)"
+peer_points="$(echo "$peer" | field points)"
+python3 - "$ours_pps" "$peer_pps" "$ours_points" "$peer_points" <<'PY'
+import sys
+ours, peer, n_ours, n_peer = map(float, sys.argv[1:])
+print(f"passangle end-to-end: {ours / 1e6:.1f} Mpoints/s ({n_ours:.0f} points)")
+print(f"velodyne-decoder:     {peer / 1e6:.1f} Mpoints/s ({n_peer:.0f} points)")
+print(f"ratio:                {ours / peer:.1f}x (goal: at least 10x on one core)")
+PY
