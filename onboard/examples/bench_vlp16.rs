@@ -13,13 +13,13 @@
 //! Output lines are `name points=N seconds=S points_per_s=P` so scripts can parse them.
 
 use std::error::Error;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 use onboard::vlp16::source::{PACKET_BUF_LEN, PacketKind, PacketSource, PcapSource};
 use onboard::vlp16::{DecoderConfig, FrameAssembler};
 
-fn end_to_end(path: &PathBuf) -> Result<u64, Box<dyn Error>> {
+fn end_to_end(path: &Path) -> Result<u64, Box<dyn Error>> {
     let mut source = PcapSource::open(path)?;
     let mut assembler = FrameAssembler::new(DecoderConfig::default())?;
     let mut buf = [0u8; PACKET_BUF_LEN];

@@ -466,15 +466,22 @@ impl FrameAssembler {
     /// A new assembler. Fails on a config out of its domain.
     pub fn new(config: DecoderConfig) -> Result<Self, ConfigError> {
         config.check()?;
-        let min_raw = (config.min_range_m / DISTANCE_RESOLUTION_M).ceil().max(1.0);
-        let max_raw = (config.max_range_m / DISTANCE_RESOLUTION_M)
+        // Limits in 2 mm units, in f64 with a tolerance of 1e-4 units so that 1.0 m is exactly
+        // 500 (in f32, 1.0 / 0.002 is 500.00003 and 0.002 itself is 0.0020000001).
+        let resolution_m = 0.002_f64;
+        let min_raw = (f64::from(config.min_range_m) / resolution_m - 1e-4)
+            .ceil()
+            .max(1.0);
+        let max_raw = (f64::from(config.max_range_m) / resolution_m + 1e-4)
             .floor()
-            .min(f32::from(u16::MAX));
+            .min(f64::from(u16::MAX));
         Ok(Self {
             config,
             lasers: LaserTable::new(config.vertical_offset),
             fractions: channel_fractions(),
-            cut_raw: f64::from(config.cut_azimuth_rad) / RAW_TO_RAD,
+            // Rounded to 0.0001 degree (the f32 resolution of the radians): the f32 radians of 90
+            // degrees are 9000.0002 hundredths, which would put the cut one firing late.
+            cut_raw: (f64::from(config.cut_azimuth_rad) / RAW_TO_RAD * 100.0).round() / 100.0,
             min_range_raw: min_raw as u16,
             max_range_raw: max_raw as u16,
             current: Frame::empty(0),
