@@ -2,6 +2,8 @@
 
 use clap::{Parser, Subcommand};
 
+mod sensors_cli;
+
 /// passangle software-in-the-loop simulator.
 #[derive(Parser)]
 #[command(version, about)]
@@ -11,9 +13,20 @@ struct Cli {
 }
 
 #[derive(Subcommand)]
-enum Command {}
+enum Command {
+    /// Print a vehicle file's true approach, breakover and departure angles.
+    Truth(sensors_cli::TruthArgs),
+    /// Simulate the VLP-16 for a scenario into a pcap file and/or UDP.
+    Lidar(sensors_cli::LidarArgs),
+    /// Render the D435's Z16 depth frames for a scenario into a directory.
+    Depth(sensors_cli::DepthArgs),
+}
 
 fn main() -> anyhow::Result<()> {
     let cli = Cli::parse();
-    match cli.command {}
+    match cli.command {
+        Command::Truth(args) => sensors_cli::truth(&args),
+        Command::Lidar(args) => sensors_cli::lidar(&args),
+        Command::Depth(args) => sensors_cli::depth(&args),
+    }
 }

@@ -194,6 +194,8 @@ pub struct Vlp16Sim<'a, T: Trajectory> {
     robot_from_lidar: Isometry,
     /// Per laser: (sin elevation, cos elevation, vertical offset m).
     lasers: [(f64, f64, f64); 16],
+    /// Per channel (sequence * 16 + laser): sin and cos of the azimuth turned since the block start.
+    channel_offsets: [(f64, f64); 32],
     omega_rad_per_s: f64,
 }
 
@@ -204,11 +206,17 @@ impl<'a, T: Trajectory> Vlp16Sim<'a, T> {
             let (s, c) = ELEVATION_DEG[i].to_radians().sin_cos();
             (s, c, VERTICAL_OFFSET_MM[i] / 1000.0)
         });
+        let omega_rad_per_s = config.rpm / 60.0 * std::f64::consts::TAU;
+        let channel_offsets = std::array::from_fn(|c| {
+            let dt = (c / 16) as f64 * SEQUENCE_S + (c % 16) as f64 * FIRING_S;
+            (omega_rad_per_s * dt).sin_cos()
+        });
         Self {
             scene,
             trajectory,
             robot_from_lidar: config.robot_from_lidar(),
-            omega_rad_per_s: config.rpm / 60.0 * std::f64::consts::TAU,
+            channel_offsets,
+            omega_rad_per_s,
             config,
             seed,
             lasers,
@@ -247,10 +255,13 @@ impl<'a, T: Trajectory> Vlp16Sim<'a, T> {
             azimuth_raw: 0,
             channels: [empty; 32],
         }; 12];
+        let mut normals = NormalPairs::default();
         for (b, block) in blocks.iter_mut().enumerate() {
             let t_block = t0 + b as f64 * BLOCK_S;
+            let azimuth_block = self.azimuth_at(t_block);
             block.azimuth_raw =
-                ((self.azimuth_at(t_block).to_degrees() * 100.0).round() as u32 % 36_000) as u16;
+                ((azimuth_block.to_degrees() * 100.0).round() as u32 % 36_000) as u16;
+            let (sin_b, cos_b) = azimuth_block.sin_cos();
             for seq in 0..2 {
                 let t_seq = t_block + seq as f64 * SEQUENCE_S;
                 let world_from_lidar = self
@@ -259,12 +270,15 @@ impl<'a, T: Trajectory> Vlp16Sim<'a, T> {
                     .to_isometry()
                     .compose(&self.robot_from_lidar);
                 for laser in 0..16 {
-                    let t = t_seq + laser as f64 * FIRING_S;
                     let channel = seq * 16 + laser;
-                    let (repr, hit) = self.fire(&world_from_lidar, t, laser, &mut rng);
+                    // Azimuth of this firing = block azimuth + the channel's fixed offset.
+                    let (sin_d, cos_d) = self.channel_offsets[channel];
+                    let azimuth = (sin_b * cos_d + cos_b * sin_d, cos_b * cos_d - sin_b * sin_d);
+                    let (repr, hit) =
+                        self.fire(&world_from_lidar, azimuth, laser, &mut rng, &mut normals);
                     block.channels[channel] = repr;
                     truth(&FiringTruth {
-                        time_s: t,
+                        time_s: t_seq + laser as f64 * FIRING_S,
                         block: b,
                         channel,
                         world_from_lidar,
@@ -287,16 +301,16 @@ impl<'a, T: Trajectory> Vlp16Sim<'a, T> {
         ((self.config.clock_offset_us + (t_s * 1e6).round() as u64) % HOUR_US) as u32
     }
 
-    /// One firing: cast, then apply the measurement model.
+    /// One firing at azimuth `(sin, cos)`: cast, then apply the measurement model.
     fn fire(
         &self,
         world_from_lidar: &Isometry,
-        t_s: f64,
+        (sin_a, cos_a): (f64, f64),
         laser: usize,
         rng: &mut ChaCha8Rng,
+        normals: &mut NormalPairs,
     ) -> (ChannelRepr, Option<(SurfaceId, Vec3)>) {
         let (sin_w, cos_w, offset_m) = self.lasers[laser];
-        let (sin_a, cos_a) = self.azimuth_at(t_s).sin_cos();
         let dir = world_from_lidar.apply_vector(Vec3::new(cos_w * sin_a, cos_w * cos_a, sin_w));
         let origin = world_from_lidar.apply(Vec3::new(0.0, 0.0, offset_m));
         let none = ChannelRepr {
@@ -307,7 +321,7 @@ impl<'a, T: Trajectory> Vlp16Sim<'a, T> {
             return (none, None);
         };
         let truth = Some((hit.surface, origin + dir * hit.range_m));
-        let (u_drop, noise) = (rng.random::<f64>(), gaussian(rng));
+        let (u_drop, noise) = (rng.random::<f64>(), normals.next(rng));
         let limit = self.config.range_noise_limit_m;
         let range_m = hit.range_m + (noise * self.config.range_noise_sigma_m).clamp(-limit, limit);
         if u_drop < self.config.dropout_probability
@@ -362,12 +376,26 @@ impl<'a, T: Trajectory> Vlp16Sim<'a, T> {
     }
 }
 
-/// A standard normal draw (Box-Muller on one 64-bit draw split into two 32-bit uniforms).
-fn gaussian(rng: &mut ChaCha8Rng) -> f64 {
-    let bits: u64 = rng.random();
-    let u1 = ((bits >> 32) as f64 + 0.5) / 4_294_967_296.0;
-    let u2 = ((bits & 0xffff_ffff) as f64) / 4_294_967_296.0;
-    (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
+/// Standard normal draws by Box-Muller: one 64-bit draw split into two 32-bit uniforms gives two
+/// independent normals; the second is kept for the next call.
+#[derive(Default)]
+struct NormalPairs {
+    spare: Option<f64>,
+}
+
+impl NormalPairs {
+    fn next(&mut self, rng: &mut ChaCha8Rng) -> f64 {
+        if let Some(z) = self.spare.take() {
+            return z;
+        }
+        let bits: u64 = rng.random();
+        let u1 = ((bits >> 32) as f64 + 0.5) / 4_294_967_296.0;
+        let u2 = ((bits & 0xffff_ffff) as f64) / 4_294_967_296.0;
+        let radius = (-2.0 * u1.ln()).sqrt();
+        let (s, c) = (std::f64::consts::TAU * u2).sin_cos();
+        self.spare = Some(radius * s);
+        radius * c
+    }
 }
 
 #[cfg(test)]

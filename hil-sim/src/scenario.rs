@@ -1,0 +1,349 @@
+//! Scenarios: which vehicle, how the robot drives under it, the sensors' settings and the seed.
+//!
+//! # Format (TOML, unknown keys rejected; angles in degrees at this user boundary)
+//! ```toml
+//! vehicle = "../vehicles/sedan.toml"  # relative to this scenario file
+//! seed = 42                           # every random stream derives from it
+//! duration_s = 25.0                   # optional; default: the time to drive robot.distance_m
+//!
+//! [robot]
+//! start_x_m = 2.0            # start of the robot origin in the vehicle frame (ahead of the bumper)
+//! lateral_offset_m = 0.0     # start y: offset from the vehicle's centre line
+//! heading_deg = 180.0        # direction of travel; 180 drives toward the vehicle's rear
+//! yaw_misalignment_deg = 0.0 # body yaw relative to the direction of travel
+//! speed_mps = 0.3            # cruise speed commanded to the wheels
+//! accel_mps2 = 0.0           # 0: cruising from t = 0
+//! distance_m = 7.5           # wheel distance of the run (sets the default duration)
+//! slip = 0.0                 # true distance = (1 - slip) * wheel distance
+//!
+//! [vibration]
+//! pitch_sigma_deg = 0.1      # RMS of the pitch oscillation
+//! roll_sigma_deg = 0.1
+//!
+//! [lidar]                    # crate::vlp16::Vlp16Config, every key optional
+//! rpm = 600
+//!
+//! [depth]                    # crate::d435::D435Config, every key optional
+//! fps = 30
+//! ```
+//!
+//! # Seeds
+//! `seed` feeds independent streams: vibration = `derive_seed(seed, 1)`, lidar = `derive_seed(seed, 2)`,
+//! depth = `derive_seed(seed, 3)`; changing one sensor's settings never changes another's noise.
+
+use std::path::{Path, PathBuf};
+
+use serde::Deserialize;
+
+use crate::d435::D435Config;
+use crate::geometry::Vec3;
+use crate::trajectory::{StraightRun, Vibration};
+use crate::vehicle::{Vehicle, VehicleError};
+use crate::vlp16::Vlp16Config;
+
+/// The scenario file as written.
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct ScenarioFile {
+    /// Vehicle file, relative to the scenario file.
+    pub vehicle: PathBuf,
+    /// Master seed.
+    pub seed: u64,
+    /// Length of the simulated recording, seconds.
+    #[serde(default)]
+    pub duration_s: Option<f64>,
+    /// The robot's run.
+    pub robot: RobotRun,
+    /// Pitch/roll vibration.
+    #[serde(default)]
+    pub vibration: VibrationSpec,
+    /// VLP-16 settings.
+    #[serde(default)]
+    pub lidar: Vlp16Config,
+    /// D435 settings.
+    #[serde(default)]
+    pub depth: D435Config,
+}
+
+/// The `[robot]` table.
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct RobotRun {
+    /// Start x of the robot origin, vehicle frame, metres.
+    pub start_x_m: f64,
+    /// Start y, metres.
+    #[serde(default)]
+    pub lateral_offset_m: f64,
+    /// Direction of travel, degrees from the vehicle's +x.
+    #[serde(default = "default_heading")]
+    pub heading_deg: f64,
+    /// Body yaw relative to the direction of travel, degrees.
+    #[serde(default)]
+    pub yaw_misalignment_deg: f64,
+    /// Cruise speed, m/s.
+    pub speed_mps: f64,
+    /// Acceleration from rest, m/s^2 (0: cruising from the start).
+    #[serde(default)]
+    pub accel_mps2: f64,
+    /// Wheel distance of the run, metres.
+    pub distance_m: f64,
+    /// Longitudinal slip ratio.
+    #[serde(default)]
+    pub slip: f64,
+}
+
+fn default_heading() -> f64 {
+    180.0
+}
+
+/// The `[vibration]` table.
+#[derive(Clone, Debug, Default, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct VibrationSpec {
+    /// RMS pitch, degrees.
+    #[serde(default)]
+    pub pitch_sigma_deg: f64,
+    /// RMS roll, degrees.
+    #[serde(default)]
+    pub roll_sigma_deg: f64,
+}
+
+/// A loaded, validated scenario.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Scenario {
+    /// Where the scenario came from.
+    pub path: PathBuf,
+    /// The file's content.
+    pub file: ScenarioFile,
+    /// The vehicle.
+    pub vehicle: Vehicle,
+    /// The robot's motion.
+    pub run: StraightRun,
+    /// Recording length, seconds.
+    pub duration_s: f64,
+}
+
+/// Why a scenario was rejected.
+#[derive(Debug, thiserror::Error)]
+pub enum ScenarioError {
+    /// The file could not be read.
+    #[error("cannot read scenario file {path}: {source}")]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The IO error.
+        source: std::io::Error,
+    },
+    /// The TOML did not parse or match the format.
+    #[error("scenario file {path}: {message}")]
+    Toml {
+        /// The file.
+        path: PathBuf,
+        /// toml's message with line and column.
+        message: String,
+    },
+    /// A field has an impossible value.
+    #[error("scenario file {path}: field `{field}`: {reason}")]
+    Invalid {
+        /// The file.
+        path: PathBuf,
+        /// The field.
+        field: String,
+        /// What is wrong.
+        reason: String,
+    },
+    /// The referenced vehicle is invalid.
+    #[error("scenario file {path}: {source}")]
+    Vehicle {
+        /// The scenario file.
+        path: PathBuf,
+        /// The vehicle's error.
+        source: VehicleError,
+    },
+}
+
+/// Mix a master seed and a stream tag into an independent seed (splitmix64 finaliser).
+pub fn derive_seed(seed: u64, tag: u64) -> u64 {
+    let mut z = seed ^ tag.wrapping_mul(0x9E37_79B9_7F4A_7C15);
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    z ^ (z >> 31)
+}
+
+impl Scenario {
+    /// Read a scenario and its vehicle.
+    pub fn load(path: &Path) -> Result<Self, ScenarioError> {
+        let text = std::fs::read_to_string(path).map_err(|source| ScenarioError::Io {
+            path: path.to_owned(),
+            source,
+        })?;
+        let file: ScenarioFile = toml::from_str(&text).map_err(|e| ScenarioError::Toml {
+            path: path.to_owned(),
+            message: e.to_string(),
+        })?;
+        let vehicle_path = path.parent().unwrap_or(Path::new(".")).join(&file.vehicle);
+        let vehicle = Vehicle::load(&vehicle_path).map_err(|source| ScenarioError::Vehicle {
+            path: path.to_owned(),
+            source,
+        })?;
+        Self::from_parts(path, file, vehicle)
+    }
+
+    /// Validate a parsed scenario against its vehicle.
+    pub fn from_parts(
+        path: &Path,
+        file: ScenarioFile,
+        vehicle: Vehicle,
+    ) -> Result<Self, ScenarioError> {
+        let invalid = |(field, reason): (String, String)| ScenarioError::Invalid {
+            path: path.to_owned(),
+            field,
+            reason,
+        };
+        validate_run(&file).map_err(invalid)?;
+        file.lidar.validate().map_err(invalid)?;
+        file.depth.validate().map_err(invalid)?;
+        let r = &file.robot;
+        let run = StraightRun {
+            start_m: Vec3::new(r.start_x_m, r.lateral_offset_m, 0.0),
+            heading_rad: r.heading_deg.to_radians(),
+            yaw_misalignment_rad: r.yaw_misalignment_deg.to_radians(),
+            speed_mps: r.speed_mps,
+            accel_mps2: r.accel_mps2,
+            slip: r.slip,
+            vibration: Vibration::new(
+                file.vibration.pitch_sigma_deg.to_radians(),
+                file.vibration.roll_sigma_deg.to_radians(),
+                derive_seed(file.seed, 1),
+            ),
+        };
+        let duration_s = file
+            .duration_s
+            .unwrap_or_else(|| run.time_for_wheel_distance(r.distance_m));
+        Ok(Self {
+            path: path.to_owned(),
+            file,
+            vehicle,
+            run,
+            duration_s,
+        })
+    }
+
+    /// Seed of the VLP-16's noise.
+    pub fn lidar_seed(&self) -> u64 {
+        derive_seed(self.file.seed, 2)
+    }
+
+    /// Seed of the D435's noise.
+    pub fn depth_seed(&self) -> u64 {
+        derive_seed(self.file.seed, 3)
+    }
+}
+
+fn validate_run(file: &ScenarioFile) -> Result<(), (String, String)> {
+    let bad = |f: &str, r: &str| Err((f.to_owned(), r.to_owned()));
+    let r = &file.robot;
+    let finite = [
+        r.start_x_m,
+        r.lateral_offset_m,
+        r.heading_deg,
+        r.yaw_misalignment_deg,
+        r.accel_mps2,
+    ];
+    if finite.iter().any(|v| !v.is_finite()) {
+        return bad(
+            "robot",
+            "start_x_m, lateral_offset_m, heading_deg, yaw_misalignment_deg and accel_mps2 must be finite",
+        );
+    }
+    if !(r.speed_mps > 0.0 && r.speed_mps <= 3.0) {
+        return bad("robot.speed_mps", "must lie in (0, 3] m/s");
+    }
+    if !(r.distance_m > 0.0 && r.distance_m.is_finite()) {
+        return bad("robot.distance_m", "must be a positive number");
+    }
+    if !(0.0..1.0).contains(&r.slip) {
+        return bad("robot.slip", "must lie in [0, 1)");
+    }
+    if r.yaw_misalignment_deg.abs() > 45.0 {
+        return bad("robot.yaw_misalignment_deg", "must lie within +-45 degrees");
+    }
+    let v = &file.vibration;
+    if !(v.pitch_sigma_deg >= 0.0
+        && v.pitch_sigma_deg <= 10.0
+        && v.roll_sigma_deg >= 0.0
+        && v.roll_sigma_deg <= 10.0)
+    {
+        return bad(
+            "vibration",
+            "pitch_sigma_deg and roll_sigma_deg must lie in 0..=10",
+        );
+    }
+    if let Some(d) = file.duration_s
+        && !(d > 0.0 && d <= 3600.0)
+    {
+        return bad("duration_s", "must lie in (0, 3600] s");
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::vehicle::tests::test_sedan;
+
+    const SCENARIO: &str = r#"
+vehicle = "sedan.toml"
+seed = 7
+[robot]
+start_x_m = 2.0
+lateral_offset_m = 0.1
+yaw_misalignment_deg = 1.0
+speed_mps = 0.3
+distance_m = 6.0
+slip = 0.02
+[vibration]
+pitch_sigma_deg = 0.1
+[lidar]
+rpm = 1200
+[depth]
+fps = 15
+"#;
+
+    fn parse(text: &str) -> Result<Scenario, ScenarioError> {
+        let file: ScenarioFile = toml::from_str(text).map_err(|e| ScenarioError::Toml {
+            path: "s.toml".into(),
+            message: e.to_string(),
+        })?;
+        Scenario::from_parts(Path::new("s.toml"), file, test_sedan())
+    }
+
+    #[test]
+    fn scenario_parses_with_defaults_and_derived_seeds() {
+        let s = parse(SCENARIO).expect("valid");
+        assert!((s.duration_s - 20.0).abs() < 1e-12);
+        assert!((s.file.lidar.rpm - 1200.0).abs() < 1e-12);
+        assert!(
+            (s.file.lidar.range_noise_sigma_m - 0.015).abs() < 1e-12,
+            "default kept"
+        );
+        assert!((s.run.heading_rad - std::f64::consts::PI).abs() < 1e-12);
+        assert_ne!(s.lidar_seed(), s.depth_seed());
+    }
+
+    #[test]
+    fn errors_name_the_field() {
+        let e = parse(&SCENARIO.replace("slip = 0.02", "slip = 1.5"))
+            .expect_err("bad slip")
+            .to_string();
+        assert!(e.contains("robot.slip"), "{e}");
+        let e = parse(&SCENARIO.replace("rpm = 1200", "rpm = 2000"))
+            .expect_err("bad rpm")
+            .to_string();
+        assert!(e.contains("lidar.rpm"), "{e}");
+        let e = parse(&SCENARIO.replace("fps = 15", "fps = 15\nexposure = 3"))
+            .expect_err("unknown key")
+            .to_string();
+        assert!(e.contains("exposure") && e.contains("line"), "{e}");
+    }
+}

@@ -1,0 +1,326 @@
+//! The sensor commands of `passangle-sim`: `truth`, `lidar` and `depth` (the imperative shell around
+//! the pure models in the `hil_sim` library: files, sockets and the wall clock live only here).
+//!
+//! # Outputs
+//! - `lidar SCENARIO --pcap OUT.pcap`: classic pcap (Ethernet/IPv4/UDP, opens in Wireshark and
+//!   VeloView) with data packets from 192.168.1.201:2368 and position packets from
+//!   192.168.1.201:8308 to 255.255.255.255, stamped [`PCAP_EPOCH_S`] + simulation time. The sensor
+//!   clock (microseconds past the hour) is `lidar.clock_offset_us` + simulation time, so with the
+//!   default offset 0 it agrees with the pcap stamps' position in the hour. `--udp HOST:PORT` sends
+//!   the same datagrams (position packets to port 8308 of the same host), as fast as possible or,
+//!   with `--realtime`, paced by the wall clock.
+//! - `depth SCENARIO --out DIR`: `DIR/depth/NNNNNN.z16` (raw Z16: little-endian u16 millimetres,
+//!   row-major, 0 = invalid), `DIR/depth.csv` (`frame,stamp_us,time_s,file`), `DIR/camera.toml`
+//!   (intrinsics, depth unit, mount `robot_from_camera`, clock offset, fps, scenario path).
+//! - Both write the ground-truth trajectory CSV (see `hil_sim::trajectory`): next to the pcap as
+//!   `OUT.truth.csv` (or `--truth PATH`), or `DIR/truth.csv`.
+
+use std::fmt::Write as _;
+use std::fs::{self, File};
+use std::io::{BufWriter, Write};
+use std::net::{Ipv4Addr, SocketAddr, SocketAddrV4, UdpSocket};
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+use anyhow::{Context, bail};
+use clap::Args;
+use hil_sim::d435::D435Sim;
+use hil_sim::scenario::Scenario;
+use hil_sim::trajectory::write_truth_csv;
+use hil_sim::truth::{TruthOptions, Zone, true_angles};
+use hil_sim::vehicle::Vehicle;
+use hil_sim::vlp16::{Datagram, Vlp16Sim};
+use hil_sim::world::Scene;
+use onboard::pcap::PcapWriter;
+
+/// pcap time of simulation time 0: 2026-01-01T00:00:00Z, seconds since the UNIX epoch.
+pub const PCAP_EPOCH_S: u64 = 1_767_225_600;
+
+/// Ground-truth sampling step, seconds.
+const TRUTH_STEP_S: f64 = 0.005;
+
+/// Arguments of `passangle-sim truth`.
+#[derive(Args)]
+pub struct TruthArgs {
+    /// Vehicle TOML file.
+    vehicle: PathBuf,
+    /// Outline sampling step, millimetres.
+    #[arg(long, default_value_t = 1.0)]
+    spacing_mm: f64,
+    /// Count points ahead of the axle (EU) instead of ahead of the tyre (CFR/SAE).
+    #[arg(long)]
+    eu_zone: bool,
+    /// Ignore flexible parts (EU: rigid parts only).
+    #[arg(long)]
+    rigid_only: bool,
+}
+
+/// Arguments of `passangle-sim lidar`.
+#[derive(Args)]
+pub struct LidarArgs {
+    /// Scenario TOML file.
+    scenario: PathBuf,
+    /// Write the packets into this pcap file.
+    #[arg(long)]
+    pcap: Option<PathBuf>,
+    /// Send the packets over UDP to this address (e.g. 127.0.0.1:2368).
+    #[arg(long)]
+    udp: Option<SocketAddr>,
+    /// Pace UDP output at the sensor's real rate instead of as fast as possible.
+    #[arg(long)]
+    realtime: bool,
+    /// Ground-truth CSV path (default: next to the pcap, `.truth.csv`).
+    #[arg(long)]
+    truth: Option<PathBuf>,
+    /// Override the scenario's duration, seconds.
+    #[arg(long)]
+    duration_s: Option<f64>,
+}
+
+/// Arguments of `passangle-sim depth`.
+#[derive(Args)]
+pub struct DepthArgs {
+    /// Scenario TOML file.
+    scenario: PathBuf,
+    /// Output directory (created).
+    #[arg(long)]
+    out: PathBuf,
+    /// Override the scenario's duration, seconds.
+    #[arg(long)]
+    duration_s: Option<f64>,
+}
+
+/// `passangle-sim truth VEHICLE`: print the true angles and what limits them.
+pub fn truth(args: &TruthArgs) -> anyhow::Result<()> {
+    let vehicle = Vehicle::load(&args.vehicle)?;
+    if !(args.spacing_mm > 0.0 && args.spacing_mm <= 100.0) {
+        bail!("--spacing-mm must lie in (0, 100], got {}", args.spacing_mm);
+    }
+    let options = TruthOptions {
+        zone: if args.eu_zone {
+            Zone::AheadOfAxle
+        } else {
+            Zone::AheadOfTyre
+        },
+        include_flexible: !args.rigid_only,
+        spacing_m: args.spacing_mm / 1000.0,
+    };
+    let t = true_angles(&vehicle, &options);
+    println!("{} ({})", vehicle.name, args.vehicle.display());
+    for (name, angle) in [
+        ("approach", &t.approach),
+        ("breakover", &t.breakover),
+        ("departure", &t.departure),
+    ] {
+        let witness = angle.witness.as_ref().map_or_else(
+            || "no point in the zone".to_owned(),
+            |w| {
+                format!(
+                    "limited by {} at x = {:.3} m, z = {:.3} m",
+                    w.source, w.x_m, w.z_m
+                )
+            },
+        );
+        println!(
+            "  {name:<10} {:7.3} deg  {witness}",
+            angle.angle_rad.to_degrees()
+        );
+    }
+    if let Some(p) = &vehicle.published {
+        println!(
+            "  published  {:.1} / {:.1} / {:.1} deg (approach / breakover / departure; {})",
+            p.approach_deg, p.breakover_deg, p.departure_deg, p.source
+        );
+    }
+    Ok(())
+}
+
+fn load_scenario(path: &Path, duration_override: Option<f64>) -> anyhow::Result<Scenario> {
+    let mut scenario = Scenario::load(path)?;
+    if let Some(d) = duration_override {
+        if !(d > 0.0 && d <= 3600.0) {
+            bail!("--duration-s must lie in (0, 3600], got {d}");
+        }
+        scenario.duration_s = d;
+    }
+    Ok(scenario)
+}
+
+fn write_truth(path: &Path, scenario: &Scenario) -> anyhow::Result<()> {
+    let mut out =
+        BufWriter::new(File::create(path).with_context(|| format!("creating {}", path.display()))?);
+    write_truth_csv(&mut out, &scenario.run, scenario.duration_s, TRUTH_STEP_S)?;
+    out.flush()
+        .with_context(|| format!("writing {}", path.display()))
+}
+
+/// `passangle-sim lidar SCENARIO`: simulate the VLP-16 into a pcap and/or UDP.
+pub fn lidar(args: &LidarArgs) -> anyhow::Result<()> {
+    if args.pcap.is_none() && args.udp.is_none() {
+        bail!("give --pcap FILE and/or --udp HOST:PORT");
+    }
+    let scenario = load_scenario(&args.scenario, args.duration_s)?;
+    let scene = Scene::from_vehicle(&scenario.vehicle);
+    let sim = Vlp16Sim::new(
+        &scene,
+        &scenario.run,
+        scenario.file.lidar.clone(),
+        scenario.lidar_seed(),
+    );
+    let mut pcap = match &args.pcap {
+        Some(p) => Some(PcapWriter::new(BufWriter::new(
+            File::create(p).with_context(|| format!("creating {}", p.display()))?,
+        ))?),
+        None => None,
+    };
+    let udp = match args.udp {
+        Some(_) => Some(UdpSocket::bind("0.0.0.0:0").context("binding a UDP socket")?),
+        None => None,
+    };
+    let truth_path = args
+        .truth
+        .clone()
+        .or_else(|| args.pcap.as_ref().map(|p| p.with_extension("truth.csv")));
+    let sensor = Ipv4Addr::new(192, 168, 1, 201);
+    let started = Instant::now();
+    let (mut data, mut position) = (0u64, 0u64);
+    for datagram in sim.datagrams(scenario.duration_s) {
+        let (send_s, payload, port): (f64, &[u8], u16) = match &datagram {
+            Datagram::Data { send_s, payload } => (*send_s, &payload[..], 2368),
+            Datagram::Position { send_s, payload } => (*send_s, &payload[..], 8308),
+        };
+        if port == 2368 {
+            data += 1;
+        } else {
+            position += 1;
+        }
+        if let Some(w) = pcap.as_mut() {
+            let stamp_ns = PCAP_EPOCH_S * 1_000_000_000 + (send_s * 1e9).round() as u64;
+            let (src, dst) = (
+                SocketAddrV4::new(sensor, port),
+                SocketAddrV4::new(Ipv4Addr::BROADCAST, port),
+            );
+            w.write_udp(stamp_ns, src, dst, payload)?;
+        }
+        if let (Some(sock), Some(addr)) = (&udp, args.udp) {
+            if args.realtime {
+                let due = Duration::from_secs_f64(send_s);
+                if let Some(wait) = due.checked_sub(started.elapsed()) {
+                    std::thread::sleep(wait);
+                }
+            }
+            let target = if port == 2368 {
+                addr
+            } else {
+                SocketAddr::new(addr.ip(), 8308)
+            };
+            sock.send_to(payload, target)
+                .with_context(|| format!("sending to {target}"))?;
+        }
+    }
+    if let Some(w) = pcap.as_mut() {
+        w.flush()?;
+    }
+    let wall_s = started.elapsed().as_secs_f64();
+    if let Some(p) = &truth_path {
+        write_truth(p, &scenario)?;
+    }
+    println!(
+        "{data} data + {position} position packets, {:.2} s simulated in {wall_s:.2} s ({:.1}x real time)",
+        scenario.duration_s,
+        scenario.duration_s / wall_s.max(1e-9)
+    );
+    if let Some(p) = &truth_path {
+        println!("ground truth: {}", p.display());
+    }
+    Ok(())
+}
+
+/// `passangle-sim depth SCENARIO --out DIR`: render the D435's Z16 frames.
+pub fn depth(args: &DepthArgs) -> anyhow::Result<()> {
+    let scenario = load_scenario(&args.scenario, args.duration_s)?;
+    let scene = Scene::from_vehicle(&scenario.vehicle);
+    let config = scenario.file.depth.clone();
+    let sim = D435Sim::new(&scene, &scenario.run, config.clone(), scenario.depth_seed());
+    let frames_dir = args.out.join("depth");
+    fs::create_dir_all(&frames_dir)
+        .with_context(|| format!("creating {}", frames_dir.display()))?;
+    let n = sim.frames_in(scenario.duration_s);
+    let workers = std::thread::available_parallelism()
+        .map_or(1, usize::from)
+        .min(8) as u64;
+    let started = Instant::now();
+    std::thread::scope(|s| -> anyhow::Result<()> {
+        let handles: Vec<_> = (0..workers)
+            .map(|w| {
+                let (sim, frames_dir) = (&sim, &frames_dir);
+                s.spawn(move || -> anyhow::Result<()> {
+                    for i in (w..n).step_by(workers as usize) {
+                        let path = frames_dir.join(format!("{i:06}.z16"));
+                        fs::write(&path, sim.frame(i).to_z16_bytes())
+                            .with_context(|| format!("writing {}", path.display()))?;
+                    }
+                    Ok(())
+                })
+            })
+            .collect();
+        for h in handles {
+            h.join()
+                .map_err(|_| anyhow::anyhow!("a render thread panicked"))??;
+        }
+        Ok(())
+    })?;
+    let mut index = String::from(
+        "# passangle-sim D435 depth frames: raw Z16, see camera.toml\nframe,stamp_us,time_s,file\n",
+    );
+    for i in 0..n {
+        let stamp_us = config.clock_offset_us + (sim.frame_time_s(i) * 1e6).round() as u64;
+        let _ = writeln!(
+            index,
+            "{i},{stamp_us},{:.6},depth/{i:06}.z16",
+            sim.frame_time_s(i)
+        );
+    }
+    fs::write(args.out.join("depth.csv"), index).context("writing depth.csv")?;
+    fs::write(args.out.join("camera.toml"), camera_toml(&scenario)?)
+        .context("writing camera.toml")?;
+    write_truth(&args.out.join("truth.csv"), &scenario)?;
+    let wall_s = started.elapsed().as_secs_f64();
+    println!(
+        "{n} frames {}x{} in {} ({wall_s:.1} s, {:.1} frames/s on {workers} threads)",
+        config.width,
+        config.height,
+        args.out.display(),
+        n as f64 / wall_s.max(1e-9)
+    );
+    Ok(())
+}
+
+/// The `camera.toml` written next to the frames.
+fn camera_toml(scenario: &Scenario) -> anyhow::Result<String> {
+    #[derive(serde::Serialize)]
+    struct Camera {
+        scenario: String,
+        fps: f64,
+        depth_unit_m: f64,
+        clock_offset_us: u64,
+        intrinsics: hil_sim::d435::Intrinsics,
+        robot_from_camera_xyz_m: [f64; 3],
+        robot_from_camera_rotation: [[f64; 3]; 3],
+    }
+    let c = &scenario.file.depth;
+    let m = c.robot_from_camera();
+    let camera = Camera {
+        scenario: scenario.path.display().to_string(),
+        fps: c.fps,
+        depth_unit_m: 0.001,
+        clock_offset_us: c.clock_offset_us,
+        intrinsics: c.intrinsics(),
+        robot_from_camera_xyz_m: [m.translation.x, m.translation.y, m.translation.z],
+        robot_from_camera_rotation: m.rotation.0,
+    };
+    let header = "# passangle-sim D435 stream: frames are <width>x<height> little-endian u16, row-major, depth in\n\
+                  # depth_unit_m, 0 = invalid. Optical frame x right, y down, z forward; robot_from_camera maps it into\n\
+                  # the robot frame (x forward, y left, z up; rotation row-major).\n";
+    Ok(format!("{header}{}", toml::to_string(&camera)?))
+}
