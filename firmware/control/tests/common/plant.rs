@@ -91,10 +91,10 @@ impl Plant {
     /// Advances `dt_s` with the raw commanded currents (per ESC slot).
     pub fn advance(&mut self, currents_raw: [i16; 4], dt_s: f32) {
         let p = self.params;
-        for slot in 0..4 {
+        for (slot, current_raw) in currents_raw.into_iter().enumerate() {
             let disturbance = p.disturbance_nm * self.gauss();
             let m = &mut self.motors[slot];
-            let commanded = raw_to_amps(currents_raw[slot]);
+            let commanded = raw_to_amps(current_raw);
             m.current_a += (commanded - m.current_a) * (dt_s / (p.current_tau_s + dt_s));
             if m.locked {
                 m.speed_radps = 0.0;
