@@ -6,4 +6,6 @@ pub mod angles;
 pub mod cloud;
 pub mod link;
 pub mod pcap;
+pub mod recorder;
+pub mod run;
 pub mod vlp16;

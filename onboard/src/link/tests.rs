@@ -261,7 +261,7 @@ fn decode_all(bytes: &[u8]) -> Vec<ToFirmware> {
     let mut d = Deframer::<MAX_FRAME_LEN>::new();
     let mut out = Vec::new();
     d.feed_all(bytes, |f| {
-        out.push(ToFirmware::decode(&f.unwrap()).unwrap())
+        out.push(ToFirmware::decode(&f.unwrap()).unwrap());
     });
     out
 }
