@@ -1,1 +1,0 @@
-//! Passing-angle calculator (DESIGN.md section 6 step 8).

@@ -1,0 +1,1060 @@
+//! Passing-angle calculator (DESIGN.md section 6 step 8): approach, departure and ramp breakover
+//! angles of a vehicle from a point cloud of its underside and tyres, per the standard definitions
+//! (`notes/domain.md` part A) and the paper's section 3.6 / Algorithm 2.
+//!
+//! Pure: points and an [`AnglesConfig`] in, an [`AnglesResult`] out; no IO, no clock, seeded RANSAC.
+//!
+//! # Method
+//! 1. **Ground** ([`ground`]): RANSAC plane (seeded, near-horizontal hypotheses only, penalising
+//!    planes with many points far below them), least-squares refinement, noise sigma from the
+//!    inliers (robust MAD). Refined again once the tyres are known, without their footprints.
+//! 2. **Tyres** ([`tyres`]): compact clusters of points a few centimetres above the ground are the
+//!    footprints; each tyre is a circle in the side view fitted to its silhouette. Static loaded
+//!    radius = centre height above the ground; the fitted radius is the free tread radius.
+//! 3. **Vehicle frame**: z = ground normal, x = from the rear axle's midpoint to the front axle's
+//!    (so ground tilt and vehicle yaw in the cloud are removed), y left; origin on the ground,
+//!    midway between the axles, on the centreline between the inner tyre faces. Steps 2-3 iterate.
+//! 4. **Body** = points above the ground threshold that are not tyre (and not in an exclusion box).
+//!    Those inside the lateral band (default: between the inner tyre faces) are projected onto the
+//!    median plane and reduced to a robust lower envelope ([`envelope`]).
+//! 5. **Angles**: for an envelope sample at horizontal distance `d` from a wheel centre and height `z`,
+//!    with static loaded radius `r`, the plane through it tangent to the tyre rises at
+//!    `a = asin(r / hypot(d, r - z)) - atan2(r - z, d)` ([`tangent_slope`]). Approach = min `a`
+//!    over samples ahead of the front tyres (zone [`Zone::Tyre`], CFR/SAE) or ahead of the front
+//!    axle ([`Zone::Axle`], EU); departure likewise behind the rear; breakover = min over samples
+//!    between the axles of `a_front + a_rear` (the supplement of the crest angle). Samples inside a
+//!    tyre's side-view disc cannot be touched by a tangent plane and are skipped.
+//!
+//! Every angle comes with its witness (the limiting envelope sample) in the vehicle and the cloud
+//! frame and the number of points supporting it; the result also carries the tyre fits, the
+//! envelope (for the side-view report, [`side_view_svg`]), point counts and warnings.
+
+mod envelope;
+mod geom;
+mod ground;
+mod svg;
+mod tyres;
+
+pub use envelope::EnvelopeSample;
+pub use geom::{V3, VehicleFrame};
+pub use svg::side_view_svg;
+
+use envelope::{EnvelopeParams, lower_envelope};
+use geom::{sub, unit};
+use ground::Plane;
+use tyres::{Seed, TyreFit, TyreParams};
+
+/// Which points count for the approach and departure angles.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Zone {
+    /// Ahead of the front tyre / behind the rear tyre (49 CFR 523.2, SAE J1100).
+    #[default]
+    Tyre,
+    /// Ahead of the front axle / behind the rearmost axle (EU 2018/858 Annex I).
+    Axle,
+}
+
+/// The lateral band whose body points form the side-view envelope.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Band {
+    /// Between the inner tyre faces, shrunk by `margin_m` on each side (default, 1 cm).
+    InnerFaces {
+        /// Margin inside each inner face (metres).
+        margin_m: f64,
+    },
+    /// `|y| <= half_width_m` about the vehicle centreline.
+    HalfWidth(f64),
+    /// Every body point, whatever its y.
+    Full,
+}
+
+/// An axis-aligned box in cloud coordinates whose points are ignored (tow hooks, steps, mud flaps).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ExclusionBox {
+    /// Minimum corner `[x0, y0, z0]` (metres, cloud frame).
+    pub min_in_cloud: V3,
+    /// Maximum corner `[x1, y1, z1]` (metres, cloud frame).
+    pub max_in_cloud: V3,
+}
+
+impl ExclusionBox {
+    fn contains(&self, p: V3) -> bool {
+        (0..3).all(|k| p[k] >= self.min_in_cloud[k] && p[k] <= self.max_in_cloud[k])
+    }
+}
+
+/// Calculator settings. `Default` gives the documented defaults.
+#[derive(Debug, Clone, PartialEq)]
+pub struct AnglesConfig {
+    /// The vehicle's front is toward +x of the cloud (false: toward -x, the CLI's `--front -x`).
+    pub front_is_positive_x: bool,
+    /// Approach/departure zone.
+    pub zone: Zone,
+    /// Lateral band of the envelope.
+    pub band: Band,
+    /// Ignored boxes, cloud frame.
+    pub exclude: Vec<ExclusionBox>,
+    /// Static loaded radius to use for every tyre instead of the fitted centre height (metres).
+    pub tyre_radius_m: Option<f64>,
+    /// RANSAC inlier distance for the ground and the height below which points are ground (0.03 m, paper 3.1).
+    pub ground_threshold_m: f64,
+    /// Largest ground tilt against the cloud's z accepted by RANSAC (20 degrees).
+    pub max_ground_tilt_rad: f64,
+    /// Tyre footprint slice: points between these heights seed the tyre search (0.025 m .. 0.08 m;
+    /// the lower bound is raised to 5 noise sigma). Body parts must not reach below `seed_high_m`.
+    pub seed_low_m: f64,
+    /// Upper bound of the footprint slice (0.08 m).
+    pub seed_high_m: f64,
+    /// Radial gap that separates a tyre's silhouette from the wheel arch (0.025 m).
+    pub tyre_gap_m: f64,
+    /// Envelope bin width; `None`: 5 mm, doubled (up to 4 cm) while bins hold too few points.
+    pub bin_m: Option<f64>,
+    /// Range noise sigma; `None`: estimated from the ground and tyre fits.
+    pub noise_m: Option<f64>,
+    /// Points an envelope bin's lowest mode needs (5): fewer are treated as outliers.
+    pub min_support: usize,
+    /// RANSAC seed.
+    pub seed: u64,
+}
+
+impl Default for AnglesConfig {
+    fn default() -> Self {
+        Self {
+            front_is_positive_x: true,
+            zone: Zone::Tyre,
+            band: Band::InnerFaces { margin_m: 0.01 },
+            exclude: Vec::new(),
+            tyre_radius_m: None,
+            ground_threshold_m: 0.03,
+            max_ground_tilt_rad: 20f64.to_radians(),
+            seed_low_m: 0.025,
+            seed_high_m: 0.08,
+            tyre_gap_m: 0.025,
+            bin_m: None,
+            noise_m: None,
+            min_support: 5,
+            seed: 0x5eed,
+        }
+    }
+}
+
+/// Why no result could be computed.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum AnglesError {
+    /// A setting is out of range; the message names it.
+    #[error("invalid setting: {0}")]
+    InvalidConfig(String),
+    /// Too few usable points.
+    #[error("only {0} usable points (after NaN removal and exclusion boxes); need at least 100")]
+    TooFewPoints(usize),
+    /// No near-horizontal plane with enough support.
+    #[error(
+        "no ground plane found (no plane within {max_tilt_deg:.0} degrees of horizontal has enough points)"
+    )]
+    NoGround {
+        /// The tilt limit that was searched, degrees.
+        max_tilt_deg: f64,
+    },
+    /// The tyres could not be found; the message says what was seen.
+    #[error("tyres not found: {0}")]
+    Tyres(String),
+}
+
+/// Tyre position on the vehicle.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum TyrePosition {
+    /// Front left.
+    FrontLeft,
+    /// Front right.
+    FrontRight,
+    /// Rear left.
+    RearLeft,
+    /// Rear right.
+    RearRight,
+}
+
+impl TyrePosition {
+    /// Short label (`FL`, `FR`, `RL`, `RR`).
+    pub fn label(self) -> &'static str {
+        match self {
+            TyrePosition::FrontLeft => "FL",
+            TyrePosition::FrontRight => "FR",
+            TyrePosition::RearLeft => "RL",
+            TyrePosition::RearRight => "RR",
+        }
+    }
+
+    fn is_front(self) -> bool {
+        matches!(self, TyrePosition::FrontLeft | TyrePosition::FrontRight)
+    }
+}
+
+/// One fitted tyre, in the vehicle frame.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Tyre {
+    /// Which tyre.
+    pub position: TyrePosition,
+    /// Wheel centre `[x, y, z]` in the vehicle frame (z = static loaded radius).
+    pub centre_in_vehicle: V3,
+    /// Wheel centre in cloud coordinates.
+    pub centre_in_cloud: V3,
+    /// Static loaded radius: the centre's height above the ground (metres).
+    pub loaded_radius_m: f64,
+    /// Fitted free tread radius (metres).
+    pub free_radius_m: f64,
+    /// Visible width between the inner and the outer face (metres).
+    pub width_m: f64,
+    /// y of the inner face (toward the centreline), vehicle frame.
+    pub inner_face_y_m: f64,
+    /// RMS distance of the silhouette points to the fitted circle (metres).
+    pub residual_rms_m: f64,
+    /// Silhouette points used by the fit.
+    pub fit_points: usize,
+}
+
+/// One limiting angle and what limits it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct AngleFinding {
+    /// The angle (radians).
+    pub angle_rad: f64,
+    /// For the breakover angle, the front and the rear tangent slopes that sum to it.
+    pub parts_rad: Option<(f64, f64)>,
+    /// The limiting envelope sample, vehicle frame (y = mean y of its supporting points).
+    pub witness_in_vehicle: V3,
+    /// The same point in cloud coordinates.
+    pub witness_in_cloud: V3,
+    /// Points supporting the limiting sample (its envelope bin's lowest mode).
+    pub support: usize,
+}
+
+/// Lowest body point between the axles.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Clearance {
+    /// Height above the ground (metres).
+    pub height_m: f64,
+    /// Where, vehicle frame.
+    pub witness_in_vehicle: V3,
+    /// Where, cloud frame.
+    pub witness_in_cloud: V3,
+}
+
+/// Point bookkeeping.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct PointCounts {
+    /// Points given to the calculator.
+    pub input: usize,
+    /// Non-finite points ignored.
+    pub non_finite: usize,
+    /// Points inside exclusion boxes.
+    pub excluded: usize,
+    /// Ground points (within the ground threshold, or below the ground).
+    pub ground: usize,
+    /// Tyre points.
+    pub tyre: usize,
+    /// Body points (everything else).
+    pub body: usize,
+    /// Body points inside the lateral band (the envelope's input).
+    pub body_in_band: usize,
+    /// Band points below their bin's lowest supported mode, rejected as outliers.
+    pub outliers_below_envelope: usize,
+}
+
+/// The ground fit.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct GroundFit {
+    /// Upward unit normal in cloud coordinates.
+    pub normal_in_cloud: V3,
+    /// Angle between the normal and the cloud's z (radians).
+    pub tilt_rad: f64,
+    /// Noise sigma of the ground inliers (robust MAD, metres).
+    pub noise_sigma_m: f64,
+    /// Inliers used by the final fit.
+    pub inliers: usize,
+}
+
+/// Everything the calculator found.
+#[derive(Debug, Clone, PartialEq)]
+pub struct AnglesResult {
+    /// Approach angle, if any body point lies in the front zone.
+    pub approach: Option<AngleFinding>,
+    /// Departure angle, if any body point lies in the rear zone.
+    pub departure: Option<AngleFinding>,
+    /// Ramp breakover angle, if any body point lies between the axles.
+    pub breakover: Option<AngleFinding>,
+    /// Lowest envelope point between the axles (inclusive).
+    pub ground_clearance: Option<Clearance>,
+    /// Distance between the axles (metres).
+    pub wheelbase_m: f64,
+    /// Mean centre-to-centre distance of left and right tyres (visible widths), if both sides were found.
+    pub track_m: Option<f64>,
+    /// Distance between the inner faces, if both sides were found.
+    pub inner_track_m: Option<f64>,
+    /// Tyre fits.
+    pub tyres: Vec<Tyre>,
+    /// Front axle: x, static loaded radius and free radius used for the angles.
+    pub front_axle: Axle,
+    /// Rear axle, likewise.
+    pub rear_axle: Axle,
+    /// Vehicle frame in cloud coordinates.
+    pub frame: VehicleFrame,
+    /// Vehicle heading against the cloud's x (front direction), radians.
+    pub yaw_rad: f64,
+    /// Ground fit.
+    pub ground: GroundFit,
+    /// Noise sigma used for the envelope window (metres).
+    pub noise_sigma_m: f64,
+    /// Envelope bin width used (metres).
+    pub bin_m: f64,
+    /// Lateral band used, `(y_min, y_max)` in the vehicle frame.
+    pub band_y_m: (f64, f64),
+    /// Side-view lower envelope, sorted by x.
+    pub envelope: Vec<EnvelopeSample>,
+    /// Point counts.
+    pub points: PointCounts,
+    /// The zone used.
+    pub zone: Zone,
+    /// Things a person should check.
+    pub warnings: Vec<String>,
+}
+
+/// An axle as used by the angles.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Axle {
+    /// Wheel centre x in the vehicle frame (mean of the axle's tyres).
+    pub x_m: f64,
+    /// Static loaded radius used (fitted centre height, or the override).
+    pub loaded_radius_m: f64,
+    /// Free tread radius (fitted), which bounds the tyre zone.
+    pub free_radius_m: f64,
+}
+
+/// Slope (radians) of the plane through a point at horizontal distance `d_m` (> 0, away from the
+/// wheel) and height `z_m` that is tangent to a tyre of static loaded radius `r_m` standing on the
+/// ground with its centre at height `r_m`: `asin(r / hypot(d, r - z)) - atan2(r - z, d)`.
+/// `None` if the point is not outboard (`d <= 0`) or lies inside the tyre's side-view disc.
+pub fn tangent_slope(d_m: f64, z_m: f64, r_m: f64) -> Option<f64> {
+    let dist = d_m.hypot(r_m - z_m);
+    (d_m > 0.0 && dist > r_m).then(|| (r_m / dist).asin() - (r_m - z_m).atan2(d_m))
+}
+
+impl AnglesConfig {
+    fn validate(&self) -> Result<(), AnglesError> {
+        let bad = |s: &str| Err(AnglesError::InvalidConfig(s.to_string()));
+        let pos = |v: f64| v.is_finite() && v > 0.0;
+        if !pos(self.ground_threshold_m) {
+            return bad("ground threshold must be > 0");
+        }
+        if !(pos(self.seed_low_m) && pos(self.seed_high_m) && self.seed_high_m > self.seed_low_m) {
+            return bad("tyre seed slice must satisfy 0 < low < high");
+        }
+        if !pos(self.tyre_gap_m) || !pos(self.max_ground_tilt_rad) {
+            return bad("tyre gap and ground tilt limit must be > 0");
+        }
+        if self.tyre_radius_m.is_some_and(|r| !pos(r)) {
+            return bad("tyre radius must be > 0");
+        }
+        if self.bin_m.is_some_and(|b| !pos(b))
+            || self.noise_m.is_some_and(|n| !(n.is_finite() && n >= 0.0))
+        {
+            return bad("bin width must be > 0 and noise >= 0");
+        }
+        match self.band {
+            Band::HalfWidth(w) if !pos(w) => return bad("band half width must be > 0"),
+            Band::InnerFaces { margin_m } if !margin_m.is_finite() => {
+                return bad("band margin must be finite");
+            }
+            _ => {}
+        }
+        if self.min_support == 0 {
+            return bad("min support must be >= 1");
+        }
+        for (i, b) in self.exclude.iter().enumerate() {
+            if (0..3).any(|k| b.min_in_cloud[k] > b.max_in_cloud[k] || b.min_in_cloud[k].is_nan()) {
+                return Err(AnglesError::InvalidConfig(format!(
+                    "exclusion box {}: each minimum must be <= its maximum",
+                    i + 1
+                )));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Compute the passing angles of the vehicle in `points_in_cloud` (metres, z roughly up).
+pub fn compute_angles(
+    points_in_cloud: &[V3],
+    config: &AnglesConfig,
+) -> Result<AnglesResult, AnglesError> {
+    config.validate()?;
+    let (points, mut counts) = usable_points(points_in_cloud, config);
+    if points.len() < 100 {
+        return Err(AnglesError::TooFewPoints(points.len()));
+    }
+    let mut warnings = Vec::new();
+    let settled = settle_frame(&points, config, &mut warnings)?;
+    let (frame, fits) = (settled.frame, settled.fits);
+    let (front, rear) = axles(&fits, config);
+    let tyre_sigma = fits
+        .iter()
+        .map(|(_, f)| f.residual_rms_m)
+        .fold(0.0, f64::max);
+    let band_y_m = band(&fits, config.band, &mut warnings);
+    let body = classify(
+        &settled.in_frame,
+        &fits,
+        config,
+        config.noise_m.unwrap_or(settled.sigma.max(tyre_sigma)),
+        band_y_m,
+        &mut counts,
+    );
+    let findings = find_angles(&body.samples, front, rear, config.zone, &frame);
+    let plane = settled.plane;
+    let heading = frame.x_axis_in_cloud;
+    let sign = if config.front_is_positive_x {
+        1.0
+    } else {
+        -1.0
+    };
+    let mut result = AnglesResult {
+        approach: findings.approach,
+        departure: findings.departure,
+        breakover: findings.breakover,
+        ground_clearance: findings.clearance,
+        wheelbase_m: front.x_m - rear.x_m,
+        track_m: track(&fits, |f| f.centre_y),
+        inner_track_m: track(&fits, |f| f.inner_y),
+        tyres: tyres_out(&fits, &frame),
+        front_axle: front,
+        rear_axle: rear,
+        frame,
+        yaw_rad: heading[1].atan2(heading[0].abs()) * sign,
+        ground: GroundFit {
+            normal_in_cloud: plane.normal,
+            tilt_rad: plane.normal[2].clamp(-1.0, 1.0).acos(),
+            noise_sigma_m: settled.sigma,
+            inliers: settled.ground_inliers,
+        },
+        noise_sigma_m: body.noise_sigma_m,
+        bin_m: body.bin_m,
+        band_y_m,
+        envelope: body.samples,
+        points: counts,
+        zone: config.zone,
+        warnings,
+    };
+    geometry_warnings(&mut result, config);
+    finding_warnings(&mut result, body.unsupported_bins, config);
+    Ok(result)
+}
+
+/// Finite points outside the exclusion boxes, and the counts of the others.
+fn usable_points(points_in_cloud: &[V3], config: &AnglesConfig) -> (Vec<V3>, PointCounts) {
+    let mut counts = PointCounts {
+        input: points_in_cloud.len(),
+        ..PointCounts::default()
+    };
+    let mut points = Vec::with_capacity(points_in_cloud.len());
+    for &p in points_in_cloud {
+        if !p.iter().all(|v| v.is_finite()) {
+            counts.non_finite += 1;
+        } else if config.exclude.iter().any(|b| b.contains(p)) {
+            counts.excluded += 1;
+        } else {
+            points.push(p);
+        }
+    }
+    (points, counts)
+}
+
+/// The vehicle frame, the tyres in it and the ground, once they agree.
+struct Settled {
+    frame: VehicleFrame,
+    plane: Plane,
+    sigma: f64,
+    ground_inliers: usize,
+    fits: Vec<(TyrePosition, TyreFit)>,
+    in_frame: Vec<V3>,
+}
+
+/// Ground, then three rounds of: tyres in the current frame, ground refit without the tyre
+/// footprints, frame re-derived from the axles. A final tyre pass gives the fits, and the origin
+/// moves to mid-wheelbase on the centreline.
+fn settle_frame(
+    points: &[V3],
+    config: &AnglesConfig,
+    warnings: &mut Vec<String>,
+) -> Result<Settled, AnglesError> {
+    let thr = config.ground_threshold_m;
+    let no_ground = AnglesError::NoGround {
+        max_tilt_deg: config.max_ground_tilt_rad.to_degrees(),
+    };
+    let plane0 = ground::ransac(points, thr, config.max_ground_tilt_rad, config.seed)
+        .ok_or(no_ground.clone())?;
+    let mut plane = ground::refine(points, plane0, thr, |_| true).unwrap_or(plane0);
+    let forward = if config.front_is_positive_x {
+        [1.0, 0.0, 0.0]
+    } else {
+        [-1.0, 0.0, 0.0]
+    };
+    let mut frame = frame_on(plane, points, forward).ok_or(no_ground)?;
+    let (mut sigma, _) = ground::noise_sigma(points, plane, thr, |_| true);
+    let mut ground_inliers = 0;
+    for round in 0..4 {
+        let in_frame: Vec<V3> = points
+            .iter()
+            .map(|&p| frame.vehicle_from_cloud(p))
+            .collect();
+        let noise = config.noise_m.unwrap_or(sigma);
+        let seed_low = config.seed_low_m.max(5.0 * noise);
+        let (seeds, clusters) = tyres::find_seeds(&in_frame, seed_low, config.seed_high_m);
+        let mut round_warnings = Vec::new();
+        if clusters > 4 {
+            round_warnings.push(format!(
+                "{clusters} compact clusters near the ground; the 4 largest were taken as tyres"
+            ));
+        }
+        let mut fits = fit_tyres(
+            &in_frame,
+            &seeds,
+            config,
+            seed_low,
+            noise,
+            &mut round_warnings,
+        )?;
+        if round == 3 {
+            warnings.extend(round_warnings);
+            // Move the origin to mid-wheelbase on the centreline.
+            let (front, rear) = axles(&fits, config);
+            let shift = [0.5 * (front.x_m + rear.x_m), centreline_y(&fits), 0.0];
+            for (_, f) in &mut fits {
+                f.centre_x -= shift[0];
+                f.centre_y -= shift[1];
+                f.inner_y -= shift[1];
+                f.outer_y -= shift[1];
+            }
+            return Ok(Settled {
+                frame: frame.yawed(0.0, shift),
+                plane,
+                sigma,
+                ground_inliers,
+                fits,
+                in_frame: in_frame.into_iter().map(|p| sub(p, shift)).collect(),
+            });
+        }
+        let footprints: Vec<TyreFit> = fits.iter().map(|(_, f)| f.clone()).collect();
+        let off_tyres = |p: V3| {
+            !footprints
+                .iter()
+                .any(|t| in_footprint(frame.vehicle_from_cloud(p), t))
+        };
+        if let Some(refined) = ground::refine(points, plane, thr, off_tyres) {
+            plane = refined;
+        }
+        (sigma, ground_inliers) = ground::noise_sigma(points, plane, thr, off_tyres);
+        let heading = axle_heading(&frame, &fits).unwrap_or(frame.x_axis_in_cloud);
+        frame = frame_on(plane, points, heading)
+            .ok_or(AnglesError::Tyres("degenerate axle heading".into()))?;
+    }
+    unreachable!("the loop returns in its last round")
+}
+
+/// The body's envelope and the figures that shaped it.
+struct Body {
+    samples: Vec<EnvelopeSample>,
+    noise_sigma_m: f64,
+    bin_m: f64,
+    unsupported_bins: usize,
+}
+
+/// Split points into ground, tyre and body; build the body's lower envelope inside the band.
+fn classify(
+    in_frame: &[V3],
+    fits: &[(TyrePosition, TyreFit)],
+    config: &AnglesConfig,
+    noise_sigma_m: f64,
+    band_y_m: (f64, f64),
+    counts: &mut PointCounts,
+) -> Body {
+    let tyre_tol = (3.0 * noise_sigma_m).max(0.01);
+    let mut band_points = Vec::new();
+    for p in in_frame {
+        if p[2] < config.ground_threshold_m {
+            counts.ground += 1;
+        } else if fits.iter().any(|(_, f)| is_tyre_point(*p, f, tyre_tol)) {
+            counts.tyre += 1;
+        } else {
+            counts.body += 1;
+            if p[1] >= band_y_m.0 && p[1] <= band_y_m.1 {
+                band_points.push(*p);
+            }
+        }
+    }
+    counts.body_in_band = band_points.len();
+    // Range noise seen by a low sensor is mostly along the underside; measure it on the body too.
+    let body_sigma = envelope::surface_noise(&band_points).unwrap_or(0.0);
+    let noise_sigma_m = config.noise_m.unwrap_or(noise_sigma_m.max(body_sigma));
+    let bin_m = config
+        .bin_m
+        .unwrap_or_else(|| auto_bin(&band_points, config.min_support));
+    // At least 0.4 bin: a surface sloping up to 0.8 keeps both of a bin's point columns in its mode.
+    let half_window_m = (2.5 * noise_sigma_m).max(0.4 * bin_m);
+    let env = lower_envelope(
+        &band_points,
+        EnvelopeParams {
+            bin_m,
+            half_window_m,
+            min_support: config.min_support,
+            noise_m: noise_sigma_m,
+        },
+    );
+    counts.outliers_below_envelope = env.outliers_below;
+    let mut samples = env.samples;
+    samples.sort_by(|a, b| a.x_m.total_cmp(&b.x_m));
+    Body {
+        samples,
+        noise_sigma_m,
+        bin_m,
+        unsupported_bins: env.unsupported_bins + env.fringe_bins,
+    }
+}
+
+/// A frame with z along the plane normal, x along `forward` projected onto the plane, origin at the
+/// projection of the points' centroid.
+fn frame_on(plane: Plane, points: &[V3], forward: V3) -> Option<VehicleFrame> {
+    let n = points.len() as f64;
+    let c = points.iter().fold([0.0; 3], |a, p| geom::add(a, *p));
+    let c = geom::scale(c, 1.0 / n);
+    let origin = sub(c, geom::scale(plane.normal, plane.height(c)));
+    VehicleFrame::from_up_forward(origin, plane.normal, forward)
+}
+
+/// Fit every seed, label front/rear and left/right.
+fn fit_tyres(
+    in_frame: &[V3],
+    seeds: &[Seed],
+    config: &AnglesConfig,
+    seed_low: f64,
+    noise: f64,
+    warnings: &mut Vec<String>,
+) -> Result<Vec<(TyrePosition, TyreFit)>, AnglesError> {
+    let seeds: Vec<&Seed> = seeds.iter().take(4).collect();
+    if seeds.len() < 2 {
+        return Err(AnglesError::Tyres(format!(
+            "{} footprint cluster(s) between {:.3} m and {:.3} m above the ground; need a front and a rear tyre",
+            seeds.len(),
+            seed_low,
+            config.seed_high_m
+        )));
+    }
+    let centre_y = seeds.iter().map(|s| s.y).sum::<f64>() / seeds.len() as f64;
+    let mut fits = Vec::new();
+    for s in &seeds {
+        let params = TyreParams {
+            h_lo: seed_low,
+            h_hi: config.seed_high_m,
+            gap_m: config.tyre_gap_m,
+            noise_m: noise,
+            inward_sign: if s.y < centre_y { 1.0 } else { -1.0 },
+        };
+        match tyres::fit_tyre(in_frame, s, params) {
+            Some(f) => fits.push(f),
+            None => warnings.push(format!(
+                "footprint at x {:.2} m, y {:.2} m: no consistent tyre circle, ignored",
+                s.x, s.y
+            )),
+        }
+    }
+    fits.sort_by(|a, b| a.centre_x.total_cmp(&b.centre_x));
+    // Split front/rear at the largest gap in x.
+    let split = (1..fits.len())
+        .max_by(|&i, &j| {
+            (fits[i].centre_x - fits[i - 1].centre_x)
+                .total_cmp(&(fits[j].centre_x - fits[j - 1].centre_x))
+        })
+        .filter(|&i| fits[i].centre_x - fits[i - 1].centre_x > 0.8)
+        .ok_or_else(|| {
+            AnglesError::Tyres(format!(
+                "{} tyre circle(s) fitted, but no front and rear axle more than 0.8 m apart",
+                fits.len()
+            ))
+        })?;
+    let centre_y = fits.iter().map(|f| f.centre_y).sum::<f64>() / fits.len() as f64;
+    let mut out = Vec::new();
+    for (group, is_front) in [(&fits[split..], true), (&fits[..split], false)] {
+        let mut group: Vec<&TyreFit> = group.iter().collect();
+        if group.len() > 2 {
+            warnings.push(format!(
+                "{} tyre circles on one axle; the two best supported were kept",
+                group.len()
+            ));
+            group.sort_by_key(|g| std::cmp::Reverse(g.silhouette_points));
+            group.truncate(2);
+        }
+        if group.len() == 2 && (group[0].centre_y > centre_y) == (group[1].centre_y > centre_y) {
+            warnings.push("two tyres on one side of the same axle; check the labels".into());
+        }
+        for f in group {
+            let left = f.centre_y > centre_y;
+            let pos = match (is_front, left) {
+                (true, true) => TyrePosition::FrontLeft,
+                (true, false) => TyrePosition::FrontRight,
+                (false, true) => TyrePosition::RearLeft,
+                (false, false) => TyrePosition::RearRight,
+            };
+            out.push((pos, f.clone()));
+        }
+    }
+    Ok(out)
+}
+
+fn in_footprint(p: V3, t: &TyreFit) -> bool {
+    let (lo, hi) = (
+        t.inner_y.min(t.outer_y) - 0.03,
+        t.inner_y.max(t.outer_y) + 0.03,
+    );
+    (p[0] - t.centre_x).abs() < t.free_radius_m + 0.03 && p[1] > lo && p[1] < hi
+}
+
+fn is_tyre_point(p: V3, t: &TyreFit, tol: f64) -> bool {
+    let (lo, hi) = (
+        t.inner_y.min(t.outer_y) - tol,
+        t.inner_y.max(t.outer_y) + tol,
+    );
+    p[1] > lo
+        && p[1] < hi
+        && (p[0] - t.centre_x).hypot(p[2] - t.loaded_radius_m) < t.free_radius_m + tol
+}
+
+/// Direction from the rear axle midpoint to the front one, in cloud coordinates.
+fn axle_heading(frame: &VehicleFrame, fits: &[(TyrePosition, TyreFit)]) -> Option<V3> {
+    let mid = |front: bool| {
+        let sel: Vec<&TyreFit> = fits
+            .iter()
+            .filter(|(p, _)| p.is_front() == front)
+            .map(|(_, f)| f)
+            .collect();
+        let n = sel.len() as f64;
+        (n > 0.0).then(|| {
+            let x = sel.iter().map(|f| f.centre_x).sum::<f64>() / n;
+            let y = sel.iter().map(|f| f.centre_y).sum::<f64>() / n;
+            frame.cloud_from_vehicle([x, y, 0.0])
+        })
+    };
+    unit(sub(mid(true)?, mid(false)?))
+}
+
+fn axles(fits: &[(TyrePosition, TyreFit)], config: &AnglesConfig) -> (Axle, Axle) {
+    let axle = |front: bool| {
+        let sel: Vec<&TyreFit> = fits
+            .iter()
+            .filter(|(p, _)| p.is_front() == front)
+            .map(|(_, f)| f)
+            .collect();
+        let n = sel.len().max(1) as f64;
+        Axle {
+            x_m: sel.iter().map(|f| f.centre_x).sum::<f64>() / n,
+            loaded_radius_m: config
+                .tyre_radius_m
+                .unwrap_or_else(|| sel.iter().map(|f| f.loaded_radius_m).sum::<f64>() / n),
+            free_radius_m: sel.iter().map(|f| f.free_radius_m).sum::<f64>() / n,
+        }
+    };
+    (axle(true), axle(false))
+}
+
+fn is_left(p: TyrePosition) -> bool {
+    matches!(p, TyrePosition::FrontLeft | TyrePosition::RearLeft)
+}
+
+/// Midpoint between the left and right inner faces (or the mean tyre y if a side is missing).
+fn centreline_y(fits: &[(TyrePosition, TyreFit)]) -> f64 {
+    let left: Vec<f64> = fits
+        .iter()
+        .filter(|(p, _)| is_left(*p))
+        .map(|(_, f)| f.inner_y)
+        .collect();
+    let right: Vec<f64> = fits
+        .iter()
+        .filter(|(p, _)| !is_left(*p))
+        .map(|(_, f)| f.inner_y)
+        .collect();
+    let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len() as f64;
+    if left.is_empty() || right.is_empty() {
+        fits.iter().map(|(_, f)| f.centre_y).sum::<f64>() / fits.len().max(1) as f64
+    } else {
+        0.5 * (mean(&left) + mean(&right))
+    }
+}
+
+fn track(fits: &[(TyrePosition, TyreFit)], y: impl Fn(&TyreFit) -> f64) -> Option<f64> {
+    let mean = |left: bool| {
+        let v: Vec<f64> = fits
+            .iter()
+            .filter(|(p, _)| is_left(*p) == left)
+            .map(|(_, f)| y(f))
+            .collect();
+        (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64)
+    };
+    Some(mean(true)? - mean(false)?)
+}
+
+fn band(fits: &[(TyrePosition, TyreFit)], band: Band, warnings: &mut Vec<String>) -> (f64, f64) {
+    match band {
+        Band::Full => (f64::NEG_INFINITY, f64::INFINITY),
+        Band::HalfWidth(w) => (-w, w),
+        Band::InnerFaces { margin_m } => {
+            let left = fits
+                .iter()
+                .filter(|(p, _)| is_left(*p))
+                .map(|(_, f)| f.inner_y)
+                .fold(f64::INFINITY, f64::min);
+            let right = fits
+                .iter()
+                .filter(|(p, _)| !is_left(*p))
+                .map(|(_, f)| f.inner_y)
+                .fold(f64::NEG_INFINITY, f64::max);
+            if left.is_finite() && right.is_finite() && left - margin_m > right + margin_m {
+                (right + margin_m, left - margin_m)
+            } else {
+                warnings.push(
+                    "tyres on one side only: the envelope uses every body point (full band)".into(),
+                );
+                (f64::NEG_INFINITY, f64::INFINITY)
+            }
+        }
+    }
+}
+
+/// 5 mm, doubled while the median occupied bin holds fewer than 3 x `min_support` points (max 4 cm).
+fn auto_bin(points: &[V3], min_support: usize) -> f64 {
+    let mut bin = 0.005;
+    while bin < 0.04 {
+        let mut keys: Vec<i64> = points.iter().map(|p| (p[0] / bin).floor() as i64).collect();
+        keys.sort_unstable();
+        let mut sizes: Vec<f64> = keys
+            .chunk_by(|a, b| a == b)
+            .map(|c| c.len() as f64)
+            .collect();
+        if geom::median(&mut sizes).unwrap_or(0.0) >= 3.0 * min_support as f64 {
+            break;
+        }
+        bin *= 2.0;
+    }
+    bin
+}
+
+struct Findings {
+    approach: Option<AngleFinding>,
+    departure: Option<AngleFinding>,
+    breakover: Option<AngleFinding>,
+    clearance: Option<Clearance>,
+}
+
+fn find_angles(
+    samples: &[EnvelopeSample],
+    front: Axle,
+    rear: Axle,
+    zone: Zone,
+    frame: &VehicleFrame,
+) -> Findings {
+    let (front_limit, rear_limit) = match zone {
+        Zone::Tyre => (
+            front.x_m + front.free_radius_m,
+            rear.x_m - rear.free_radius_m,
+        ),
+        Zone::Axle => (front.x_m, rear.x_m),
+    };
+    let finding = |s: &EnvelopeSample, angle_rad: f64, parts_rad: Option<(f64, f64)>| {
+        let w = [s.x_m, s.y_m, s.z_m];
+        AngleFinding {
+            angle_rad,
+            parts_rad,
+            witness_in_vehicle: w,
+            witness_in_cloud: frame.cloud_from_vehicle(w),
+            support: s.support,
+        }
+    };
+    let keep_min = |best: &mut Option<AngleFinding>, cand: AngleFinding| {
+        if best.as_ref().is_none_or(|b| cand.angle_rad < b.angle_rad) {
+            *best = Some(cand);
+        }
+    };
+    let mut out = Findings {
+        approach: None,
+        departure: None,
+        breakover: None,
+        clearance: None,
+    };
+    for s in samples {
+        let a_front = tangent_slope(s.x_m - front.x_m, s.z_m, front.loaded_radius_m);
+        let a_rear = tangent_slope(rear.x_m - s.x_m, s.z_m, rear.loaded_radius_m);
+        if s.x_m > front_limit
+            && let Some(a) = a_front
+        {
+            keep_min(&mut out.approach, finding(s, a, None));
+        }
+        if s.x_m < rear_limit
+            && let Some(a) = a_rear
+        {
+            keep_min(&mut out.departure, finding(s, a, None));
+        }
+        if s.x_m > rear.x_m && s.x_m < front.x_m {
+            let af = tangent_slope(front.x_m - s.x_m, s.z_m, front.loaded_radius_m);
+            let ar = tangent_slope(s.x_m - rear.x_m, s.z_m, rear.loaded_radius_m);
+            if let (Some(af), Some(ar)) = (af, ar) {
+                keep_min(&mut out.breakover, finding(s, af + ar, Some((af, ar))));
+            }
+        }
+        if s.x_m >= rear.x_m
+            && s.x_m <= front.x_m
+            && out.clearance.as_ref().is_none_or(|c| s.z_m < c.height_m)
+        {
+            let w = [s.x_m, s.y_m, s.z_m];
+            out.clearance = Some(Clearance {
+                height_m: s.z_m,
+                witness_in_vehicle: w,
+                witness_in_cloud: frame.cloud_from_vehicle(w),
+            });
+        }
+    }
+    out
+}
+
+fn tyres_out(fits: &[(TyrePosition, TyreFit)], frame: &VehicleFrame) -> Vec<Tyre> {
+    let mut out: Vec<Tyre> = fits
+        .iter()
+        .map(|(pos, f)| {
+            let c = [f.centre_x, f.centre_y, f.loaded_radius_m];
+            Tyre {
+                position: *pos,
+                centre_in_vehicle: c,
+                centre_in_cloud: frame.cloud_from_vehicle(c),
+                loaded_radius_m: f.loaded_radius_m,
+                free_radius_m: f.free_radius_m,
+                width_m: (f.outer_y - f.inner_y).abs(),
+                inner_face_y_m: f.inner_y,
+                residual_rms_m: f.residual_rms_m,
+                fit_points: f.silhouette_points,
+            }
+        })
+        .collect();
+    out.sort_by_key(|t| t.position as u8);
+    out
+}
+
+fn geometry_warnings(r: &mut AnglesResult, config: &AnglesConfig) {
+    let w = &mut r.warnings;
+    if r.ground.tilt_rad > 5f64.to_radians() {
+        w.push(format!(
+            "ground tilted {:.1} degrees from the cloud's z (expected <= 5)",
+            r.ground.tilt_rad.to_degrees()
+        ));
+    }
+    if r.yaw_rad.abs() > 10f64.to_radians() {
+        w.push(format!(
+            "vehicle yawed {:.1} degrees from the cloud's x (expected <= 10)",
+            r.yaw_rad.to_degrees()
+        ));
+    }
+    if r.tyres.len() < 4 {
+        let found: Vec<&str> = r.tyres.iter().map(|t| t.position.label()).collect();
+        w.push(format!(
+            "only {} tyres fitted ({})",
+            r.tyres.len(),
+            found.join(", ")
+        ));
+    }
+    for t in &r.tyres {
+        if t.residual_rms_m > (2.0 * r.ground.noise_sigma_m).max(0.005) {
+            w.push(format!(
+                "tyre {}: circle fit residual {:.1} mm is high (noise {:.1} mm)",
+                t.position.label(),
+                t.residual_rms_m * 1e3,
+                r.ground.noise_sigma_m * 1e3
+            ));
+        }
+    }
+    for pair in [
+        (TyrePosition::FrontLeft, TyrePosition::FrontRight),
+        (TyrePosition::RearLeft, TyrePosition::RearRight),
+    ] {
+        let get = |p| {
+            r.tyres
+                .iter()
+                .find(|t| t.position == p)
+                .map(|t| t.loaded_radius_m)
+        };
+        if let (Some(a), Some(b)) = (get(pair.0), get(pair.1))
+            && (a - b).abs() > 0.01
+        {
+            w.push(format!(
+                "{} and {} loaded radii differ by {:.0} mm (uneven load or fit problem)",
+                pair.0.label(),
+                pair.1.label(),
+                (a - b).abs() * 1e3
+            ));
+        }
+    }
+    if config.tyre_radius_m.is_some() {
+        w.push("static loaded radius overridden by the user".into());
+    }
+}
+
+fn finding_warnings(r: &mut AnglesResult, unsupported_bins: usize, config: &AnglesConfig) {
+    let w = &mut r.warnings;
+    let (x_min, x_max) = match (r.envelope.first(), r.envelope.last()) {
+        (Some(a), Some(b)) => (a.x_m, b.x_m),
+        _ => (0.0, 0.0),
+    };
+    for (name, f, edge) in [
+        ("approach", &r.approach, x_max),
+        ("departure", &r.departure, x_min),
+    ] {
+        match f {
+            None => w.push(format!(
+                "{name}: no body points in the zone; angle not determined"
+            )),
+            Some(f) => {
+                // A scan that ends mid-underside has no face rising at its end: the samples near
+                // the end are no higher than the witness.
+                let end_top = r
+                    .envelope
+                    .iter()
+                    .filter(|s| (s.x_m - edge).abs() < 0.03)
+                    .map(|s| s.z_m)
+                    .fold(f64::NEG_INFINITY, f64::max);
+                if (f.witness_in_vehicle[0] - edge).abs() < 0.03
+                    && end_top < f.witness_in_vehicle[2] + 0.03
+                {
+                    w.push(format!(
+                        "{name}: the limiting point is at the end of the scanned body with no face rising there; \
+                         the vehicle may extend beyond the cloud"
+                    ));
+                }
+            }
+        }
+    }
+    if r.breakover.is_none() {
+        w.push("breakover: no body points between the axles; angle not determined".into());
+    }
+    for (name, f) in [
+        ("approach", &r.approach),
+        ("departure", &r.departure),
+        ("breakover", &r.breakover),
+    ] {
+        if let Some(f) = f
+            && f.support < 2 * config.min_support
+        {
+            w.push(format!(
+                "{name}: limiting feature supported by only {} points",
+                f.support
+            ));
+        }
+    }
+    if unsupported_bins > 0 {
+        w.push(format!(
+            "{unsupported_bins} envelope bins were ignored (fewer than {} points in their lowest mode, or noise fringe)",
+            config.min_support
+        ));
+    }
+}

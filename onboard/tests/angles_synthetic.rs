@@ -1,0 +1,256 @@
+//! The angle calculator on synthetic vehicles (see `synth/mod.rs`) against true angles computed
+//! independently by brute force from the exact geometry.
+
+mod synth;
+
+use onboard::angles::{
+    AnglesConfig, AnglesError, AnglesResult, ExclusionBox, TyrePosition, Zone, compute_angles,
+};
+use synth::{Pose, Scan, Truth, Vehicle};
+
+fn run(v: &Vehicle, scan: Scan, pose: Pose, config: &AnglesConfig) -> AnglesResult {
+    let cloud: Vec<[f64; 3]> = synth::sample(v, scan)
+        .into_iter()
+        .map(|p| pose.apply(p))
+        .collect();
+    compute_angles(&cloud, config).unwrap_or_else(|e| panic!("{}: {e}", v.name))
+}
+
+/// Errors in degrees: (approach, departure, breakover).
+fn errors_deg(r: &AnglesResult, t: Truth) -> [f64; 3] {
+    let got =
+        |f: &Option<onboard::angles::AngleFinding>| f.as_ref().map_or(f64::NAN, |f| f.angle_rad);
+    [
+        (got(&r.approach) - t.approach_rad).to_degrees(),
+        (got(&r.departure) - t.departure_rad).to_degrees(),
+        (got(&r.breakover) - t.breakover_rad).to_degrees(),
+    ]
+}
+
+fn check(v: &Vehicle, r: &AnglesResult, t: Truth, tol_deg: f64, what: &str) -> f64 {
+    let e = errors_deg(r, t);
+    println!(
+        "{what:>28} {:>13}: truth {:7.3} {:7.3} {:7.3} | error {:+.4} {:+.4} {:+.4} deg | support {:?}",
+        v.name,
+        t.approach_rad.to_degrees(),
+        t.departure_rad.to_degrees(),
+        t.breakover_rad.to_degrees(),
+        e[0],
+        e[1],
+        e[2],
+        [&r.approach, &r.departure, &r.breakover].map(|f| f.as_ref().map_or(0, |f| f.support)),
+    );
+    for (k, name) in ["approach", "departure", "breakover"].iter().enumerate() {
+        assert!(
+            e[k].abs() < tol_deg,
+            "{what} {}: {name} off by {:.4} deg (limit {tol_deg}); warnings {:?}",
+            v.name,
+            e[k],
+            r.warnings
+        );
+    }
+    e.iter().map(|x| x.abs()).fold(0.0, f64::max)
+}
+
+const TILTED: Pose = Pose {
+    yaw_rad: 0.14,  // 8 degrees
+    tilt_rad: 0.07, // 4 degrees
+    tilt_axis_rad: 0.5,
+    shift_m: [12.0, -3.5, 1.3],
+};
+
+#[test]
+fn noiseless_5mm_within_0_02_deg_level_and_tilted_yawed_shifted() {
+    let cfg = AnglesConfig::default();
+    let mut worst: f64 = 0.0;
+    for v in synth::all() {
+        let truth = synth::truth(&v, false);
+        for (pose, what) in [
+            (Pose::IDENTITY, "noiseless level"),
+            (TILTED, "noiseless tilted+yawed"),
+        ] {
+            let r = run(&v, Scan::noiseless(0.005), pose, &cfg);
+            worst = worst.max(check(&v, &r, truth, 0.02, what));
+        }
+    }
+    println!("worst noiseless error {worst:.4} deg");
+}
+
+#[test]
+fn noisy_5mm_range_noise_within_0_3_deg() {
+    let cfg = AnglesConfig::default();
+    let mut worst: f64 = 0.0;
+    for (i, v) in synth::all().into_iter().enumerate() {
+        let truth = synth::truth(&v, false);
+        let scan = Scan {
+            noise_m: 0.005,
+            seed: 100 + i as u64,
+            ..Scan::noiseless(0.005)
+        };
+        let r = run(&v, scan, TILTED, &cfg);
+        worst = worst.max(check(&v, &r, truth, 0.3, "5 mm noise, tilted+yawed"));
+    }
+    println!("worst noisy error {worst:.4} deg");
+}
+
+#[test]
+fn lone_low_outliers_do_not_decide() {
+    let v = synth::sedan();
+    let scan = Scan {
+        outliers: 40,
+        ..Scan::noiseless(0.005)
+    };
+    let r = run(&v, scan, Pose::IDENTITY, &AnglesConfig::default());
+    check(&v, &r, synth::truth(&v, false), 0.02, "40 lone outliers");
+    assert!(r.points.outliers_below_envelope >= 30, "{:?}", r.points);
+}
+
+#[test]
+fn eu_axle_zone_matches_its_truth() {
+    let cfg = AnglesConfig {
+        zone: Zone::Axle,
+        ..AnglesConfig::default()
+    };
+    for v in [synth::off_roader(), synth::sedan()] {
+        let r = run(&v, Scan::noiseless(0.005), Pose::IDENTITY, &cfg);
+        check(&v, &r, synth::truth(&v, true), 0.02, "EU axle zone");
+    }
+}
+
+#[test]
+fn front_toward_minus_x() {
+    let v = synth::suv();
+    let pose = Pose {
+        yaw_rad: std::f64::consts::PI + 0.1,
+        ..TILTED
+    };
+    let cfg = AnglesConfig {
+        front_is_positive_x: false,
+        ..AnglesConfig::default()
+    };
+    let r = run(&v, Scan::noiseless(0.005), pose, &cfg);
+    check(&v, &r, synth::truth(&v, false), 0.02, "front toward -x");
+    assert!((r.yaw_rad - 0.1).abs() < 1e-3, "yaw {}", r.yaw_rad);
+}
+
+#[test]
+fn tyre_fits_geometry_and_frame() {
+    let v = synth::van();
+    let r = run(&v, Scan::noiseless(0.005), TILTED, &AnglesConfig::default());
+    assert_eq!(r.tyres.len(), 4);
+    for t in &r.tyres {
+        let front = matches!(
+            t.position,
+            TyrePosition::FrontLeft | TyrePosition::FrontRight
+        );
+        let left = matches!(t.position, TyrePosition::FrontLeft | TyrePosition::RearLeft);
+        let x = if front { v.front_x() } else { v.rear_x() };
+        let y = (v.inner_face_y() + v.tyre_width_m / 2.0) * if left { 1.0 } else { -1.0 };
+        let c = t.centre_in_vehicle;
+        assert!((c[0] - x).abs() < 1e-3 && (c[1] - y).abs() < 3e-3, "{t:?}");
+        assert!(
+            (t.loaded_radius_m - v.loaded_radius_m).abs() < 1e-3,
+            "{t:?}"
+        );
+        assert!((t.free_radius_m - v.free_radius_m).abs() < 1e-3, "{t:?}");
+        assert!((t.width_m - v.tyre_width_m).abs() < 5e-3, "{t:?}");
+        let in_cloud = TILTED.apply([x, y, v.loaded_radius_m]);
+        let d: f64 = (0..3)
+            .map(|k| (in_cloud[k] - t.centre_in_cloud[k]).powi(2))
+            .sum::<f64>()
+            .sqrt();
+        assert!(d < 3e-3, "cloud centre off by {d}");
+    }
+    assert!((r.wheelbase_m - v.wheelbase_m).abs() < 1e-3);
+    assert!((r.track_m.unwrap() - v.track_m).abs() < 5e-3);
+    assert!((r.yaw_rad - 0.14).abs() < 1e-3 && (r.ground.tilt_rad - 0.07).abs() < 1e-4);
+    // Witness in the cloud frame is the witness in the vehicle frame, placed by the pose.
+    let a = r.approach.as_ref().unwrap();
+    let expect = TILTED.apply(a.witness_in_vehicle);
+    assert!(
+        (0..3).all(|k| (expect[k] - a.witness_in_cloud[k]).abs() < 3e-3),
+        "{a:?}"
+    );
+    assert!(r.warnings.is_empty(), "{:?}", r.warnings);
+}
+
+#[test]
+fn exclusion_box_removes_the_tow_hitch() {
+    let v = synth::pickup_with_hitch();
+    let mut bare = v.clone();
+    bare.parts.clear();
+    let with_hitch = synth::truth(&v, false);
+    let without = synth::truth(&bare, false);
+    assert!(
+        without.departure_rad - with_hitch.departure_rad > 2f64.to_radians(),
+        "the hitch must limit the departure"
+    );
+    let cfg = AnglesConfig {
+        exclude: vec![ExclusionBox {
+            min_in_cloud: [-3.3, -0.1, 0.3],
+            max_in_cloud: [-2.6, 0.1, 0.56],
+        }],
+        ..AnglesConfig::default()
+    };
+    let r = run(&v, Scan::noiseless(0.005), Pose::IDENTITY, &cfg);
+    check(&v, &r, without, 0.02, "hitch excluded");
+    assert!(r.points.excluded > 0);
+}
+
+#[test]
+fn tyre_radius_override_is_used() {
+    let v = synth::sedan();
+    let mut bigger = v.clone();
+    bigger.loaded_radius_m = 0.33;
+    let cfg = AnglesConfig {
+        tyre_radius_m: Some(0.33),
+        ..AnglesConfig::default()
+    };
+    let r = run(&v, Scan::noiseless(0.005), Pose::IDENTITY, &cfg);
+    let t = synth::truth(&bigger, false);
+    let e = errors_deg(&r, t);
+    assert!(e.iter().all(|e| e.abs() < 0.02), "{e:?}");
+    assert!(r.warnings.iter().any(|w| w.contains("overridden")));
+}
+
+#[test]
+fn clear_errors_for_unusable_clouds() {
+    let few = vec![[0.0, 0.0, 0.0]; 50];
+    assert_eq!(
+        compute_angles(&few, &AnglesConfig::default()),
+        Err(AnglesError::TooFewPoints(50))
+    );
+    let ground_only: Vec<[f64; 3]> = (0..10_000)
+        .map(|i| [f64::from(i % 100) * 0.05, f64::from(i / 100) * 0.05, 0.0])
+        .collect();
+    let err = compute_angles(&ground_only, &AnglesConfig::default()).unwrap_err();
+    assert!(matches!(err, AnglesError::Tyres(_)), "{err}");
+    assert!(
+        err.to_string().contains("need a front and a rear tyre"),
+        "{err}"
+    );
+    let wall: Vec<[f64; 3]> = (0..10_000)
+        .map(|i| [0.0, f64::from(i % 100) * 0.05, f64::from(i / 100) * 0.05])
+        .collect();
+    assert!(matches!(
+        compute_angles(&wall, &AnglesConfig::default()),
+        Err(AnglesError::NoGround { .. })
+    ));
+}
+
+#[test]
+fn truth_matches_hand_checks() {
+    // The brute-force truth against the closed forms of notes/domain.md: z = r, d = 2r gives 30 deg.
+    let mut v = synth::sedan();
+    v.profile = vec![
+        (v.front_x() + 2.0 * v.loaded_radius_m, v.loaded_radius_m),
+        (0.0, 5.0),
+        (v.rear_x() - 1.0, 5.0),
+    ];
+    let t = synth::truth(&v, false);
+    assert!(
+        (t.approach_rad.to_degrees() - 30.0).abs() < 1e-6,
+        "{}",
+        t.approach_rad.to_degrees()
+    );
+}
