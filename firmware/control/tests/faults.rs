@@ -248,6 +248,33 @@ fn stop_ramps_down_with_the_commanded_ramp_then_goes_idle() {
 }
 
 #[test]
+fn immediate_stop_zeroes_in_the_next_step_and_needs_a_new_drive() {
+    let mut sim = cruising();
+    sim.command(Command::Stop { immediate: true }).unwrap();
+    assert_eq!(sim.machine.mode(), Mode::Idle);
+    assert_eq!(ticks_until_zero_frame(&mut sim, 5), 1);
+    assert!(
+        sim.machine
+            .interlocks(sim.now_us)
+            .contains(Interlocks::STOP_REQUESTED)
+    );
+    assert_zero_for(&mut sim, 100);
+    let drive = Command::Drive(DriveCommand {
+        twist: Twist::new(0.2, 0.0, 0.0),
+        accel_mps2: 0.5,
+        jerk_mps3: 5.0,
+    });
+    assert_eq!(sim.command(drive), Ok(()));
+    assert!(
+        !sim.machine
+            .interlocks(sim.now_us)
+            .contains(Interlocks::STOP_REQUESTED)
+    );
+    sim.run(10);
+    assert!(sim.last.currents_raw.iter().any(|c| *c != 0));
+}
+
+#[test]
 fn start_is_blocked_until_escs_and_heartbeat_are_present() {
     let mut sim = Sim::default_seeded(1);
     sim.heartbeat_every = 0;
