@@ -15,6 +15,12 @@
 //! Everything here is a pure function of (scenario, seed, time); the command line in `main.rs` is
 //! the only part that touches files, sockets and clocks.
 
+pub mod can_bus;
+pub mod esc_model;
+pub mod fil;
+pub mod fil_scenarios;
+pub mod pty;
+pub mod robot;
 pub mod d435;
 pub mod geometry;
 pub mod scenario;
