@@ -38,15 +38,21 @@ PY
 pin=()
 if command -v taskset >/dev/null; then pin=(taskset -c 0); fi
 cargo build --release -q -p onboard --example bench_vlp16
-ours="$("${pin[@]}" "${CARGO_TARGET_DIR:-target}/release/examples/bench_vlp16" "$scratch/capture.pcap" "$seconds")"
-peer="$("${pin[@]}" python3 bench/peer_velodyne_decoder.py "$scratch/capture.pcap" "$((seconds / 2))")"
-echo "$ours"
-echo "$peer"
+# Interleaved rounds, best figure per side: other load on the machine hits both alike.
 field() { sed -n "s/.*$1=\([^ ]*\).*/\1/p"; }
-ours_pps="$(echo "$ours" | grep '^end_to_end' | field points_per_s)"
-ours_points="$(echo "$ours" | grep '^end_to_end' | field points)"
-peer_pps="$(echo "$peer" | field points_per_s)"
-peer_points="$(echo "$peer" | field points)"
+ours_pps=0; peer_pps=0; ours_points=0; peer_points=0
+for round in 1 2 3; do
+  ours="$("${pin[@]}" "${CARGO_TARGET_DIR:-target}/release/examples/bench_vlp16" "$scratch/capture.pcap" "$seconds")"
+  peer="$("${pin[@]}" python3 bench/peer_velodyne_decoder.py "$scratch/capture.pcap" "$((seconds / 2))")"
+  echo "round $round: $(echo "$ours" | tr '\n' ' ')"
+  echo "round $round: $peer"
+  pps="$(echo "$ours" | grep '^end_to_end' | field points_per_s)"
+  ours_points="$(echo "$ours" | grep '^end_to_end' | field points)"
+  if [ "$pps" -gt "$ours_pps" ]; then ours_pps="$pps"; fi
+  pps="$(echo "$peer" | field points_per_s)"
+  peer_points="$(echo "$peer" | field points)"
+  if [ "$pps" -gt "$peer_pps" ]; then peer_pps="$pps"; fi
+done
 python3 - "$ours_pps" "$peer_pps" "$ours_points" "$peer_points" <<'PY'
 import sys
 ours, peer, n_ours, n_peer = map(float, sys.argv[1:])
