@@ -7,8 +7,8 @@
 //!   192.168.1.201:8308 to 255.255.255.255, stamped [`PCAP_EPOCH_S`] + simulation time. The sensor
 //!   clock (microseconds past the hour) is `lidar.clock_offset_us` + simulation time, so with the
 //!   default offset 0 it agrees with the pcap stamps' position in the hour. `--udp HOST:PORT` sends
-//!   the same datagrams (position packets to port 8308 of the same host), as fast as possible or,
-//!   with `--realtime`, paced by the wall clock.
+//!   the same datagrams (position packets to `--udp-position`, default port 8308 of the same host),
+//!   as fast as possible or, with `--realtime`, paced by the wall clock.
 //! - `depth SCENARIO --out DIR`: `DIR/depth/NNNNNN.z16` (raw Z16: little-endian u16 millimetres,
 //!   row-major, 0 = invalid), `DIR/depth.csv` (`frame,stamp_us,time_s,file`), `DIR/camera.toml`
 //!   (intrinsics, depth unit, mount `robot_from_camera`, clock offset, fps, scenario path).
@@ -66,6 +66,9 @@ pub struct LidarArgs {
     /// Send the packets over UDP to this address (e.g. 127.0.0.1:2368).
     #[arg(long)]
     udp: Option<SocketAddr>,
+    /// Send position packets here (default: port 8308 of the --udp host).
+    #[arg(long)]
+    udp_position: Option<SocketAddr>,
     /// Pace UDP output at the sensor's real rate instead of as fast as possible.
     #[arg(long)]
     realtime: bool,
@@ -212,7 +215,8 @@ pub fn lidar(args: &LidarArgs) -> anyhow::Result<()> {
             let target = if port == 2368 {
                 addr
             } else {
-                SocketAddr::new(addr.ip(), 8308)
+                args.udp_position
+                    .unwrap_or_else(|| SocketAddr::new(addr.ip(), 8308))
             };
             sock.send_to(payload, target)
                 .with_context(|| format!("sending to {target}"))?;

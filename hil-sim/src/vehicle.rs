@@ -66,6 +66,13 @@ pub const DEFAULT_ARCH_CLEARANCE_M: f64 = 0.05;
 /// Minimum side-view clearance between the underside polylines and a tyre circle, metres.
 pub const MIN_TYRE_GAP_M: f64 = 0.01;
 
+/// Largest length, and largest coordinate magnitude, a vehicle file may use, metres (keeps every
+/// derived computation finite and small).
+pub const MAX_DIMENSION_M: f64 = 50.0;
+
+/// Smallest outline sampling step, metres; smaller requests are raised to it.
+pub const MIN_SPACING_M: f64 = 1e-4;
+
 /// A vehicle as written in its TOML file (see the module docs for the format).
 #[derive(Clone, Debug, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
@@ -347,9 +354,7 @@ impl Vehicle {
         }
         for (i, &[x, z]) in section.points.iter().enumerate() {
             let field = format!("{name}.points[{i}]");
-            if !x.is_finite() || !z.is_finite() {
-                return fail(&field, "coordinates must be finite numbers");
-            }
+            coordinates(&field, &[x, z])?;
             if x <= x_min || x >= x_max {
                 return fail(
                     &field,
@@ -448,7 +453,13 @@ impl Vehicle {
     /// The vehicle's side-view outline as points, every polyline vertex plus samples at most
     /// `spacing_m` apart along every edge (underside, bumper faces, arches, parts). This is what the
     /// true-angle routine searches; the vertices alone are returned by [`Vehicle::outline_vertices`].
+    /// Steps below [`MIN_SPACING_M`] (or NaN) are raised to it.
     pub fn outline_points(&self, spacing_m: f64) -> Vec<OutlinePoint> {
+        let spacing_m = if spacing_m >= MIN_SPACING_M {
+            spacing_m
+        } else {
+            MIN_SPACING_M
+        };
         let mut out = Vec::new();
         for edge in self.outline_edges() {
             let n = ((distance2(edge.a, edge.b) / spacing_m).ceil() as usize).max(1);
@@ -562,13 +573,9 @@ fn rectangle(x0: f64, x1: f64, z0: f64, z1: f64) -> Vec<[f64; 2]> {
 fn validate_part(field: &str, part: &Part) -> Result<(), (String, String)> {
     match part {
         Part::Box { min_m, max_m, .. } => {
+            coordinates(&format!("{field}.min_m"), min_m)?;
+            coordinates(&format!("{field}.max_m"), max_m)?;
             for k in 0..3 {
-                if !min_m[k].is_finite() || !max_m[k].is_finite() {
-                    return fail(
-                        &format!("{field}.min_m/max_m"),
-                        "coordinates must be finite numbers",
-                    );
-                }
                 if min_m[k] >= max_m[k] {
                     return fail(
                         &format!("{field}.max_m[{k}]"),
@@ -590,12 +597,7 @@ fn validate_part(field: &str, part: &Part) -> Result<(), (String, String)> {
             length_m,
             ..
         } => {
-            if centre_m.iter().any(|c| !c.is_finite()) {
-                return fail(
-                    &format!("{field}.centre_m"),
-                    "coordinates must be finite numbers",
-                );
-            }
+            coordinates(&format!("{field}.centre_m"), centre_m)?;
             positive(&format!("{field}.radius_m"), *radius_m)?;
             positive(&format!("{field}.length_m"), *length_m)?;
             let half_height = if *axis == Axis::Z {
@@ -615,18 +617,36 @@ fn validate_part(field: &str, part: &Part) -> Result<(), (String, String)> {
 }
 
 fn positive(field: &str, v: f64) -> Result<(), (String, String)> {
-    if v.is_finite() && v > 0.0 {
+    if v.is_finite() && v > 0.0 && v <= MAX_DIMENSION_M {
         Ok(())
     } else {
-        fail(field, format!("must be a positive number, got {v}"))
+        fail(
+            field,
+            format!("must be a positive number up to {MAX_DIMENSION_M}, got {v}"),
+        )
     }
 }
 
 fn non_negative(field: &str, v: f64) -> Result<(), (String, String)> {
-    if v.is_finite() && v >= 0.0 {
+    if v.is_finite() && (0.0..=MAX_DIMENSION_M).contains(&v) {
         Ok(())
     } else {
-        fail(field, format!("must be zero or positive, got {v}"))
+        fail(field, format!("must lie in 0..={MAX_DIMENSION_M}, got {v}"))
+    }
+}
+
+/// Every coordinate finite and within +-[`MAX_DIMENSION_M`].
+fn coordinates(field: &str, values: &[f64]) -> Result<(), (String, String)> {
+    if values
+        .iter()
+        .all(|v| v.is_finite() && v.abs() <= MAX_DIMENSION_M)
+    {
+        Ok(())
+    } else {
+        fail(
+            field,
+            format!("coordinates must be finite numbers within +-{MAX_DIMENSION_M} m"),
+        )
     }
 }
 

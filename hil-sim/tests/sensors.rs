@@ -402,3 +402,47 @@ fn depth_output_is_reproducible_and_documented() {
     );
     std::fs::remove_dir_all(&dir).ok();
 }
+
+#[test]
+fn udp_output_reaches_a_loopback_listener_at_real_time_pace() {
+    use std::net::UdpSocket;
+    use std::time::{Duration, Instant};
+    // Count datagrams of `len` bytes on a socket until it stays quiet for 1 s (read concurrently:
+    // the loopback receive buffer cannot hold the whole burst).
+    fn listen(len: usize) -> (std::net::SocketAddr, std::thread::JoinHandle<usize>) {
+        let socket = UdpSocket::bind("127.0.0.1:0").expect("bind");
+        socket
+            .set_read_timeout(Some(Duration::from_secs(1)))
+            .expect("timeout");
+        let addr = socket.local_addr().expect("addr");
+        let handle = std::thread::spawn(move || {
+            let mut buf = [0u8; 2048];
+            let mut count = 0;
+            while let Ok(n) = socket.recv(&mut buf) {
+                assert_eq!(n, len);
+                count += 1;
+            }
+            count
+        });
+        (addr, handle)
+    }
+    let (data_addr, data) = listen(1206);
+    let (position_addr, position) = listen(512);
+    let started = Instant::now();
+    run_ok(
+        sim_bin()
+            .args(["lidar"])
+            .arg(crate_dir().join("scenarios/van-pass.toml"))
+            .args(["--udp", &data_addr.to_string()])
+            .args(["--udp-position", &position_addr.to_string()])
+            .args(["--realtime", "--duration-s", "0.2"]),
+    );
+    let elapsed = started.elapsed();
+    // 0.2 s of data is 151 packets (one every 1.327 ms) and 10 position packets (one per 14).
+    assert!(
+        elapsed >= Duration::from_millis(190),
+        "--realtime finished after {elapsed:?}"
+    );
+    assert_eq!(data.join().expect("listener"), 151);
+    assert_eq!(position.join().expect("listener"), 10);
+}
