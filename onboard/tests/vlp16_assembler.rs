@@ -196,6 +196,20 @@ fn frames_cut_at_the_configured_angle() {
 }
 
 #[test]
+fn a_late_packet_does_not_cut_a_frame() {
+    let mut asm = FrameAssembler::new(DecoderConfig::default()).unwrap();
+    let order = [0u32, 1, 2, 4, 3, 5, 6]; // packet 3 arrives after packet 4
+    for k in order {
+        let repr = packet(1_000 + k * 12 * 20, 20, 1_000, k * 1_327);
+        asm.push_data(&repr.to_bytes(), 0).unwrap();
+    }
+    let (frames, _) = finish(asm);
+    assert_eq!(frames.len(), 1);
+    assert_eq!(frames[0].points.len(), 7 * 384);
+    assert_eq!(frames[0].packets, 7);
+}
+
+#[test]
 fn range_limits_drop_and_count() {
     let config = DecoderConfig {
         min_range_m: 1.0,

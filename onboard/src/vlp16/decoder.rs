@@ -625,8 +625,10 @@ impl FrameAssembler {
         recv_host_ns: u64,
     ) {
         let from_cut = wrap_raw(azimuth_raw - self.cut_raw);
+        // A wrap past the cut shows as the angle from the cut dropping by more than half a turn;
+        // a small drop is a late or repeated packet, not a new revolution.
         if let Some((previous_from_cut, _)) = self.previous_sequence
-            && from_cut < previous_from_cut
+            && previous_from_cut - from_cut > f64::from(AZIMUTH_RAW_MAX / 2)
         {
             self.close_frame(true);
             self.current.starts_at_cut = true;
