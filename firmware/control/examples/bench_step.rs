@@ -34,8 +34,24 @@ fn frame<M: Message>(msg: &M, seq: u16) -> Vec<u8> {
     buf[..len].to_vec()
 }
 
-/// Runs the scripted scenario once; returns per-step wall times in nanoseconds.
-fn run(steps: u64) -> Vec<u64> {
+/// CAN bits on the wire during a run: (frames, total bits).
+#[derive(Default)]
+struct BusTally {
+    frames: u64,
+    bits: u64,
+}
+
+impl BusTally {
+    fn add(&mut self, id: u16, data: &[u8]) {
+        self.frames += 1;
+        self.bits += u64::from(control::busload::frame_bits(id, data));
+    }
+}
+
+/// Runs the scripted scenario once; returns per-step wall times in nanoseconds and the CAN
+/// traffic (every feedback frame and every 0x200 command, with their real payloads).
+fn run(steps: u64) -> (Vec<u64>, BusTally) {
+    let mut bus = BusTally::default();
     let mut ctl = Controller::new(Config::default()).unwrap();
     let mut plant = Plant::new(PlantParams::default(), 42);
     let mut currents = [0i16; 4];
@@ -61,13 +77,16 @@ fn run(steps: u64) -> Vec<u64> {
         if step == steps * 2 / 3 + 500 {
             plant.motors[1].temperature_c = 40;
         }
-        let esc: Vec<EscSample> = (0..4)
+        let esc: Vec<EscSample> = (0..4usize)
             .map(|slot| EscSample {
                 esc_id: slot as u8 + 1,
                 feedback: plant.feedback(slot),
                 stamp_us: now_us,
             })
             .collect();
+        for sample in &esc {
+            bus.add(0x200 + u16::from(sample.esc_id), &sample.feedback.encode());
+        }
         let mut link_rx = Vec::new();
         match step {
             2 => link_rx.extend_from_slice(&hello),
@@ -99,14 +118,18 @@ fn run(steps: u64) -> Vec<u64> {
         times.push(best);
         let out = ctl.step(now_us, &inputs);
         currents = std::hint::black_box(out.currents_raw);
+        bus.add(
+            protocol::esc::CMD_ID_1_4,
+            &protocol::esc::encode_command(currents),
+        );
     }
-    times
+    (times, bus)
 }
 
 fn main() {
     let steps = 60_000; // one simulated minute
     let _ = run(2000); // warm caches
-    let mut times = run(steps);
+    let (mut times, bus) = run(steps);
     times.sort_unstable();
     let pct = |p: f64| times[((times.len() - 1) as f64 * p) as usize];
     let mean = times.iter().sum::<u64>() as f64 / times.len() as f64;
@@ -126,5 +149,13 @@ fn main() {
     println!(
         "  worst case = {:.2} % of the 1 ms control period (host proxy; the M4F is slower)",
         max as f64 / 1e4
+    );
+    let mean_bits = bus.bits as f64 / bus.frames as f64;
+    let seconds = steps as f64 / 1000.0;
+    println!(
+        "CAN bus load at 1 Mbit/s: {:.1} % ({} frames in {seconds:.0} s, mean {mean_bits:.1} bits per frame \
+         with stuffing; 4 feedback + 1 command frame per ms)",
+        100.0 * bus.bits as f64 / (seconds * 1.0e6),
+        bus.frames
     );
 }

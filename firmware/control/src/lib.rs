@@ -9,6 +9,7 @@
 //! - [`odometry`]: rotor-angle unwrapping, gear ratio, integrated pose and twist;
 //! - [`safety`]: per-ESC fault monitors, named interlocks, bus state;
 //! - [`config`]: the tuning knobs and their validation;
+//! - [`busload`]: exact CAN frame lengths (bit stuffing) for the bus-load figure;
 //! - [`machine`]: the drive state machine tying the above together (`command` + `step`);
 //! - [`link`]: MCU-link frames in (shared deframer, `protocol::mcu`), replies and rejections out;
 //! - [`controller`]: [`Controller::step`]`(now_us, &Inputs) -> Outputs`, the one call the
@@ -20,6 +21,7 @@
 #![cfg_attr(not(test), no_std)]
 #![warn(clippy::cast_possible_truncation, clippy::cast_sign_loss)]
 
+pub mod busload;
 pub mod config;
 pub mod controller;
 pub mod kinematics;
