@@ -54,7 +54,7 @@ fi
 echo "size tool: $SIZE"
 
 step "control builds for $TARGET (no_std check)"
-(cd "$root" && cargo build -p control --target "$TARGET" --locked)
+(cd "$root" && cargo check -p control --target "$TARGET" --locked)
 
 step "stm32 firmware, release"
 (cd "$here/stm32" && cargo build --release --locked)
