@@ -69,7 +69,7 @@ pub enum Command {
     Heartbeat,
     /// Clear latched faults whose cause is gone.
     ClearFaults,
-    /// Replace the configuration (only while idle or faulted).
+    /// Replace the configuration (only while idle or faulted; a new wheel map only while idle).
     SetConfig(Config),
 }
 
@@ -367,11 +367,23 @@ impl Machine {
             }
             Command::ClearFaults => self.clear_faults(now_us),
             Command::SetConfig(config) => {
-                if !matches!(self.mode, Mode::Idle | Mode::Faulted) {
+                // A new wheel map changes which ESC each monitor and encoder stands for, so it
+                // is accepted only when idle (no latched faults to lose) and restarts them.
+                let remap = config.wheels != self.config.wheels;
+                let allowed = if remap {
+                    self.mode == Mode::Idle
+                } else {
+                    matches!(self.mode, Mode::Idle | Mode::Faulted)
+                };
+                if !allowed {
                     return Err(Reject::Busy);
                 }
                 config.validate().map_err(Reject::BadConfig)?;
                 self.config = config;
+                if remap {
+                    self.escs = [EscMonitor::new(); 4];
+                    self.encoders = [EncoderUnwrap::new(); 4];
+                }
                 Ok(())
             }
         }

@@ -365,6 +365,42 @@ fn out_of_range_commands_are_rejected_by_field() {
 }
 
 #[test]
+fn wheel_map_changes_only_when_idle_and_restart_the_monitors() {
+    let mut sim = cruising();
+    sim.patch[1] = Patch {
+        temperature_c: Some(90),
+        ..Patch::default()
+    };
+    sim.tick();
+    assert_eq!(sim.machine.mode(), Mode::Faulted);
+    let mut remapped = control::Config::default();
+    remapped.wheels.esc_id = [2, 1, 4, 3];
+    remapped.wheels.sign = [-1, 1, -1, 1];
+    // Faulted: tuning is allowed, a new wheel map is not (it would drop the latched fault).
+    let tuned = control::Config {
+        over_current_a: 12.0,
+        ..control::Config::default()
+    };
+    assert_eq!(sim.command(Command::SetConfig(tuned)), Ok(()));
+    assert_eq!(sim.command(Command::SetConfig(remapped)), Err(Reject::Busy));
+    sim.patch[1] = Patch::default();
+    sim.plant.motors[1].temperature_c = 40;
+    sim.tick();
+    assert_eq!(sim.command(Command::ClearFaults), Ok(()));
+    assert_eq!(sim.command(Command::SetConfig(remapped)), Ok(()));
+    // The monitors restart: until every ESC reports again, motion is blocked.
+    let status = sim.machine.status(sim.now_us);
+    assert!(status.interlocks.contains(Interlocks::ESC_FEEDBACK_MISSING));
+    assert_eq!(status.esc[0].esc_id, 2);
+    sim.tick();
+    assert!(
+        !sim.machine
+            .interlocks(sim.now_us)
+            .contains(Interlocks::ESC_FEEDBACK_MISSING)
+    );
+}
+
+#[test]
 fn odometry_tracks_a_straight_run() {
     let mut sim = cruising();
     let start = sim.machine.pose();
