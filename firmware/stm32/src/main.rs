@@ -72,6 +72,11 @@ async fn main(spawner: Spawner) {
     // `enable` also turns on automatic bus-off management: the controller rejoins by itself after
     // 128 x 11 recessive bits; the control logic zeroes the currents and latches CAN_BUS_OFF.
     can.enable().await;
+    // A C620 holds its last command: after a reset (watchdog, brown-out) the wheels could still be
+    // driven by the current sent before it. Zero them before anything else starts.
+    if let Ok(zero) = control::controller::command_frame::<Frame>([0; 4]) {
+        let _ = can.try_write(&zero);
+    }
     let (can_tx, can_rx) = can.split();
     let can_rx = can_rx.buffered(CAN_RX_BUF.init(RxBuf::new()));
 
