@@ -15,6 +15,7 @@
 //! accel_mps2 = 0.0           # 0: cruising from t = 0
 //! distance_m = 7.5           # wheel distance of the run (sets the default duration)
 //! slip = 0.0                 # true distance = (1 - slip) * wheel distance
+//! height_m = 0.16            # robot top; the run is rejected if the vehicle hangs lower
 //!
 //! [vibration]
 //! pitch_sigma_deg = 0.1      # RMS of the pitch oscillation
@@ -40,6 +41,7 @@ use crate::geometry::Vec3;
 use crate::trajectory::{StraightRun, Vibration};
 use crate::vehicle::{Vehicle, VehicleError};
 use crate::vlp16::Vlp16Config;
+use crate::world::{Scene, SurfaceKind};
 
 /// The scenario file as written.
 #[derive(Clone, Debug, Deserialize, PartialEq)]
@@ -90,7 +92,23 @@ pub struct RobotRun {
     /// Longitudinal slip ratio.
     #[serde(default)]
     pub slip: f64,
+    /// Height of the robot's top (the lidar's top), metres; the run is rejected if the vehicle
+    /// hangs lower anywhere over the robot's footprint.
+    #[serde(default = "default_robot_height")]
+    pub height_m: f64,
 }
+
+fn default_robot_height() -> f64 {
+    DEFAULT_ROBOT_HEIGHT_M
+}
+
+/// Default robot height: 88 mm chassis plus the VLP-16 on top, about 0.16 m (the paper's system
+/// needs a chassis higher than 160 mm).
+pub const DEFAULT_ROBOT_HEIGHT_M: f64 = 0.16;
+
+/// Half the robot's width (295 mm) and length (384 mm), metres.
+const ROBOT_HALF_WIDTH_M: f64 = 0.1475;
+const ROBOT_HALF_LENGTH_M: f64 = 0.192;
 
 fn default_heading() -> f64 {
     180.0
@@ -220,6 +238,8 @@ impl Scenario {
         let duration_s = file
             .duration_s
             .unwrap_or_else(|| run.time_for_wheel_distance(r.distance_m));
+        check_clearance(&vehicle, &run, r.distance_m * (1.0 - r.slip), r.height_m)
+            .map_err(|reason| invalid(("robot".to_owned(), reason)))?;
         Ok(Self {
             path: path.to_owned(),
             file,
@@ -238,6 +258,54 @@ impl Scenario {
     pub fn depth_seed(&self) -> u64 {
         derive_seed(self.file.seed, 3)
     }
+}
+
+/// Cast vertical rays over the robot's footprint along the whole run (every 2 cm along, 5 across,
+/// with the footprint's half length added at both ends): the vehicle must be higher than `height_m`
+/// everywhere, or the robot would hit it. Returns what would be hit and where.
+fn check_clearance(
+    vehicle: &Vehicle,
+    run: &StraightRun,
+    distance_m: f64,
+    height_m: f64,
+) -> Result<(), String> {
+    let scene = Scene::from_vehicle(vehicle);
+    let (sin_h, cos_h) = run.heading_rad.sin_cos();
+    let steps = ((distance_m + 2.0 * ROBOT_HALF_LENGTH_M) / 0.02).ceil() as usize;
+    for k in 0..=steps {
+        let along = -ROBOT_HALF_LENGTH_M + k as f64 * 0.02;
+        for j in -2..=2 {
+            let across = f64::from(j) / 2.0 * ROBOT_HALF_WIDTH_M;
+            let origin = run.start_m
+                + Vec3::new(
+                    along * cos_h - across * sin_h,
+                    along * sin_h + across * cos_h,
+                    0.001,
+                );
+            if let Some(hit) = scene.cast(origin, Vec3::new(0.0, 0.0, 1.0), height_m) {
+                let what = match hit.surface.kind {
+                    SurfaceKind::Part => vehicle
+                        .parts
+                        .get(usize::from(hit.surface.index))
+                        .map_or("a part", |p| p.name())
+                        .to_owned(),
+                    SurfaceKind::Body => vehicle
+                        .body_prisms()
+                        .get(usize::from(hit.surface.index))
+                        .map_or_else(|| "the body".to_owned(), |b| b.0.clone()),
+                    SurfaceKind::Tyre => "a tyre".to_owned(),
+                    SurfaceKind::Ground => "the ground".to_owned(),
+                };
+                return Err(format!(
+                    "the robot ({height_m} m tall) would hit {what} at x = {:.3} m, y = {:.3} m (only {:.3} m above the ground)",
+                    origin.x,
+                    origin.y,
+                    hit.range_m + 0.001
+                ));
+            }
+        }
+    }
+    Ok(())
 }
 
 fn validate_run(file: &ScenarioFile) -> Result<(), (String, String)> {
@@ -261,6 +329,9 @@ fn validate_run(file: &ScenarioFile) -> Result<(), (String, String)> {
     }
     if !(r.distance_m > 0.0 && r.distance_m.is_finite()) {
         return bad("robot.distance_m", "must be a positive number");
+    }
+    if !(r.height_m > 0.0 && r.height_m <= 1.0) {
+        return bad("robot.height_m", "must lie in (0, 1] m");
     }
     if !(0.0..1.0).contains(&r.slip) {
         return bad("robot.slip", "must lie in [0, 1)");
@@ -302,6 +373,7 @@ yaw_misalignment_deg = 1.0
 speed_mps = 0.3
 distance_m = 6.0
 slip = 0.02
+height_m = 0.12
 [vibration]
 pitch_sigma_deg = 0.1
 [lidar]
@@ -329,6 +401,23 @@ fps = 15
         );
         assert!((s.run.heading_rad - std::f64::consts::PI).abs() < 1e-12);
         assert_ne!(s.lidar_seed(), s.depth_seed());
+    }
+
+    #[test]
+    fn a_run_under_parts_lower_than_the_robot_is_rejected_with_the_part_named() {
+        let e = parse(&SCENARIO.replace("height_m = 0.12", "height_m = 0.35"))
+            .expect_err("robot too tall")
+            .to_string();
+        assert!(
+            e.contains("field `robot`") && e.contains("would hit"),
+            "{e}"
+        );
+        // The test sedan's floor is 0.14 m high: the default 0.16 m robot does not fit either.
+        let e = parse(&SCENARIO.replace("height_m = 0.12", ""))
+            .err()
+            .map(|e| e.to_string())
+            .unwrap_or_default();
+        assert!(e.contains("between axles") || e.contains("overhang"), "{e}");
     }
 
     #[test]
