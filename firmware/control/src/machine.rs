@@ -82,7 +82,8 @@ pub enum Reject {
     Interlocked(Interlocks),
     /// The new configuration failed validation.
     BadConfig(ConfigError),
-    /// The configuration can only change while the robot is idle or faulted.
+    /// The configuration can only change while the robot is idle or faulted (a new wheel map
+    /// only while idle).
     Busy,
     /// Some faults are still present after `ClearFaults` (what still blocks is set).
     FaultsPersist(Interlocks),
