@@ -6,6 +6,7 @@ pub mod angles;
 pub mod cloud;
 pub mod link;
 pub mod pcap;
+pub mod pipeline;
 pub mod recorder;
 pub mod run;
 pub mod vlp16;

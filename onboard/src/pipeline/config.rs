@@ -1,0 +1,342 @@
+//! The pipeline's configuration: one struct per stage, each with documented defaults, grouped in
+//! [`PipelineConfig`]. Deserialised from TOML (the onboard service embeds it as `[pipeline]`) with
+//! kebab-case keys; unknown keys are rejected so a typo never silently falls back to a default.
+//!
+//! ```toml
+//! [pipeline.ground]
+//! distance-threshold-m = 0.03
+//! [pipeline.features]
+//! window-half-width = 5
+//! ```
+
+use serde::Deserialize;
+
+/// Every stage's settings. `PipelineConfig::default()` is the tuned configuration.
+#[derive(Debug, Clone, PartialEq, Deserialize, Default)]
+#[serde(deny_unknown_fields, rename_all = "kebab-case", default)]
+pub struct PipelineConfig {
+    /// Sensor mounts on the robot.
+    pub mounts: MountConfig,
+    /// Step 2: ground removal (paper 3.1).
+    pub ground: GroundConfig,
+    /// Step 3: motion compensation (paper 3.2, eq. 1).
+    pub deskew: DeskewConfig,
+    /// Step 4: feature extraction and outlier rejection (paper 3.3, eqs. 2-5).
+    pub features: FeatureConfig,
+    /// Step 5: scan-to-scan laser odometry (two-step Levenberg-Marquardt).
+    pub laser: LaserOdometryConfig,
+    /// Step 6a: visual odometry from D435 depth frames.
+    pub visual: VisualOdometryConfig,
+    /// Step 6b: fusion of laser, visual and wheel odometry (paper Algorithm 1, eqs. 6-7).
+    pub fusion: FusionConfig,
+    /// Step 7a: scan-to-map refinement and the output cloud.
+    pub map: MapConfig,
+    /// Step 7b: bilateral filter of the output cloud.
+    pub filter: FilterConfig,
+}
+
+/// Where the sensors sit on the robot (robot frame: x forward, y left, z up, origin on the ground
+/// below the robot's centre).
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, rename_all = "kebab-case", default)]
+pub struct MountConfig {
+    /// VLP-16 optical centre in the robot frame, metres.
+    pub lidar_xyz_m: [f64; 3],
+    /// Roll, pitch, yaw of the lidar's manual frame (x right, y forward at azimuth 0, z up) in the
+    /// robot frame, radians. The default yaw of -pi/2 puts azimuth 0 along the robot's +x.
+    pub lidar_rpy_rad: [f64; 3],
+    /// D435 depth optical centre in the robot frame, metres.
+    pub camera_xyz_m: [f64; 3],
+    /// Roll, pitch, yaw of the camera's optical frame (x right, y down, z forward) in the robot
+    /// frame, radians. The default looks straight up with the image's top towards the robot's
+    /// front.
+    pub camera_rpy_rad: [f64; 3],
+}
+
+impl Default for MountConfig {
+    fn default() -> Self {
+        Self {
+            lidar_xyz_m: [0.0, 0.0, 0.12],
+            lidar_rpy_rad: [0.0, 0.0, -std::f64::consts::FRAC_PI_2],
+            camera_xyz_m: [0.12, 0.0, 0.09],
+            // Optical z up, optical y (image down) backwards, optical x (image right) to the left:
+            // a yaw of +pi/2 about the shared z axis.
+            camera_rpy_rad: [0.0, 0.0, std::f64::consts::FRAC_PI_2],
+        }
+    }
+}
+
+/// RANSAC ground plane per frame.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, rename_all = "kebab-case", default)]
+pub struct GroundConfig {
+    /// Remove ground points from the features used for registration (the ablation switch).
+    pub enabled: bool,
+    /// Inlier distance to the plane, metres (paper: 0.03).
+    pub distance_threshold_m: f64,
+    /// Stop once the inliers exceed this fraction of the frame (paper: 50 %).
+    pub early_stop_fraction: f64,
+    /// Hypotheses tried at most.
+    pub max_iterations: u32,
+    /// Largest angle between the plane normal and the robot's z axis, radians.
+    pub max_tilt_rad: f64,
+    /// The plane must lie at least this far below the lidar, metres (rejects the underbody).
+    pub min_depth_below_lidar_m: f64,
+    /// Seed of the hypothesis sampler (mixed with the frame index).
+    pub seed: u64,
+}
+
+impl Default for GroundConfig {
+    fn default() -> Self {
+        Self {
+            enabled: true,
+            distance_threshold_m: 0.03,
+            early_stop_fraction: 0.5,
+            max_iterations: 60,
+            max_tilt_rad: 0.35,
+            min_depth_below_lidar_m: 0.05,
+            seed: 7,
+        }
+    }
+}
+
+/// Motion compensation.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, rename_all = "kebab-case", default)]
+pub struct DeskewConfig {
+    /// Compensate motion at all.
+    pub enabled: bool,
+    /// Below this yaw rate (rad/s) the straight-line model of eq. 1 is used; above it the general
+    /// constant-twist model.
+    pub straight_max_yaw_rate_radps: f64,
+    /// The paper's empirical scale factor alpha of eq. 1 (1.0: trust the odometry's speed).
+    pub alpha: f64,
+}
+
+impl Default for DeskewConfig {
+    fn default() -> Self {
+        Self {
+            enabled: true,
+            straight_max_yaw_rate_radps: 0.02,
+            alpha: 1.0,
+        }
+    }
+}
+
+/// Feature extraction per ring.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, rename_all = "kebab-case", default)]
+pub struct FeatureConfig {
+    /// N: neighbours on each side of the window's centre (|W| = 2N).
+    pub window_half_width: usize,
+    /// Largest azimuth span of a window, radians (paper eq. 2: pi / 16).
+    pub max_window_angle_rad: f64,
+    /// Reject outliers (mean-distance test, eqs. 3-4, plus statistical outlier removal).
+    pub outlier_removal: bool,
+    /// Statistical outlier removal: reject points whose mean neighbour distance over range
+    /// exceeds the frame's mean by this many standard deviations.
+    pub outlier_std_ratio: f64,
+    /// Corner threshold lambda_c1 on the smoothness c of eq. 5.
+    pub corner_threshold: f64,
+    /// Plane threshold lambda_c2 on c.
+    pub plane_threshold: f64,
+    /// Sectors per ring for balancing.
+    pub sectors: usize,
+    /// Corners kept per sector at most.
+    pub corners_per_sector: usize,
+    /// Planar points kept per sector at most.
+    pub planes_per_sector: usize,
+    /// Points closer than this to the lidar are ignored, metres.
+    pub min_range_m: f64,
+    /// Points farther than this are ignored, metres (far returns only add drift under a car).
+    pub max_range_m: f64,
+}
+
+impl Default for FeatureConfig {
+    fn default() -> Self {
+        Self {
+            window_half_width: 5,
+            max_window_angle_rad: std::f64::consts::PI / 16.0,
+            outlier_removal: true,
+            outlier_std_ratio: 2.0,
+            corner_threshold: 0.005,
+            plane_threshold: 0.002,
+            sectors: 6,
+            corners_per_sector: 4,
+            planes_per_sector: 12,
+            min_range_m: 0.4,
+            max_range_m: 12.0,
+        }
+    }
+}
+
+/// Scan-to-scan registration.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, rename_all = "kebab-case", default)]
+pub struct LaserOdometryConfig {
+    /// Levenberg-Marquardt iterations per step.
+    pub iterations: u32,
+    /// Largest correspondence distance, metres.
+    pub max_correspondence_m: f64,
+    /// Huber kernel width, metres.
+    pub huber_m: f64,
+    /// Initial LM damping (relative to the Hessian's diagonal).
+    pub lm_lambda: f64,
+    /// An eigenvalue of a step's normal matrix below this (per correspondence) marks that
+    /// direction degenerate; the prior fills it.
+    pub degeneracy_eigen_min: f64,
+}
+
+impl Default for LaserOdometryConfig {
+    fn default() -> Self {
+        Self {
+            iterations: 8,
+            max_correspondence_m: 0.5,
+            huber_m: 0.05,
+            lm_lambda: 1e-3,
+            degeneracy_eigen_min: 0.02,
+        }
+    }
+}
+
+/// D435 depth odometry (projective point-to-plane ICP between consecutive depth frames).
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, rename_all = "kebab-case", default)]
+pub struct VisualOdometryConfig {
+    /// Use depth frames at all.
+    pub enabled: bool,
+    /// Take every this-many-th pixel in each direction.
+    pub pixel_stride: usize,
+    /// Depths outside this band are ignored, metres (D435: 0.17 m minimum at 848x480).
+    pub min_depth_m: f64,
+    /// Depths outside this band are ignored, metres.
+    pub max_depth_m: f64,
+    /// Gauss-Newton iterations.
+    pub iterations: u32,
+    /// Largest point-to-plane residual accepted, metres.
+    pub max_residual_m: f64,
+    /// Add depth points to the output cloud.
+    pub add_to_cloud: bool,
+}
+
+impl Default for VisualOdometryConfig {
+    fn default() -> Self {
+        Self {
+            enabled: true,
+            pixel_stride: 8,
+            min_depth_m: 0.17,
+            max_depth_m: 3.0,
+            iterations: 10,
+            max_residual_m: 0.02,
+            add_to_cloud: true,
+        }
+    }
+}
+
+/// Odometry fusion (Algorithm 1).
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, rename_all = "kebab-case", default)]
+pub struct FusionConfig {
+    /// Use wheel odometry as a source.
+    pub use_wheel: bool,
+    /// Use visual odometry as a source.
+    pub use_visual: bool,
+    /// Frames averaged for the constant-velocity reference (eq. 6: ten).
+    pub reference_frames: usize,
+    /// Per-axis rotation deviation (rx, ry, rz) from the reference below which the laser is
+    /// trusted, radians per second of motion. The paper's [0.1, 0.1, 0.1] quaternion components
+    /// are per frame of its own rate; rates make the threshold independent of the frame rate.
+    pub rotation_tolerance_radps: [f64; 3],
+    /// Per-axis translation deviation (x, y, z) below which the laser is trusted, m/s (the paper's
+    /// [0.1, 0.5, 0.1] allows more along the direction of travel).
+    pub translation_tolerance_mps: [f64; 3],
+}
+
+impl Default for FusionConfig {
+    fn default() -> Self {
+        Self {
+            use_wheel: true,
+            use_visual: true,
+            reference_frames: 10,
+            rotation_tolerance_radps: [0.05, 0.05, 0.05],
+            translation_tolerance_mps: [0.05, 0.05, 0.05],
+        }
+    }
+}
+
+/// Scan-to-map refinement and the output cloud.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, rename_all = "kebab-case", default)]
+pub struct MapConfig {
+    /// Refine each fused pose against the local feature map.
+    pub refine: bool,
+    /// Voxel of the feature map, metres.
+    pub feature_voxel_m: f64,
+    /// Feature points kept per map voxel at most.
+    pub points_per_voxel: usize,
+    /// Levenberg-Marquardt iterations of the refinement.
+    pub iterations: u32,
+    /// Voxel of the output cloud (centroid per voxel), metres.
+    pub output_voxel_m: f64,
+    /// Lidar points farther than this from the sensor are not added to the output, metres.
+    pub output_max_range_m: f64,
+    /// Keep ground points in the output cloud (the angle calculator fits the ground plane).
+    pub keep_ground: bool,
+}
+
+impl Default for MapConfig {
+    fn default() -> Self {
+        Self {
+            refine: true,
+            feature_voxel_m: 0.5,
+            points_per_voxel: 20,
+            iterations: 6,
+            output_voxel_m: 0.01,
+            output_max_range_m: 8.0,
+            keep_ground: true,
+        }
+    }
+}
+
+/// Edge-preserving bilateral filter of the output cloud.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, rename_all = "kebab-case", default)]
+pub struct FilterConfig {
+    /// Filter at all.
+    pub enabled: bool,
+    /// Neighbourhood radius, metres.
+    pub radius_m: f64,
+    /// Spatial Gaussian sigma, metres.
+    pub sigma_spatial_m: f64,
+    /// Range (along-normal offset) Gaussian sigma, metres: offsets much larger than this (edges)
+    /// barely move a point.
+    pub sigma_normal_m: f64,
+}
+
+impl Default for FilterConfig {
+    fn default() -> Self {
+        Self {
+            enabled: true,
+            radius_m: 0.05,
+            sigma_spatial_m: 0.025,
+            sigma_normal_m: 0.02,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn empty_toml_gives_defaults_and_unknown_keys_are_rejected() {
+        let c: PipelineConfig = toml::from_str("").unwrap();
+        assert_eq!(c, PipelineConfig::default());
+        let c: PipelineConfig = toml::from_str("[ground]\ndistance-threshold-m = 0.05\n").unwrap();
+        assert!((c.ground.distance_threshold_m - 0.05).abs() < 1e-12);
+        let e = toml::from_str::<PipelineConfig>("[ground]\ndistance-threshold = 0.05\n")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("distance-threshold"), "{e}");
+    }
+}

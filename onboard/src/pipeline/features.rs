@@ -1,0 +1,293 @@
+//! Step 4, features (paper section 3.3, eqs. 2-5).
+//!
+//! Each ring (laser line) is walked in azimuth order with a sliding window W of N neighbours on
+//! each side of a centre point:
+//!
+//! 1. **Window width** (eq. 2): the azimuth between the window's first and last points must stay
+//!    below `max_window_angle_rad` (pi / 16); wider windows straddle a gap in the scan and are
+//!    skipped, so no feature is taken across a structural break.
+//! 2. **Mean distance** (eqs. 3-4): `l_a = 1/(2N) sum_j |p_0 - p_j|`. Divided by the centre's range
+//!    (the spacing of a ring grows linearly with range), it is the outlier statistic.
+//! 3. **Statistical outlier removal**: points whose normalised `l_a` exceeds the frame's mean by
+//!    more than `outlier_std_ratio` standard deviations are outliers (sparse points off the main
+//!    structure, mixed pixels at edges). They become neither features nor cloud points.
+//! 4. **Smoothness** (eq. 5): `c = |sum_j (p_j - p_0)| / (|W| |p_0|)`, computed in the same pass.
+//!    `c > corner_threshold` marks a corner candidate, `c < plane_threshold` a plane candidate.
+//! 5. **Selection**: each ring is split into `sectors`; per sector the sharpest corners and the
+//!    flattest plane points are kept up to a cap, and a chosen point suppresses its window
+//!    neighbours, so features spread over the whole scene instead of clustering on one edge.
+//!
+//! Ground points (step 2) take part in windows but are never selected as features.
+
+use super::config::FeatureConfig;
+use super::geom::{V3, norm, sub};
+
+/// One point as feature extraction sees it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RingPoint {
+    /// Position, robot frame after deskewing, metres.
+    pub p: V3,
+    /// Range from the lidar, metres.
+    pub range_m: f64,
+    /// Azimuth of the firing, radians.
+    pub azimuth_rad: f64,
+    /// Ring 0..16.
+    pub ring: u8,
+    /// Ground point: may be a neighbour, never a feature.
+    pub is_ground: bool,
+}
+
+/// The features of one frame.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Features {
+    /// Corner points (sharp: edges, tyre silhouettes), robot frame.
+    pub corners: Vec<V3>,
+    /// Plane points (flat: underbody panels, ground when not removed), robot frame.
+    pub planes: Vec<V3>,
+    /// Every non-ground, non-outlier point with `c > corner_threshold` (uncapped): the
+    /// registration target for the next frame and the map ("less sharp" in LOAM), with its ring.
+    pub corner_candidates: Vec<(V3, u8)>,
+    /// Every non-ground, non-outlier point with `c < plane_threshold` ("less flat"), with its ring.
+    pub plane_candidates: Vec<(V3, u8)>,
+    /// Ground points with `c < plane_threshold`, with their ring: plane features for the z, roll
+    /// and pitch step only (as in LeGO-LOAM), never for x, y and yaw.
+    pub ground_candidates: Vec<(V3, u8)>,
+    /// `true` for each input point rejected as an outlier.
+    pub is_outlier: Vec<bool>,
+    /// Windows that passed the width test.
+    pub windows: usize,
+}
+
+#[derive(Clone, Copy)]
+struct Scored {
+    index: usize,
+    smoothness: f64,
+    spread: f64,
+}
+
+/// Extract corner and plane features from one frame's points (any order; grouped by ring here,
+/// keeping their order within a ring, which must be azimuth order as the lidar fires).
+pub fn extract(points: &[RingPoint], config: &FeatureConfig) -> Features {
+    let n_half = config.window_half_width.max(1);
+    let mut rings: Vec<Vec<usize>> = vec![Vec::new(); 16];
+    for (i, p) in points.iter().enumerate() {
+        if (config.min_range_m..=config.max_range_m).contains(&p.range_m)
+            && let Some(ring) = rings.get_mut(usize::from(p.ring))
+        {
+            ring.push(i);
+        }
+    }
+    let mut scored: Vec<Vec<Scored>> = Vec::with_capacity(rings.len());
+    let mut windows = 0;
+    for ring in &rings {
+        let mut out = Vec::new();
+        for k in n_half..ring.len().saturating_sub(n_half) {
+            let first = &points[ring[k - n_half]];
+            let last = &points[ring[k + n_half]];
+            if azimuth_span(first.azimuth_rad, last.azimuth_rad) >= config.max_window_angle_rad {
+                continue;
+            }
+            windows += 1;
+            let centre = points[ring[k]];
+            let mut sum = [0.0; 3];
+            let mut total_distance = 0.0;
+            for &j in &ring[k - n_half..=k + n_half] {
+                let d = sub(points[j].p, centre.p);
+                sum = [sum[0] + d[0], sum[1] + d[1], sum[2] + d[2]];
+                total_distance += norm(d);
+            }
+            let w = (2 * n_half) as f64;
+            out.push(Scored {
+                index: ring[k],
+                smoothness: norm(sum) / (w * centre.range_m),
+                spread: total_distance / w / centre.range_m,
+            });
+        }
+        scored.push(out);
+    }
+    let mut is_outlier = vec![false; points.len()];
+    if config.outlier_removal {
+        mark_outliers(&scored, config.outlier_std_ratio, &mut is_outlier);
+    }
+    let mut features = Features {
+        windows,
+        ..Features::default()
+    };
+    for ring in &scored {
+        select(points, ring, &is_outlier, config, &mut features);
+    }
+    features.is_outlier = is_outlier;
+    features
+}
+
+/// Angle between two azimuths, radians in [0, pi].
+fn azimuth_span(a: f64, b: f64) -> f64 {
+    let d = (a - b).rem_euclid(std::f64::consts::TAU);
+    d.min(std::f64::consts::TAU - d)
+}
+
+/// Statistical outlier removal over the normalised mean distances of all windows of the frame.
+fn mark_outliers(scored: &[Vec<Scored>], std_ratio: f64, is_outlier: &mut [bool]) {
+    let all = scored.iter().flatten();
+    let n = all.clone().count() as f64;
+    if n < 2.0 {
+        return;
+    }
+    let mean = all.clone().map(|s| s.spread).sum::<f64>() / n;
+    let var = all.clone().map(|s| (s.spread - mean).powi(2)).sum::<f64>() / (n - 1.0);
+    let limit = mean + std_ratio * var.sqrt();
+    for s in all {
+        if s.spread > limit {
+            is_outlier[s.index] = true;
+        }
+    }
+}
+
+fn select(
+    points: &[RingPoint],
+    ring: &[Scored],
+    is_outlier: &[bool],
+    config: &FeatureConfig,
+    out: &mut Features,
+) {
+    let sectors = config.sectors.max(1);
+    let suppress = config.window_half_width.max(1);
+    let mut taken = vec![false; ring.len()];
+    for s in 0..sectors {
+        let lo = ring.len() * s / sectors;
+        let hi = ring.len() * (s + 1) / sectors;
+        for k in lo..hi {
+            let p = &points[ring[k].index];
+            if p.is_ground
+                && !is_outlier[ring[k].index]
+                && ring[k].smoothness < config.plane_threshold
+            {
+                out.ground_candidates.push((p.p, p.ring));
+            }
+        }
+        let mut order: Vec<usize> = (lo..hi)
+            .filter(|&k| !is_outlier[ring[k].index] && !points[ring[k].index].is_ground)
+            .collect();
+        order.sort_by(|&a, &b| ring[b].smoothness.total_cmp(&ring[a].smoothness));
+        for &k in &order {
+            let p = &points[ring[k].index];
+            if ring[k].smoothness > config.corner_threshold {
+                out.corner_candidates.push((p.p, p.ring));
+            } else if ring[k].smoothness < config.plane_threshold {
+                out.plane_candidates.push((p.p, p.ring));
+            }
+        }
+        let mut picked = 0;
+        for &k in &order {
+            if picked == config.corners_per_sector || ring[k].smoothness <= config.corner_threshold
+            {
+                break;
+            }
+            if !taken[k] {
+                out.corners.push(points[ring[k].index].p);
+                picked += 1;
+                mark(&mut taken, k, suppress);
+            }
+        }
+        picked = 0;
+        for &k in order.iter().rev() {
+            if picked == config.planes_per_sector || ring[k].smoothness >= config.plane_threshold {
+                break;
+            }
+            if !taken[k] {
+                out.planes.push(points[ring[k].index].p);
+                picked += 1;
+                mark(&mut taken, k, suppress);
+            }
+        }
+    }
+}
+
+fn mark(taken: &mut [bool], k: usize, radius: usize) {
+    let lo = k.saturating_sub(radius);
+    let hi = (k + radius + 1).min(taken.len());
+    for t in &mut taken[lo..hi] {
+        *t = true;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// One ring sweeping a square room (walls at +-2 m) from its centre: corners at the four room
+    /// corners, planes along the walls.
+    fn square_room(spike_at: Option<usize>) -> Vec<RingPoint> {
+        let n = 1800;
+        (0..n)
+            .map(|i| {
+                let a = i as f64 * std::f64::consts::TAU / n as f64;
+                let (s, c) = a.sin_cos();
+                let mut r = 2.0 / c.abs().max(s.abs());
+                if spike_at == Some(i) {
+                    r *= 0.6;
+                }
+                RingPoint {
+                    p: [r * c, r * s, 0.0],
+                    range_m: r,
+                    azimuth_rad: a,
+                    ring: 3,
+                    is_ground: false,
+                }
+            })
+            .collect()
+    }
+
+    #[test]
+    fn corners_at_room_corners_planes_on_walls() {
+        let f = extract(&square_room(None), &FeatureConfig::default());
+        assert!(!f.corners.is_empty() && !f.planes.is_empty());
+        for c in &f.corners {
+            let (x, y) = (c[0].abs(), c[1].abs());
+            assert!(
+                (x - 2.0).abs() < 0.1 && (y - 2.0).abs() < 0.1,
+                "corner {c:?}"
+            );
+        }
+        for p in &f.planes {
+            let on_wall = (p[0].abs() - 2.0).abs() < 1e-9 || (p[1].abs() - 2.0).abs() < 1e-9;
+            let near_corner = (p[0].abs() - 2.0).abs() < 0.2 && (p[1].abs() - 2.0).abs() < 0.2;
+            assert!(on_wall && !near_corner, "plane {p:?}");
+        }
+        // SOR flags the tail of the spread distribution: in a clean room, only points next to its
+        // corners (where the window bends and the spacing grows).
+        let points = square_room(None);
+        for (p, _) in points.iter().zip(&f.is_outlier).filter(|(_, o)| **o) {
+            let near_corner = (p.p[0].abs() - 2.0).abs() < 0.4 && (p.p[1].abs() - 2.0).abs() < 0.4;
+            assert!(near_corner, "{p:?}");
+        }
+    }
+
+    #[test]
+    fn an_isolated_spike_is_an_outlier_and_never_a_feature() {
+        let spike = 300;
+        let points = square_room(Some(spike));
+        let f = extract(&points, &FeatureConfig::default());
+        assert!(f.is_outlier[spike]);
+        assert!(!f.corners.contains(&points[spike].p));
+        let without = FeatureConfig {
+            outlier_removal: false,
+            ..FeatureConfig::default()
+        };
+        let f = extract(&points, &without);
+        assert!(f.corners.contains(&points[spike].p), "the test can fail");
+    }
+
+    #[test]
+    fn windows_across_a_gap_are_skipped_and_ground_is_never_a_feature() {
+        let mut points = square_room(None);
+        points.retain(|p| !(1.0..1.6).contains(&p.azimuth_rad));
+        for p in &mut points {
+            p.is_ground = p.p[0] > 0.0;
+        }
+        let f = extract(&points, &FeatureConfig::default());
+        assert!(f.corners.iter().chain(&f.planes).all(|p| p[0] <= 0.0));
+        let full = extract(&square_room(None), &FeatureConfig::default());
+        assert!(f.windows < full.windows);
+    }
+}

@@ -1,0 +1,291 @@
+//! Step 6b, odometry fusion under the constant-velocity constraint (paper section 3.4, Algorithm 1,
+//! eqs. 6-7), with wheel odometry as a third source.
+//!
+//! Every source is expressed as a **rate** over the lidar interval: the increment
+//! `log(robot_prev_from_robot_cur)` as `[rx, ry, rz, tx, ty, tz]` divided by the interval's length,
+//! so thresholds do not depend on the frame rate. Each source also says which of the six components
+//! it actually determines (`available`): wheel odometry knows nothing of z, roll and pitch; a laser
+//! scan between two parallel planes knows nothing of x, y and yaw (see [`super::laser_odometry`]).
+//!
+//! 1. **Reference** (eq. 6): the mean of the last `reference_frames` (ten) fused rates. The paper
+//!    averages `(d_l + d_v) / 2`; averaging the fused result instead keeps a degenerate source out of
+//!    the reference.
+//! 2. **Deviations** (eq. 7): `delta = d - reference` per source.
+//! 3. **Selection** (Algorithm 1), separately for rotation (rx, ry, rz) and translation (tx, ty, tz):
+//!    if every laser deviation is below its tolerance, the laser wins; otherwise the source with the
+//!    smallest summed absolute deviation wins (`min{Sum(...)}`; the paper chooses between laser and
+//!    visual, the wheel is a third candidate here).
+//! 4. **Gaps**: a component the winner does not determine is taken from the available source
+//!    closest to the reference, else from the reference itself (constant velocity), else zero.
+//!
+//! Until the reference holds `reference_frames` rates, the laser is used wherever it is determined.
+
+use std::collections::VecDeque;
+
+use super::config::FusionConfig;
+use super::geom::Twist6;
+
+/// One source's estimate over a lidar interval.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SourceRate {
+    /// Rate `[rx, ry, rz, tx, ty, tz]` per second.
+    pub rate: Twist6,
+    /// Which components this source determines.
+    pub available: [bool; 6],
+}
+
+/// Where a fused component came from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Source {
+    /// Laser odometry.
+    Laser,
+    /// Visual (depth) odometry.
+    Visual,
+    /// Wheel odometry.
+    Wheel,
+    /// The constant-velocity reference.
+    Reference,
+    /// Nothing known: zero.
+    Zero,
+}
+
+/// The fused rate and where each component came from.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Fused {
+    /// Rate per second.
+    pub rate: Twist6,
+    /// Source of each component.
+    pub chosen: [Source; 6],
+}
+
+/// The fusion state: the history of fused rates.
+#[derive(Debug, Clone)]
+pub struct Fusion {
+    config: FusionConfig,
+    history: VecDeque<Twist6>,
+}
+
+impl Fusion {
+    /// A fresh fusion with an empty history.
+    pub fn new(config: FusionConfig) -> Self {
+        Self {
+            config,
+            history: VecDeque::new(),
+        }
+    }
+
+    /// The constant-velocity reference (eq. 6), once the history is full.
+    pub fn reference(&self) -> Option<Twist6> {
+        let n = self.config.reference_frames.max(1);
+        if self.history.len() < n {
+            return None;
+        }
+        let mut mean = [0.0; 6];
+        for r in &self.history {
+            for k in 0..6 {
+                mean[k] += r[k] / n as f64;
+            }
+        }
+        Some(mean)
+    }
+
+    /// The best prediction before the laser runs: per component visual, then wheel, then the
+    /// reference, then the last fused rate, else zero.
+    pub fn predict(&self, visual: Option<&SourceRate>, wheel: Option<&SourceRate>) -> Twist6 {
+        let fallback = self
+            .reference()
+            .or_else(|| self.history.back().copied())
+            .unwrap_or([0.0; 6]);
+        std::array::from_fn(|k| {
+            [visual, wheel]
+                .into_iter()
+                .flatten()
+                .find(|s| s.available[k])
+                .map_or(fallback[k], |s| s.rate[k])
+        })
+    }
+
+    /// Fuse one interval's sources (Algorithm 1) and push the result into the history.
+    pub fn fuse(
+        &mut self,
+        laser: Option<&SourceRate>,
+        visual: Option<&SourceRate>,
+        wheel: Option<&SourceRate>,
+    ) -> Fused {
+        let visual = visual.filter(|_| self.config.use_visual);
+        let wheel = wheel.filter(|_| self.config.use_wheel);
+        let reference = self.reference();
+        let candidates = [
+            (Source::Laser, laser),
+            (Source::Visual, visual),
+            (Source::Wheel, wheel),
+        ];
+        let mut fused = Fused {
+            rate: [0.0; 6],
+            chosen: [Source::Zero; 6],
+        };
+        for (group, tolerance) in [
+            ([0, 1, 2], self.config.rotation_tolerance_radps),
+            ([3, 4, 5], self.config.translation_tolerance_mps),
+        ] {
+            let winner = match reference {
+                None => laser.map(|_| Source::Laser),
+                Some(r) => select(&candidates, &group, &tolerance, &r),
+            };
+            for &k in &group {
+                let from_winner = candidates
+                    .iter()
+                    .find(|(s, c)| Some(*s) == winner && c.is_some_and(|c| c.available[k]));
+                let (source, value) = if let Some((s, c)) = from_winner {
+                    (*s, c.map_or(0.0, |c| c.rate[k]))
+                } else {
+                    fill_gap(&candidates, k, reference.as_ref(), self.history.back())
+                };
+                fused.rate[k] = value;
+                fused.chosen[k] = source;
+            }
+        }
+        let n = self.config.reference_frames.max(1);
+        self.history.push_back(fused.rate);
+        while self.history.len() > n {
+            self.history.pop_front();
+        }
+        fused
+    }
+}
+
+/// Algorithm 1 for one group: the laser if it is within tolerance everywhere (and determines the
+/// whole group), else the available source with the smallest summed deviation.
+fn select(
+    candidates: &[(Source, Option<&SourceRate>)],
+    group: &[usize; 3],
+    tolerance: &[f64; 3],
+    reference: &Twist6,
+) -> Option<Source> {
+    if let Some((_, Some(laser))) = candidates.first()
+        && group.iter().all(|&k| laser.available[k])
+        && group
+            .iter()
+            .zip(tolerance)
+            .all(|(&k, &tol)| (laser.rate[k] - reference[k]).abs() < tol)
+    {
+        return Some(Source::Laser);
+    }
+    candidates
+        .iter()
+        .filter_map(|(s, c)| c.map(|c| (*s, c)))
+        .filter(|(_, c)| group.iter().any(|&k| c.available[k]))
+        .map(|(s, c)| {
+            // Unavailable components count as a full tolerance-sized miss.
+            let sum: f64 = group
+                .iter()
+                .zip(tolerance)
+                .map(|(&k, &tol)| {
+                    if c.available[k] {
+                        (c.rate[k] - reference[k]).abs()
+                    } else {
+                        tol
+                    }
+                })
+                .sum();
+            (s, sum)
+        })
+        .min_by(|a, b| a.1.total_cmp(&b.1))
+        .map(|(s, _)| s)
+}
+
+fn fill_gap(
+    candidates: &[(Source, Option<&SourceRate>)],
+    k: usize,
+    reference: Option<&Twist6>,
+    last: Option<&Twist6>,
+) -> (Source, f64) {
+    let target = reference.or(last).map_or(0.0, |r| r[k]);
+    let best = candidates
+        .iter()
+        .filter_map(|(s, c)| c.filter(|c| c.available[k]).map(|c| (*s, c.rate[k])))
+        .min_by(|a, b| (a.1 - target).abs().total_cmp(&(b.1 - target).abs()));
+    match (best, reference) {
+        (Some(b), _) => b,
+        (None, Some(r)) => (Source::Reference, r[k]),
+        (None, None) => (Source::Zero, 0.0),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn rate(v: Twist6) -> SourceRate {
+        SourceRate {
+            rate: v,
+            available: [true; 6],
+        }
+    }
+
+    fn warm(f: &mut Fusion, v: Twist6) {
+        for _ in 0..10 {
+            f.fuse(Some(&rate(v)), None, None);
+        }
+    }
+
+    #[test]
+    fn laser_within_tolerance_wins() {
+        let mut f = Fusion::new(FusionConfig::default());
+        let cruise = [0.0, 0.0, 0.0, 0.3, 0.0, 0.0];
+        warm(&mut f, cruise);
+        let laser = rate([0.0, 0.0, 0.01, 0.31, 0.0, 0.0]);
+        let wheel = rate([0.0, 0.0, 0.0, 0.3, 0.0, 0.0]);
+        let out = f.fuse(Some(&laser), None, Some(&wheel));
+        assert_eq!(out.chosen, [Source::Laser; 6]);
+        assert!((out.rate[3] - 0.31).abs() < 1e-12);
+    }
+
+    #[test]
+    fn a_laser_jump_is_replaced_by_the_closest_source() {
+        let mut f = Fusion::new(FusionConfig::default());
+        let cruise = [0.0, 0.0, 0.0, 0.3, 0.0, 0.0];
+        warm(&mut f, cruise);
+        let laser = rate([0.0, 0.0, 0.0, 0.9, 0.0, 0.0]);
+        let visual = rate([0.0, 0.0, 0.0, 0.29, 0.01, 0.0]);
+        let wheel = rate([0.0, 0.0, 0.0, 0.33, 0.0, 0.0]);
+        let out = f.fuse(Some(&laser), Some(&visual), Some(&wheel));
+        assert_eq!(out.chosen[3..], [Source::Visual; 3]);
+        assert_eq!(out.chosen[..3], [Source::Laser; 3]);
+        assert!((out.rate[3] - 0.29).abs() < 1e-12);
+    }
+
+    #[test]
+    fn degenerate_laser_components_are_filled_by_wheel_then_reference() {
+        let mut f = Fusion::new(FusionConfig::default());
+        warm(&mut f, [0.0, 0.0, 0.0, 0.3, 0.0, 0.0]);
+        let mut laser = rate([0.0, 0.0, 0.0, 0.0, 0.0, 0.001]);
+        laser.available = [true, true, false, false, false, true];
+        let wheel = SourceRate {
+            rate: [0.0, 0.0, 0.0, 0.32, 0.0, 0.0],
+            available: [false, false, true, true, true, false],
+        };
+        let out = f.fuse(Some(&laser), None, Some(&wheel));
+        assert_eq!(out.chosen[3], Source::Wheel);
+        assert!((out.rate[3] - 0.32).abs() < 1e-12);
+        assert_eq!(out.chosen[5], Source::Laser);
+        // Without the wheel, x comes from the constant-velocity reference.
+        let out = f.fuse(Some(&laser), None, None);
+        assert_eq!(out.chosen[3], Source::Reference);
+        assert!(out.rate[3] > 0.29);
+    }
+
+    #[test]
+    fn prediction_prefers_visual_then_wheel_then_reference() {
+        let mut f = Fusion::new(FusionConfig::default());
+        assert!(f.predict(None, None).iter().all(|&v| v == 0.0));
+        warm(&mut f, [0.0, 0.0, 0.0, 0.3, 0.0, 0.0]);
+        let wheel = SourceRate {
+            rate: [0.0, 0.0, 0.1, 0.2, 0.0, 0.0],
+            available: [false, false, true, true, true, false],
+        };
+        let p = f.predict(None, Some(&wheel));
+        assert!((p[3] - 0.2).abs() < 1e-12 && (p[2] - 0.1).abs() < 1e-12);
+        assert!(p[5].abs() < 1e-12);
+    }
+}

@@ -1,0 +1,463 @@
+//! Step 5, laser odometry: feature registration by Levenberg-Marquardt (paper 3.3, after LOAM and
+//! LeGO-LOAM), shared by scan-to-scan odometry and the scan-to-map refinement of step 7.
+//!
+//! Residuals, for a source point `q = T p` moved by the current estimate `T = target_from_source`:
+//! - **point-to-plane** (plane features): the five nearest target plane points within
+//!   `max_correspondence_m` are fitted by PCA; if they are flat (smallest eigenvalue well below the
+//!   middle one) the residual is `n . (q - c)`.
+//! - **point-to-line** (corner features): the five nearest target corners; if they are linear
+//!   (largest eigenvalue dominates) the residual is the distance from `q` to the line.
+//!
+//! Both are weighted by a Huber kernel (`huber_m`). The increment is left-multiplied,
+//! `T <- exp(delta) T`, with `delta = [rx, ry, rz, tx, ty, tz]`, so the Jacobian of a residual with
+//! unit direction `e` (the plane normal, or the perpendicular to the line) is `[q x e, e]`.
+//!
+//! **Two steps** (scan-to-scan): step 1 solves z, roll and pitch from the plane features (the
+//! underbody and any remaining ground fix them well); step 2 solves x, y and yaw with the
+//! others held, from the corners plus the plane features (tyre sidewalls and body panels with
+//! horizontal normals constrain x, y and yaw too; LeGO-LOAM uses corners only, which under a car are
+//! too few for a well-posed step).
+//!
+//! **Degeneracy** (Zhang, Kaess and Singh 2016, "solution remapping"): after the solve, the normal
+//! matrix of each step (per residual) is eigen-decomposed; directions whose eigenvalue is below
+//! `degeneracy_eigen_min` are not determined by the scan (under a car: travel along two parallel
+//! planes). In those directions the estimate is replaced by the prior (the fused prediction from
+//! visual and wheel odometry), and the directions are reported so fusion knows which of the laser's
+//! components to distrust.
+
+use super::config::LaserOdometryConfig;
+use super::geom::{
+    Pose, Twist6, V3, VoxelIndex, centroid_covariance, cross, dot, norm, scale, solve_spd, sub,
+    symmetric_eigen,
+};
+
+/// The target of a registration: feature points indexed for nearest-neighbour search.
+#[derive(Debug, Clone)]
+pub struct FeatureTarget {
+    /// Corner points.
+    pub corners: VoxelIndex,
+    /// Plane points.
+    pub planes: VoxelIndex,
+}
+
+/// How a registration went.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Registration {
+    /// `target_from_source`.
+    pub pose: Pose,
+    /// Per parameter `[rx, ry, rz, tx, ty, tz]`: true where the scan did not determine it and the
+    /// prior was used.
+    pub degenerate: [bool; 6],
+    /// Residuals used in the last iteration.
+    pub residuals: usize,
+    /// RMS of the last iteration's residuals, metres.
+    pub rms_m: f64,
+}
+
+/// One linearised residual: unit direction `e` and a point `c` on the target feature, so that the
+/// residual of a moved point `q` is `e . (q - c)`.
+#[derive(Clone, Copy)]
+struct Correspondence {
+    source: V3,
+    direction: V3,
+    anchor: V3,
+}
+
+/// True when the neighbours come from at least two scan lines (tags). Neighbours on one ring lie
+/// along that ring, so they can define neither a plane nor the edge line across the rings (LOAM
+/// takes its neighbours from adjacent rings for the same reason).
+fn spans_lines(index: &VoxelIndex, nn: &[(f64, u32)]) -> bool {
+    let first = index.tag(nn[0].1);
+    nn.iter().any(|&(_, i)| index.tag(i) != first)
+}
+
+/// Plane through the five nearest target points, if they are flat (and not a line).
+fn plane_at(index: &VoxelIndex, q: V3, radius_m: f64) -> Option<(V3, V3)> {
+    let mut nn = [(0.0, 0u32); 5];
+    if index.nearest(q, radius_m, &mut nn) < 5 || !spans_lines(index, &nn) {
+        return None;
+    }
+    let pts = nn.iter().map(|&(_, i)| index.points()[i as usize]);
+    let (c, cov) = centroid_covariance(pts)?;
+    let (values, vectors) = symmetric_eigen(&cov);
+    if values[0] > 0.1 * values[1] || values[1] < 0.01 * values[2] {
+        return None;
+    }
+    Some(([vectors[0][0], vectors[1][0], vectors[2][0]], c))
+}
+
+/// Line through the five nearest target corners, if they are linear: `(direction, point)`.
+fn line_at(index: &VoxelIndex, q: V3, radius_m: f64) -> Option<(V3, V3)> {
+    let mut nn = [(0.0, 0u32); 5];
+    if index.nearest(q, radius_m, &mut nn) < 5 || !spans_lines(index, &nn) {
+        return None;
+    }
+    let pts = nn.iter().map(|&(_, i)| index.points()[i as usize]);
+    let (c, cov) = centroid_covariance(pts)?;
+    let (values, vectors) = symmetric_eigen(&cov);
+    if values[2] < 3.0 * values[1] {
+        return None;
+    }
+    Some(([vectors[0][2], vectors[1][2], vectors[2][2]], c))
+}
+
+fn correspondences(
+    target: &FeatureTarget,
+    planes: &[V3],
+    corners: &[V3],
+    pose: &Pose,
+    radius_m: f64,
+) -> Vec<Correspondence> {
+    let mut out = Vec::with_capacity(planes.len() + corners.len());
+    for &p in planes {
+        let q = pose.apply(p);
+        if let Some((n, c)) = plane_at(&target.planes, q, radius_m) {
+            out.push(Correspondence {
+                source: p,
+                direction: n,
+                anchor: c,
+            });
+        }
+    }
+    for &p in corners {
+        let q = pose.apply(p);
+        if let Some((u, c)) = line_at(&target.corners, q, radius_m) {
+            let d = sub(q, c);
+            let perp = sub(d, scale(u, dot(d, u)));
+            let len = norm(perp);
+            if len > 1e-9 {
+                out.push(Correspondence {
+                    source: p,
+                    direction: scale(perp, 1.0 / len),
+                    anchor: c,
+                });
+            }
+        }
+    }
+    out
+}
+
+fn huber_weight(r: f64, k: f64) -> f64 {
+    if r.abs() <= k { 1.0 } else { k / r.abs() }
+}
+
+fn cost(corr: &[Correspondence], pose: &Pose, k: f64) -> f64 {
+    corr.iter()
+        .map(|c| {
+            let r = dot(c.direction, sub(pose.apply(c.source), c.anchor)).abs();
+            if r <= k {
+                0.5 * r * r
+            } else {
+                k * (r - 0.5 * k)
+            }
+        })
+        .sum()
+}
+
+/// Normal equations `(H, g)` over all six parameters.
+fn normal_equations(corr: &[Correspondence], pose: &Pose, k: f64) -> ([[f64; 6]; 6], [f64; 6]) {
+    let mut h = [[0.0; 6]; 6];
+    let mut g = [0.0; 6];
+    for c in corr {
+        let q = pose.apply(c.source);
+        let r = dot(c.direction, sub(q, c.anchor));
+        let w = huber_weight(r, k);
+        let jw = cross(q, c.direction);
+        let j = [
+            jw[0],
+            jw[1],
+            jw[2],
+            c.direction[0],
+            c.direction[1],
+            c.direction[2],
+        ];
+        for a in 0..6 {
+            g[a] += w * j[a] * r;
+            for b in 0..6 {
+                h[a][b] += w * j[a] * j[b];
+            }
+        }
+    }
+    (h, g)
+}
+
+/// `exp(d) * pose` (left increment).
+fn apply_increment(pose: &Pose, d: &Twist6) -> Pose {
+    Pose::from_increment(*d).compose(pose)
+}
+
+/// One LM solve over the parameters in `active` (indices into `[rx, ry, rz, tx, ty, tz]`).
+/// Returns the pose, the per-residual normal matrix restricted to `active`, the residual count
+/// and the RMS.
+fn solve(
+    target: &FeatureTarget,
+    planes: &[V3],
+    corners: &[V3],
+    init: Pose,
+    active: &[usize],
+    iterations: u32,
+    config: &LaserOdometryConfig,
+) -> (Pose, [[f64; 6]; 6], usize, f64) {
+    let k = config.huber_m;
+    let mut pose = init;
+    let mut lambda = config.lm_lambda;
+    let mut last_h = [[0.0; 6]; 6];
+    let mut last_n = 0;
+    let mut rms = f64::NAN;
+    for _ in 0..iterations {
+        let corr = correspondences(target, planes, corners, &pose, config.max_correspondence_m);
+        if corr.len() < active.len() {
+            break;
+        }
+        let (h, g) = normal_equations(&corr, &pose, k);
+        last_h = h;
+        last_n = corr.len();
+        let before = cost(&corr, &pose, k);
+        rms = (2.0 * before / corr.len() as f64).sqrt();
+        let mut improved = false;
+        for _ in 0..4 {
+            let mut a = [[0.0; 6]; 6];
+            let mut b = [0.0; 6];
+            for (i, &pi) in active.iter().enumerate() {
+                b[i] = -g[pi];
+                for (j, &pj) in active.iter().enumerate() {
+                    a[i][j] = h[pi][pj];
+                }
+                a[i][i] += lambda * h[pi][pi] + 1e-9;
+            }
+            for i in active.len()..6 {
+                a[i][i] = 1.0;
+            }
+            let Some(x) = solve_spd(&a, &b) else { break };
+            let mut d = [0.0; 6];
+            for (i, &pi) in active.iter().enumerate() {
+                d[pi] = x[i];
+            }
+            let candidate = apply_increment(&pose, &d);
+            if cost(&corr, &candidate, k) < before {
+                pose = candidate;
+                lambda = (lambda * 0.3).max(1e-7);
+                improved = true;
+                break;
+            }
+            lambda *= 10.0;
+        }
+        if !improved {
+            break;
+        }
+    }
+    let mut h = [[0.0; 6]; 6];
+    if last_n > 0 {
+        for &a in active {
+            for &b in active {
+                h[a][b] = last_h[a][b] / last_n as f64;
+            }
+        }
+    }
+    (pose, h, last_n, rms)
+}
+
+/// Replace the estimate by the prior along the degenerate eigen-directions of `h` (restricted to
+/// `active`); returns the remapped pose and which parameters were mostly taken from the prior.
+fn remap(
+    estimate: &Pose,
+    prior: &Pose,
+    h: &[[f64; 6]; 6],
+    active: &[usize],
+    eigen_min: f64,
+) -> (Pose, [bool; 6]) {
+    let mut m = *h;
+    for i in 0..6 {
+        if !active.contains(&i) {
+            m[i] = [0.0; 6];
+            m[i][i] = 1e12;
+        }
+    }
+    let (values, vectors) = symmetric_eigen(&m);
+    let delta = estimate.compose(&prior.inverse()).to_increment();
+    let mut kept = [0.0; 6];
+    let mut bad_weight = [0.0; 6];
+    for (e, &value) in values.iter().enumerate() {
+        let v: [f64; 6] = std::array::from_fn(|k| vectors[k][e]);
+        if value >= eigen_min {
+            let proj: f64 = (0..6).map(|k| v[k] * delta[k]).sum();
+            for k in 0..6 {
+                kept[k] += proj * v[k];
+            }
+        } else {
+            for k in 0..6 {
+                bad_weight[k] += v[k] * v[k];
+            }
+        }
+    }
+    let degenerate = std::array::from_fn(|k| active.contains(&k) && bad_weight[k] > 0.5);
+    (Pose::from_increment(kept).compose(prior), degenerate)
+}
+
+/// Register source features to `target` with all six parameters in one LM problem (the scan-to-map
+/// refinement), starting from and falling back to `prior` = `target_from_source`.
+pub fn register_joint(
+    target: &FeatureTarget,
+    planes: &[V3],
+    corners: &[V3],
+    prior: Pose,
+    iterations: u32,
+    config: &LaserOdometryConfig,
+) -> Registration {
+    let active = [0, 1, 2, 3, 4, 5];
+    let (pose, h, residuals, rms_m) =
+        solve(target, planes, corners, prior, &active, iterations, config);
+    let (pose, degenerate) = remap(&pose, &prior, &h, &active, config.degeneracy_eigen_min);
+    Registration {
+        pose,
+        degenerate,
+        residuals,
+        rms_m,
+    }
+}
+
+/// Scan-to-scan two-step registration: `prev_from_cur`, starting from and falling back to `prior`.
+/// `step1_planes` (the plane features plus the ground's) fix z, roll and pitch; `planes` and
+/// `corners` then fix x, y and yaw.
+pub fn register_two_step(
+    target: &FeatureTarget,
+    step1_planes: &[V3],
+    planes: &[V3],
+    corners: &[V3],
+    prior: Pose,
+    config: &LaserOdometryConfig,
+) -> Registration {
+    let step1 = [0, 1, 5];
+    let (pose1, h1, n1, _) = solve(
+        target,
+        step1_planes,
+        &[],
+        prior,
+        &step1,
+        config.iterations,
+        config,
+    );
+    let (pose1, deg1) = remap(&pose1, &prior, &h1, &step1, config.degeneracy_eigen_min);
+    let step2 = [2, 3, 4];
+    let (pose2, h2, n2, rms_m) = solve(
+        target,
+        planes,
+        corners,
+        pose1,
+        &step2,
+        config.iterations,
+        config,
+    );
+    let (pose, deg2) = remap(&pose2, &pose1, &h2, &step2, config.degeneracy_eigen_min);
+    Registration {
+        pose,
+        degenerate: std::array::from_fn(|k| deg1[k] || deg2[k]),
+        residuals: n1.max(n2),
+        rms_m,
+    }
+}
+
+#[cfg(test)]
+pub(crate) mod tests {
+    use super::*;
+
+    /// A synthetic "under a car" scene: ground, underbody at 0.35 m, four tyre cylinders (corner
+    /// lines along their silhouettes) and optionally a box that pins the travel direction.
+    pub(crate) fn scene(with_tyres: bool) -> (Vec<V3>, Vec<V3>) {
+        let mut planes = Vec::new();
+        let mut corners = Vec::new();
+        for i in -40..40 {
+            for j in -10..10 {
+                let (x, y) = (f64::from(i) * 0.1, f64::from(j) * 0.1);
+                planes.push([x, y, 0.0]);
+                planes.push([x + 0.05, y + 0.05, 0.35]);
+            }
+        }
+        if with_tyres {
+            for (cx, cy) in [(1.4_f64, 0.8_f64), (1.4, -0.8), (-1.4, 0.8), (-1.4, -0.8)] {
+                for k in 0..60 {
+                    let a = f64::from(k) * std::f64::consts::TAU / 60.0;
+                    let (x, z) = (cx + 0.3 * a.cos(), 0.3 + 0.3 * a.sin());
+                    // Tyre sidewall (a vertical disc facing the robot) and its edges.
+                    for w in 0..4 {
+                        let r = 0.3 - 0.06 * f64::from(w);
+                        planes.push([cx + r * a.cos(), cy, 0.3 + r * a.sin()]);
+                    }
+                    corners.push([x, cy, z]);
+                    corners.push([x, cy - 0.2 * cy.signum(), z]);
+                }
+                // Vertical edge lines at the tyre fronts and backs.
+                for k in 0..20 {
+                    let z = f64::from(k) * 0.02;
+                    corners.push([cx + 0.3, cy, z]);
+                    corners.push([cx - 0.3, cy, z]);
+                }
+            }
+        }
+        (planes, corners)
+    }
+
+    pub(crate) fn target_of(planes: &[V3], corners: &[V3]) -> FeatureTarget {
+        // Every synthetic point is its own scan line.
+        let tags = |n: usize| (0..n as u32).collect();
+        FeatureTarget {
+            corners: VoxelIndex::new_tagged(corners.to_vec(), tags(corners.len()), 0.5),
+            planes: VoxelIndex::new_tagged(planes.to_vec(), tags(planes.len()), 0.5),
+        }
+    }
+
+    fn moved(points: &[V3], pose: &Pose) -> Vec<V3> {
+        let inv = pose.inverse();
+        points.iter().map(|&p| inv.apply(p)).collect()
+    }
+
+    #[test]
+    fn recovers_a_known_motion_in_both_modes() {
+        let (planes, corners) = scene(true);
+        let target = target_of(&planes, &corners);
+        let truth = Pose::from_xyz_rpy([0.04, 0.01, 0.005], [0.003, -0.004, 0.01]);
+        let (sp, sc) = (moved(&planes, &truth), moved(&corners, &truth));
+        let config = LaserOdometryConfig::default();
+        for reg in [
+            register_two_step(&target, &sp, &sp, &sc, Pose::IDENTITY, &config),
+            register_joint(&target, &sp, &sc, Pose::IDENTITY, 10, &config),
+        ] {
+            let err = reg.pose.compose(&truth.inverse()).to_increment();
+            assert!(err.iter().all(|e| e.abs() < 3e-3), "{err:?} {reg:?}");
+            assert!(reg.degenerate.iter().all(|&d| !d), "{reg:?}");
+        }
+    }
+
+    #[test]
+    fn two_parallel_planes_leave_x_y_yaw_to_the_prior() {
+        let (planes, corners) = scene(false);
+        let target = target_of(&planes, &corners);
+        let truth = Pose::from_xyz_rpy([0.05, 0.0, 0.01], [0.0, 0.0, 0.0]);
+        let sp = moved(&planes, &truth);
+        let prior = Pose::from_xyz_rpy([0.03, 0.0, 0.0], [0.0, 0.0, 0.0]);
+        let reg = register_two_step(
+            &target,
+            &sp,
+            &sp,
+            &[],
+            prior,
+            &LaserOdometryConfig::default(),
+        );
+        assert!(
+            reg.degenerate[3] && reg.degenerate[4] && reg.degenerate[2],
+            "{reg:?}"
+        );
+        assert!(!reg.degenerate[5] && !reg.degenerate[0] && !reg.degenerate[1]);
+        // x comes from the prior, z from the scan.
+        assert!(
+            (reg.pose.translation[0] - 0.03).abs() < 1e-6,
+            "{:?}",
+            reg.pose
+        );
+        assert!(
+            (reg.pose.translation[2] - 0.01).abs() < 1e-3,
+            "{:?}",
+            reg.pose
+        );
+    }
+}

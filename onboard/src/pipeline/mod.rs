@@ -1,0 +1,746 @@
+//! The point-cloud building pipeline (DESIGN.md section 6, steps 2-7; paper sections 3.1-3.5).
+//!
+//! [`Pipeline`] takes sensor data one message at a time and returns the fused cloud at the end. It
+//! is pure: no clocks, files or unseeded randomness; every stamp is an input (seconds on one common
+//! clock that the caller maps the sensor and MCU clocks onto).
+//!
+//! Per lidar frame `k` (the paper's order):
+//! 1. points move from the lidar's manual frame to the robot frame (`mounts`);
+//! 2. [`deskew`]: motion compensation to the frame's start (eq. 1, velocity from wheel odometry;
+//!    the general constant twist when turning, the last fused velocity without wheels);
+//! 3. [`ground`]: RANSAC ground plane (3.1), kept out of the features;
+//! 4. [`features`]: window test, outliers, smoothness, corners and planes (3.3, eqs. 2-5);
+//! 5. [`laser_odometry`]: two-step LM against frame `k - 1`, starting from the fused prediction of
+//!    the other sources; degenerate directions fall back to that prediction;
+//! 6. [`fusion`]: Algorithm 1 over laser, [`visual_odometry`] (depth frames, tracked as they arrive)
+//!    and wheel odometry, under the ten-frame constant-velocity reference (eqs. 6-7);
+//! 7. [`map`]: scan-to-map refinement against the local feature map (3.5), then the frame's points
+//!    (and the depth points in its interval) are fused into the output cloud; at
+//!    [`Pipeline::finish`] the [`filter`] (bilateral) runs once over the fused cloud.
+//!
+//! **Streaming**: a lidar frame is processed as soon as every source in use (wheel, depth) has
+//! reported past the frame's end, so the odometry of its interval is complete; [`Pipeline::finish`]
+//! flushes what is left. The result is ready one filter pass after the last frame.
+
+// `!(x > 0.0)` is deliberate throughout: it rejects NaN along with the out-of-range values.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+// Small fixed-size matrix code reads best with explicit indices.
+#![allow(clippy::needless_range_loop)]
+
+pub mod config;
+pub mod deskew;
+pub mod features;
+pub mod filter;
+pub mod fusion;
+pub mod geom;
+pub mod ground;
+pub mod laser_odometry;
+pub mod map;
+pub mod visual_odometry;
+
+use std::collections::VecDeque;
+
+use thiserror::Error;
+
+pub use config::PipelineConfig;
+pub use visual_odometry::DepthFrame;
+
+use self::deskew::{DeskewModel, Velocity};
+use self::features::RingPoint;
+use self::fusion::{Fusion, Source, SourceRate};
+use self::geom::{Pose, Twist6, V3, VoxelIndex, norm, voxel_of};
+use self::laser_odometry::{FeatureTarget, register_joint, register_two_step};
+use self::map::{CloudAccumulator, FeatureMap};
+use self::visual_odometry::{VisualOdometry, VisualStep};
+use crate::cloud::Cloud;
+use crate::vlp16::Frame;
+
+/// One lidar return as the pipeline needs it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LidarPoint {
+    /// Position in the lidar's manual frame (x right, y forward at azimuth 0, z up), metres.
+    pub xyz_in_lidar_m: [f32; 3],
+    /// Firing time after the frame's start, seconds.
+    pub time_offset_s: f32,
+    /// Azimuth of the firing, radians.
+    pub azimuth_rad: f32,
+    /// Ring 0..16 by elevation.
+    pub ring: u8,
+}
+
+/// One revolution of the lidar.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LidarFrame {
+    /// Frame start (first firing), seconds on the common clock.
+    pub stamp_s: f64,
+    /// Points in firing order.
+    pub points: Vec<LidarPoint>,
+}
+
+impl LidarFrame {
+    /// From a decoded VLP-16 frame whose first firing is at `stamp_s` on the common clock.
+    pub fn from_vlp16(frame: &Frame, stamp_s: f64) -> Self {
+        Self {
+            stamp_s,
+            points: frame
+                .points
+                .iter()
+                .map(|p| LidarPoint {
+                    xyz_in_lidar_m: [p.x_m, p.y_m, p.z_m],
+                    time_offset_s: p.time_us * 1e-6,
+                    azimuth_rad: p.azimuth_rad,
+                    ring: p.ring,
+                })
+                .collect(),
+        }
+    }
+}
+
+/// Wheel odometry from the firmware (`protocol::mcu::Odometry`), stamped on the common clock.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct WheelOdometry {
+    /// Seconds on the common clock.
+    pub stamp_s: f64,
+    /// Integrated pose in the odometry frame, metres.
+    pub x_m: f64,
+    /// Integrated pose, metres.
+    pub y_m: f64,
+    /// Integrated heading, radians.
+    pub yaw_rad: f64,
+    /// Body velocity (robot frame), m/s.
+    pub vx_mps: f64,
+    /// Body velocity, m/s.
+    pub vy_mps: f64,
+    /// Yaw rate, rad/s.
+    pub wz_radps: f64,
+}
+
+impl WheelOdometry {
+    /// From the firmware's message, with its MCU stamp already mapped to `stamp_s`.
+    pub fn from_mcu(msg: &protocol::mcu::Odometry, stamp_s: f64) -> Self {
+        Self {
+            stamp_s,
+            x_m: f64::from(msg.x_m),
+            y_m: f64::from(msg.y_m),
+            yaw_rad: f64::from(msg.yaw_rad),
+            vx_mps: f64::from(msg.vx_mps),
+            vy_mps: f64::from(msg.vy_mps),
+            wz_radps: f64::from(msg.wz_radps),
+        }
+    }
+}
+
+/// The pose estimated for one lidar frame.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TrajectoryPoint {
+    /// Frame start, seconds.
+    pub stamp_s: f64,
+    /// `world_from_robot` at the frame start (world = robot frame at the first frame).
+    pub world_from_robot: Pose,
+    /// Which source each fused increment component came from (`Zero` for the first frame).
+    pub chosen: [Source; 6],
+    /// Components the laser odometry could not determine.
+    pub laser_degenerate: [bool; 6],
+}
+
+/// Counters for the report and the benchmarks.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct PipelineStats {
+    /// Lidar frames processed.
+    pub frames: usize,
+    /// Lidar points in.
+    pub points_in: usize,
+    /// Points marked ground.
+    pub ground_points: usize,
+    /// Frames where no ground plane was found.
+    pub frames_without_ground: usize,
+    /// Points rejected as outliers.
+    pub outlier_points: usize,
+    /// Corner features selected.
+    pub corners: usize,
+    /// Plane features selected.
+    pub planes: usize,
+    /// Frames where the laser was degenerate in at least one component.
+    pub degenerate_frames: usize,
+    /// Frames deskewed with the general twist model.
+    pub twist_deskews: usize,
+    /// Depth frames received / tracked.
+    pub depth_frames: usize,
+    /// Depth frames with a visual odometry step.
+    pub visual_steps: usize,
+    /// Wheel odometry messages received.
+    pub wheel_messages: usize,
+    /// Fused components taken from [laser, visual, wheel, reference, zero].
+    pub chosen: [usize; 5],
+}
+
+/// The run's result.
+#[derive(Debug, Clone, PartialEq)]
+pub struct BuiltCloud {
+    /// The fused, filtered cloud in the world frame (robot frame at the first lidar frame: x
+    /// forward, y left, z up, origin on the ground below the robot's centre), metres.
+    pub points_in_world: Vec<V3>,
+    /// One pose per lidar frame.
+    pub trajectory: Vec<TrajectoryPoint>,
+    /// Counters.
+    pub stats: PipelineStats,
+}
+
+impl BuiltCloud {
+    /// The points as a [`Cloud`] for the writers and the angle calculator.
+    pub fn to_cloud(&self) -> Cloud {
+        Cloud {
+            points_m: self.points_in_world.clone(),
+        }
+    }
+}
+
+/// Bad input to the pipeline.
+#[derive(Debug, Error, PartialEq)]
+pub enum PipelineError {
+    /// A config value is out of range; names the key.
+    #[error("pipeline config: {0}")]
+    InvalidConfig(String),
+    /// A message's stamp went backwards or is not finite.
+    #[error("{what} stamp {stamp_s} s is not after the previous one ({previous_s} s)")]
+    StampOrder {
+        /// Which stream.
+        what: &'static str,
+        /// The offending stamp.
+        stamp_s: f64,
+        /// The stream's previous stamp.
+        previous_s: f64,
+    },
+    /// A depth frame is malformed.
+    #[error("{0}")]
+    BadDepthFrame(String),
+}
+
+impl PipelineConfig {
+    /// Check every value the stages divide by or loop on; the error names the key.
+    pub fn validate(&self) -> Result<(), PipelineError> {
+        let positive = [
+            (
+                "ground.distance-threshold-m",
+                self.ground.distance_threshold_m,
+            ),
+            (
+                "features.max-window-angle-rad",
+                self.features.max_window_angle_rad,
+            ),
+            ("features.max-range-m", self.features.max_range_m),
+            (
+                "laser.max-correspondence-m",
+                self.laser.max_correspondence_m,
+            ),
+            ("laser.huber-m", self.laser.huber_m),
+            ("visual.max-depth-m", self.visual.max_depth_m),
+            ("visual.max-residual-m", self.visual.max_residual_m),
+            ("map.feature-voxel-m", self.map.feature_voxel_m),
+            ("map.output-voxel-m", self.map.output_voxel_m),
+            ("map.output-max-range-m", self.map.output_max_range_m),
+            ("filter.radius-m", self.filter.radius_m),
+            ("filter.sigma-spatial-m", self.filter.sigma_spatial_m),
+            ("filter.sigma-normal-m", self.filter.sigma_normal_m),
+        ];
+        for (key, v) in positive {
+            if !(v > 0.0 && v.is_finite()) {
+                return Err(PipelineError::InvalidConfig(format!(
+                    "{key} = {v}: must be a positive number"
+                )));
+            }
+        }
+        if !(0.0..=1.0).contains(&self.ground.early_stop_fraction) {
+            return Err(PipelineError::InvalidConfig(
+                "ground.early-stop-fraction must lie in 0..=1".into(),
+            ));
+        }
+        if self.features.window_half_width == 0 || self.visual.pixel_stride == 0 {
+            return Err(PipelineError::InvalidConfig(
+                "features.window-half-width and visual.pixel-stride must be >= 1".into(),
+            ));
+        }
+        if self.laser.max_correspondence_m > self.map.feature_voxel_m {
+            return Err(PipelineError::InvalidConfig(
+                "laser.max-correspondence-m must not exceed map.feature-voxel-m".into(),
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// The previous frame, kept as the scan-to-scan target.
+#[derive(Debug, Clone)]
+struct PreviousFrame {
+    stamp_s: f64,
+    target: FeatureTarget,
+    world_from_robot: Pose,
+}
+
+/// The streaming pipeline. See the module docs.
+#[derive(Debug, Clone)]
+pub struct Pipeline {
+    config: PipelineConfig,
+    robot_from_lidar: Pose,
+    pending: VecDeque<LidarFrame>,
+    wheel: Vec<WheelOdometry>,
+    visual: VisualOdometry,
+    visual_steps: Vec<VisualStep>,
+    last_depth_s: Option<f64>,
+    depth_points: VecDeque<(f64, Vec<V3>)>,
+    robot_from_camera: Pose,
+    fusion: Fusion,
+    previous: Option<PreviousFrame>,
+    last_rate: Twist6,
+    map: FeatureMap,
+    cloud: CloudAccumulator,
+    trajectory: Vec<TrajectoryPoint>,
+    stats: PipelineStats,
+}
+
+impl Pipeline {
+    /// A pipeline with a checked config.
+    pub fn new(config: PipelineConfig) -> Result<Self, PipelineError> {
+        config.validate()?;
+        let m = &config.mounts;
+        let robot_from_camera = Pose::from_xyz_rpy(m.camera_xyz_m, m.camera_rpy_rad);
+        Ok(Self {
+            robot_from_lidar: Pose::from_xyz_rpy(m.lidar_xyz_m, m.lidar_rpy_rad),
+            pending: VecDeque::new(),
+            wheel: Vec::new(),
+            visual: VisualOdometry::new(
+                config.visual.clone(),
+                robot_from_camera,
+                config.laser.degeneracy_eigen_min,
+            ),
+            visual_steps: Vec::new(),
+            last_depth_s: None,
+            depth_points: VecDeque::new(),
+            robot_from_camera,
+            fusion: Fusion::new(config.fusion.clone()),
+            previous: None,
+            last_rate: [0.0; 6],
+            map: FeatureMap::new(config.map.feature_voxel_m, config.map.points_per_voxel),
+            cloud: CloudAccumulator::new(config.map.output_voxel_m),
+            trajectory: Vec::new(),
+            stats: PipelineStats::default(),
+            config,
+        })
+    }
+
+    /// The trajectory so far.
+    pub fn trajectory(&self) -> &[TrajectoryPoint] {
+        &self.trajectory
+    }
+
+    /// Queue a lidar frame; it is processed once the other sources have caught up with it.
+    pub fn push_lidar_frame(&mut self, frame: LidarFrame) -> Result<(), PipelineError> {
+        let previous_s = self
+            .pending
+            .back()
+            .map(|f| f.stamp_s)
+            .or(self.previous.as_ref().map(|p| p.stamp_s))
+            .unwrap_or(f64::NEG_INFINITY);
+        if !(frame.stamp_s > previous_s && frame.stamp_s.is_finite()) {
+            return Err(PipelineError::StampOrder {
+                what: "lidar frame",
+                stamp_s: frame.stamp_s,
+                previous_s,
+            });
+        }
+        self.pending.push_back(frame);
+        self.drain(false);
+        Ok(())
+    }
+
+    /// Add a wheel odometry message.
+    pub fn push_wheel_odometry(&mut self, odometry: WheelOdometry) -> Result<(), PipelineError> {
+        let previous_s = self.wheel.last().map_or(f64::NEG_INFINITY, |w| w.stamp_s);
+        if !(odometry.stamp_s > previous_s && odometry.stamp_s.is_finite()) {
+            return Err(PipelineError::StampOrder {
+                what: "wheel odometry",
+                stamp_s: odometry.stamp_s,
+                previous_s,
+            });
+        }
+        self.stats.wheel_messages += 1;
+        self.wheel.push(odometry);
+        self.drain(false);
+        Ok(())
+    }
+
+    /// Track a depth frame (visual odometry runs now) and keep its points for the cloud.
+    pub fn push_depth_frame(&mut self, frame: DepthFrame) -> Result<(), PipelineError> {
+        if !self.config.visual.enabled {
+            return Ok(());
+        }
+        frame.check().map_err(PipelineError::BadDepthFrame)?;
+        let previous_s = self.last_depth_s.unwrap_or(f64::NEG_INFINITY);
+        if !(frame.stamp_s > previous_s) {
+            return Err(PipelineError::StampOrder {
+                what: "depth frame",
+                stamp_s: frame.stamp_s,
+                previous_s,
+            });
+        }
+        self.stats.depth_frames += 1;
+        if self.config.visual.add_to_cloud {
+            let points = frame
+                .sampled_points(&self.config.visual)
+                .into_iter()
+                .map(|p| self.robot_from_camera.apply(p))
+                .collect();
+            self.depth_points.push_back((frame.stamp_s, points));
+        }
+        let prior = self
+            .last_depth_s
+            .and_then(|a| self.wheel_rate(a, frame.stamp_s).map(|r| (a, r)))
+            .map_or(Pose::IDENTITY, |(a, r)| {
+                Pose::from_increment(scale_twist(&r.rate, frame.stamp_s - a))
+            });
+        self.last_depth_s = Some(frame.stamp_s);
+        if let Some(step) = self.visual.push(frame, prior) {
+            self.stats.visual_steps += 1;
+            self.visual_steps.push(step);
+        }
+        self.drain(false);
+        Ok(())
+    }
+
+    /// Process everything still queued, filter, and return the result.
+    pub fn finish(mut self) -> BuiltCloud {
+        self.drain(true);
+        self.flush_depth_points(f64::INFINITY);
+        let raw = self.cloud.points();
+        let points_in_world = filter::bilateral(&raw, &self.config.filter);
+        BuiltCloud {
+            points_in_world,
+            trajectory: self.trajectory,
+            stats: self.stats,
+        }
+    }
+
+    /// Process queued frames whose interval every active source covers (all of them if `all`).
+    fn drain(&mut self, all: bool) {
+        while let Some(front) = self.pending.front() {
+            let end_s = front.stamp_s
+                + front
+                    .points
+                    .iter()
+                    .map(|p| f64::from(p.time_offset_s))
+                    .fold(0.0, f64::max);
+            let wheel_ready = !self.config.fusion.use_wheel
+                || self.wheel.last().is_none_or(|w| w.stamp_s >= end_s);
+            let depth_ready = !(self.config.fusion.use_visual && self.config.visual.enabled)
+                || self.last_depth_s.is_none_or(|s| s >= end_s);
+            if !(all || wheel_ready && depth_ready) {
+                break;
+            }
+            let Some(frame) = self.pending.pop_front() else {
+                break;
+            };
+            self.process(&frame);
+        }
+    }
+
+    /// Velocity for deskewing the frame starting at `t0_s`: wheel odometry's twist if it covers
+    /// the frame, else the constant-velocity reference (the last fused rate until there is one).
+    fn deskew_velocity(&self, t0_s: f64) -> Velocity {
+        let i = self.wheel.partition_point(|w| w.stamp_s < t0_s);
+        if self.config.fusion.use_wheel
+            && let Some(w) = self.wheel.get(i).or_else(|| self.wheel.last())
+            && (w.stamp_s - t0_s).abs() < 0.2
+        {
+            return Velocity {
+                linear_mps: [w.vx_mps, w.vy_mps, 0.0],
+                angular_radps: [0.0, 0.0, w.wz_radps],
+            };
+        }
+        // The ten-frame constant-velocity reference, not the last frame's rate: deskewing with the
+        // last scan-to-scan estimate feeds its error back with gain -1 (an undamped alternation
+        // between long and short increments); the mean damps it.
+        let r = self.fusion.reference().unwrap_or(self.last_rate);
+        Velocity {
+            linear_mps: [r[3], r[4], r[5]],
+            angular_radps: [r[0], r[1], r[2]],
+        }
+    }
+
+    fn process(&mut self, frame: &LidarFrame) {
+        let cfg = self.config.clone();
+        let n = frame.points.len();
+        let mut points: Vec<V3> = Vec::with_capacity(n);
+        let mut times = Vec::with_capacity(n);
+        let mut ranges = Vec::with_capacity(n);
+        for p in &frame.points {
+            let l = p.xyz_in_lidar_m.map(f64::from);
+            points.push(self.robot_from_lidar.apply(l));
+            times.push(f64::from(p.time_offset_s));
+            ranges.push(norm(l));
+        }
+        let velocity = self.deskew_velocity(frame.stamp_s);
+        if deskew::deskew(&mut points, &times, velocity, &cfg.deskew) == DeskewModel::Twist {
+            self.stats.twist_deskews += 1;
+        }
+        let frame_index = self.stats.frames as u64;
+        let split = ground::segment_ground(
+            &points,
+            self.robot_from_lidar.translation[2],
+            &cfg.ground,
+            frame_index,
+        );
+        let is_ground: Vec<bool> = if let Some(s) = &split {
+            s.is_ground.clone()
+        } else {
+            self.stats.frames_without_ground += 1;
+            vec![false; n]
+        };
+        let ring_points: Vec<RingPoint> = (0..n)
+            .map(|i| RingPoint {
+                p: points[i],
+                range_m: ranges[i],
+                azimuth_rad: f64::from(frame.points[i].azimuth_rad),
+                ring: frame.points[i].ring,
+                is_ground: cfg.ground.enabled && is_ground[i],
+            })
+            .collect();
+        let feats = features::extract(&ring_points, &cfg.features);
+        self.stats.frames += 1;
+        self.stats.points_in += n;
+        self.stats.ground_points += is_ground.iter().filter(|&&g| g).count();
+        self.stats.outlier_points += feats.is_outlier.iter().filter(|&&o| o).count();
+        self.stats.corners += feats.corners.len();
+        self.stats.planes += feats.planes.len();
+
+        let ground_sample: Vec<V3> = downsample(&feats.ground_candidates, 0.2)
+            .into_iter()
+            .map(|(p, _)| p)
+            .collect();
+        let (world_from_robot, chosen, laser_degenerate) =
+            self.estimate_pose(frame.stamp_s, &feats, &ground_sample);
+        // Scan-line tags: frame index * 16 + ring, unique over the run.
+        let tagged = |v: &[(V3, u8)]| -> Vec<(V3, u32)> {
+            v.iter()
+                .map(|&(p, ring)| (p, frame_index as u32 * 16 + u32::from(ring)))
+                .collect()
+        };
+        let mut plane_candidates = tagged(&downsample(&feats.plane_candidates, 0.05));
+        plane_candidates.extend(tagged(&downsample(&feats.ground_candidates, 0.1)));
+        let corner_candidates = tagged(&feats.corner_candidates);
+        if cfg.map.refine {
+            self.map
+                .add(&world_from_robot, &plane_candidates, &corner_candidates);
+        }
+        let keep_ground = self.config.map.keep_ground;
+        for i in 0..n {
+            if feats.is_outlier[i]
+                || (is_ground[i] && !keep_ground)
+                || ranges[i] > self.config.map.output_max_range_m
+            {
+                continue;
+            }
+            self.cloud.add(world_from_robot.apply(points[i]));
+        }
+        self.trajectory.push(TrajectoryPoint {
+            stamp_s: frame.stamp_s,
+            world_from_robot,
+            chosen,
+            laser_degenerate,
+        });
+        self.flush_depth_points(frame.stamp_s);
+        self.previous = Some(PreviousFrame {
+            stamp_s: frame.stamp_s,
+            target: FeatureTarget {
+                corners: tagged_index(corner_candidates, self.config.laser.max_correspondence_m),
+                planes: tagged_index(plane_candidates, self.config.laser.max_correspondence_m),
+            },
+            world_from_robot,
+        });
+    }
+
+    /// Steps 5-7: laser odometry, fusion, scan-to-map.
+    fn estimate_pose(
+        &mut self,
+        stamp_s: f64,
+        feats: &features::Features,
+        ground_sample: &[V3],
+    ) -> (Pose, [Source; 6], [bool; 6]) {
+        let Some(prev) = &self.previous else {
+            return (Pose::IDENTITY, [Source::Zero; 6], [false; 6]);
+        };
+        let dt = stamp_s - prev.stamp_s;
+        let wheel = self.wheel_rate(prev.stamp_s, stamp_s);
+        let visual = self.visual_rate(prev.stamp_s, stamp_s);
+        let predicted = self.fusion.predict(visual.as_ref(), wheel.as_ref());
+        let prior = Pose::from_increment(scale_twist(&predicted, dt));
+        let mut step1_planes = feats.planes.clone();
+        step1_planes.extend_from_slice(ground_sample);
+        let laser = register_two_step(
+            &prev.target,
+            &step1_planes,
+            &feats.planes,
+            &feats.corners,
+            prior,
+            &self.config.laser,
+        );
+        let laser_degenerate = laser.degenerate;
+        if laser_degenerate.iter().any(|&d| d) {
+            self.stats.degenerate_frames += 1;
+        }
+        let laser_rate = SourceRate {
+            rate: scale_twist(&laser.pose.to_increment(), 1.0 / dt),
+            available: laser_degenerate.map(|d| !d),
+        };
+        let fused = self
+            .fusion
+            .fuse(Some(&laser_rate), visual.as_ref(), wheel.as_ref());
+        for s in fused.chosen {
+            self.stats.chosen[s as usize] += 1;
+        }
+        self.last_rate = fused.rate;
+        let increment = Pose::from_increment(scale_twist(&fused.rate, dt));
+        let predicted_world = prev.world_from_robot.compose(&increment);
+        let world = if self.config.map.refine && !self.map.is_empty() {
+            register_joint(
+                self.map.target(),
+                &step1_planes,
+                &feats.corners,
+                predicted_world,
+                self.config.map.iterations,
+                &self.config.laser,
+            )
+            .pose
+        } else {
+            predicted_world
+        };
+        (world, fused.chosen, laser_degenerate)
+    }
+
+    /// Wheel odometry's rate over `[a_s, b_s]` (robot frame at `a_s`), if it covers the interval.
+    fn wheel_rate(&self, a_s: f64, b_s: f64) -> Option<SourceRate> {
+        if !self.config.fusion.use_wheel || b_s <= a_s {
+            return None;
+        }
+        let pa = wheel_pose_at(&self.wheel, a_s)?;
+        let pb = wheel_pose_at(&self.wheel, b_s)?;
+        let inc = pa.inverse().compose(&pb).to_increment();
+        Some(SourceRate {
+            rate: scale_twist(&inc, 1.0 / (b_s - a_s)),
+            available: [false, false, true, true, true, false],
+        })
+    }
+
+    /// Visual odometry's rate over `[a_s, b_s]`: the overlap-weighted mean of the steps' rates,
+    /// if the steps cover at least 90 % of the interval.
+    fn visual_rate(&self, a_s: f64, b_s: f64) -> Option<SourceRate> {
+        if !(self.config.fusion.use_visual && self.config.visual.enabled) || b_s <= a_s {
+            return None;
+        }
+        let mut rate = [0.0; 6];
+        let mut covered = 0.0;
+        let mut degenerate = [false; 6];
+        let first = self.visual_steps.partition_point(|s| s.to_s <= a_s);
+        for step in self.visual_steps[first..]
+            .iter()
+            .take_while(|s| s.from_s < b_s)
+        {
+            let overlap = step.to_s.min(b_s) - step.from_s.max(a_s);
+            if overlap <= 0.0 {
+                continue;
+            }
+            let r = scale_twist(
+                &step.robot_prev_from_cur.to_increment(),
+                1.0 / (step.to_s - step.from_s),
+            );
+            for k in 0..6 {
+                rate[k] += r[k] * overlap;
+                degenerate[k] |= step.degenerate[k];
+            }
+            covered += overlap;
+        }
+        if covered < 0.9 * (b_s - a_s) {
+            return None;
+        }
+        Some(SourceRate {
+            rate: scale_twist(&rate, 1.0 / covered),
+            available: degenerate.map(|d| !d),
+        })
+    }
+
+    /// Add the depth points stamped up to `until_s` at poses interpolated on the trajectory.
+    fn flush_depth_points(&mut self, until_s: f64) {
+        while let Some((stamp_s, _)) = self.depth_points.front() {
+            if *stamp_s > until_s {
+                break;
+            }
+            let stamp_s = *stamp_s;
+            let Some((_, points)) = self.depth_points.pop_front() else {
+                break;
+            };
+            let Some(pose) = pose_on_trajectory(&self.trajectory, stamp_s) else {
+                continue;
+            };
+            for p in points {
+                self.cloud.add(pose.apply(p));
+            }
+        }
+    }
+}
+
+fn scale_twist(t: &Twist6, s: f64) -> Twist6 {
+    t.map(|v| v * s)
+}
+
+/// One point per occupied voxel (the first seen).
+fn downsample<T: Copy>(points: &[(V3, T)], voxel_m: f64) -> Vec<(V3, T)> {
+    let mut seen: std::collections::HashSet<[i32; 3], _> = std::collections::HashSet::with_hasher(
+        std::hash::BuildHasherDefault::<geom::FxHasher>::default(),
+    );
+    points
+        .iter()
+        .copied()
+        .filter(|&(p, _)| seen.insert(voxel_of(p, voxel_m)))
+        .collect()
+}
+
+fn tagged_index(points: Vec<(V3, u32)>, voxel_m: f64) -> VoxelIndex {
+    let (p, t) = points.into_iter().unzip();
+    VoxelIndex::new_tagged(p, t, voxel_m)
+}
+
+/// The wheel odometry pose at `t_s` (linear interpolation), if the messages bracket it.
+fn wheel_pose_at(wheel: &[WheelOdometry], t_s: f64) -> Option<Pose> {
+    let i = wheel.partition_point(|w| w.stamp_s < t_s);
+    let b = wheel.get(i)?;
+    let a = if i == 0 {
+        if b.stamp_s > t_s {
+            return None;
+        }
+        b
+    } else {
+        &wheel[i - 1]
+    };
+    let s = if b.stamp_s > a.stamp_s {
+        (t_s - a.stamp_s) / (b.stamp_s - a.stamp_s)
+    } else {
+        0.0
+    };
+    let pose = |w: &WheelOdometry| Pose::from_xyz_rpy([w.x_m, w.y_m, 0.0], [0.0, 0.0, w.yaw_rad]);
+    Some(pose(a).interpolate(&pose(b), s))
+}
+
+/// `world_from_robot` at `t_s` interpolated between trajectory points; the last pose extrapolated
+/// is not used (only stamps inside the trajectory, or at the first pose).
+fn pose_on_trajectory(trajectory: &[TrajectoryPoint], t_s: f64) -> Option<Pose> {
+    let i = trajectory.partition_point(|p| p.stamp_s < t_s);
+    let b = trajectory.get(i)?;
+    if i == 0 {
+        return (b.stamp_s - t_s < 0.05).then_some(b.world_from_robot);
+    }
+    let a = &trajectory[i - 1];
+    let s = (t_s - a.stamp_s) / (b.stamp_s - a.stamp_s);
+    Some(a.world_from_robot.interpolate(&b.world_from_robot, s))
+}
+
+#[cfg(test)]
+mod tests;
