@@ -1,0 +1,364 @@
+//! `passangle angles CLOUD`: the passing angles of any underside point cloud (PLY, PCD, XYZ/CSV).
+//!
+//! Reads the cloud through `onboard::cloud`, runs the pure calculator `onboard::angles`, and prints
+//! a table (default) or one JSON object (`--json`); `--report FILE.svg` writes the side view.
+//! Degrees appear only here, at the user boundary.
+
+use std::io::Write;
+use std::path::PathBuf;
+
+use anyhow::{Context, bail};
+use onboard::angles::{
+    AngleFinding, AnglesConfig, AnglesResult, Band, ExclusionBox, Zone, compute_angles,
+    side_view_svg,
+};
+use onboard::cloud::{ReadStats, read_cloud};
+use serde_json::{Value, json};
+
+/// Arguments of `passangle angles`.
+#[derive(Debug, clap::Args)]
+pub struct AnglesArgs {
+    /// Point cloud file: .ply, .pcd, .xyz, .csv or .txt (metres, z roughly up).
+    pub cloud: PathBuf,
+    /// Direction of the vehicle's front in the cloud: `+x` (default) or `-x`.
+    #[arg(long, default_value = "+x", allow_hyphen_values = true)]
+    pub front: String,
+    /// Approach/departure zone: `tyre` (ahead of the front tyre, CFR/SAE) or `axle` (ahead of the axle, EU).
+    #[arg(long, default_value = "tyre")]
+    pub zone: String,
+    /// Ignore the points in a box `x0,x1,y0,y1,z0,z1` (metres, cloud frame), e.g. a tow hook; repeatable.
+    #[arg(long, allow_hyphen_values = true)]
+    pub exclude: Vec<String>,
+    /// Static loaded tyre radius (metres) to use instead of the fitted wheel-centre height.
+    #[arg(long)]
+    pub tyre_radius: Option<f64>,
+    /// Lateral band of the side-view envelope: `inner` (between the inner tyre faces), `full`, or a
+    /// half width in metres about the centreline.
+    #[arg(long, default_value = "inner")]
+    pub band: String,
+    /// Range noise sigma in metres (default: estimated from the cloud).
+    #[arg(long)]
+    pub noise: Option<f64>,
+    /// Print one JSON object instead of the table.
+    #[arg(long)]
+    pub json: bool,
+    /// Write the side-view report (SVG) to this file.
+    #[arg(long)]
+    pub report: Option<PathBuf>,
+}
+
+/// Run the command, writing the table or JSON to `out`.
+pub fn run(args: &AnglesArgs, out: &mut impl Write) -> anyhow::Result<()> {
+    let config = config_from(args)?;
+    let (cloud, stats) = read_cloud(&args.cloud)?;
+    let result = compute_angles(&cloud.points_m, &config)
+        .with_context(|| format!("{}: computing the angles", args.cloud.display()))?;
+    if let Some(path) = &args.report {
+        std::fs::write(path, side_view_svg(&result))
+            .with_context(|| format!("writing the report {}", path.display()))?;
+    }
+    if args.json {
+        let v = to_json(args, &stats, &result);
+        writeln!(out, "{}", serde_json::to_string_pretty(&v)?)?;
+    } else {
+        write_table(out, args, &stats, &result)?;
+    }
+    Ok(())
+}
+
+fn config_from(args: &AnglesArgs) -> anyhow::Result<AnglesConfig> {
+    let front_is_positive_x = match args.front.as_str() {
+        "+x" | "x" => true,
+        "-x" => false,
+        other => bail!("--front: expected `+x` or `-x`, got `{other}`"),
+    };
+    let zone = match args.zone.as_str() {
+        "tyre" | "tire" => Zone::Tyre,
+        "axle" => Zone::Axle,
+        other => bail!("--zone: expected `tyre` or `axle`, got `{other}`"),
+    };
+    let exclude = args
+        .exclude
+        .iter()
+        .enumerate()
+        .map(|(i, s)| parse_box(s).with_context(|| format!("--exclude #{}", i + 1)))
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    Ok(AnglesConfig {
+        front_is_positive_x,
+        zone,
+        band: parse_band(&args.band)?,
+        exclude,
+        tyre_radius_m: args.tyre_radius,
+        noise_m: args.noise,
+        ..AnglesConfig::default()
+    })
+}
+
+fn parse_band(s: &str) -> anyhow::Result<Band> {
+    Ok(match s {
+        "inner" => AnglesConfig::default().band,
+        "full" => Band::Full,
+        w => {
+            let half: f64 = w.parse().with_context(|| {
+                format!("--band: expected `inner`, `full` or metres, got `{w}`")
+            })?;
+            if !(half.is_finite() && half > 0.0) {
+                bail!("--band: half width must be > 0 m, got {half}");
+            }
+            Band::HalfWidth(half)
+        }
+    })
+}
+
+fn parse_box(s: &str) -> anyhow::Result<ExclusionBox> {
+    let v: Vec<f64> = s
+        .split(',')
+        .map(|t| {
+            t.trim()
+                .parse::<f64>()
+                .with_context(|| format!("`{t}` in `{s}` is not a number"))
+        })
+        .collect::<anyhow::Result<_>>()?;
+    if let Some(bad) = v.iter().find(|x| !x.is_finite()) {
+        bail!("`{s}`: {bad} is not a finite coordinate");
+    }
+    let [x0, x1, y0, y1, z0, z1] = v[..] else {
+        bail!(
+            "`{s}`: expected six numbers x0,x1,y0,y1,z0,z1, got {}",
+            v.len()
+        );
+    };
+    for (name, lo, hi) in [("x", x0, x1), ("y", y0, y1), ("z", z0, z1)] {
+        if lo > hi {
+            bail!("`{s}`: {name}0 ({lo}) must not exceed {name}1 ({hi})");
+        }
+    }
+    Ok(ExclusionBox {
+        min_in_cloud: [x0, y0, z0],
+        max_in_cloud: [x1, y1, z1],
+    })
+}
+
+fn deg(f: Option<&AngleFinding>) -> Value {
+    f.map_or(Value::Null, |f| json!(round(f.angle_rad.to_degrees(), 4)))
+}
+
+fn round(v: f64, digits: i32) -> f64 {
+    let k = 10f64.powi(digits);
+    (v * k).round() / k
+}
+
+fn v3(p: [f64; 3]) -> Value {
+    json!([round(p[0], 4), round(p[1], 4), round(p[2], 4)])
+}
+
+fn witness(f: Option<&AngleFinding>) -> Value {
+    f.map_or(Value::Null, |f| {
+        let mut w = json!({
+            "angle_deg": round(f.angle_rad.to_degrees(), 4),
+            "in_vehicle_m": v3(f.witness_in_vehicle),
+            "in_cloud_m": v3(f.witness_in_cloud),
+            "support_points": f.support,
+        });
+        if let Some((front, rear)) = f.parts_rad {
+            w["front_tangent_deg"] = json!(round(front.to_degrees(), 4));
+            w["rear_tangent_deg"] = json!(round(rear.to_degrees(), 4));
+        }
+        w
+    })
+}
+
+fn to_json(args: &AnglesArgs, stats: &ReadStats, r: &AnglesResult) -> Value {
+    let p = r.points;
+    let tyres: Vec<Value> = r
+        .tyres
+        .iter()
+        .map(|t| {
+            json!({
+                "position": t.position.label(),
+                "centre_in_vehicle_m": v3(t.centre_in_vehicle),
+                "centre_in_cloud_m": v3(t.centre_in_cloud),
+                "loaded_radius_m": round(t.loaded_radius_m, 4),
+                "free_radius_m": round(t.free_radius_m, 4),
+                "width_m": round(t.width_m, 4),
+                "fit_residual_m": round(t.residual_rms_m, 5),
+                "fit_points": t.fit_points,
+            })
+        })
+        .collect();
+    json!({
+        "file": args.cloud.display().to_string(),
+        "format": format!("{} {}", stats.format, stats.encoding),
+        "zone": match r.zone { Zone::Tyre => "tyre", Zone::Axle => "axle" },
+        "approach_deg": deg(r.approach.as_ref()),
+        "departure_deg": deg(r.departure.as_ref()),
+        "breakover_deg": deg(r.breakover.as_ref()),
+        "ground_clearance_m": r.ground_clearance.as_ref().map(|c| round(c.height_m, 4)),
+        "wheelbase_m": round(r.wheelbase_m, 4),
+        "track_m": r.track_m.map(|t| round(t, 4)),
+        "inner_track_m": r.inner_track_m.map(|t| round(t, 4)),
+        "tyres": tyres,
+        "witness": {
+            "approach": witness(r.approach.as_ref()),
+            "departure": witness(r.departure.as_ref()),
+            "breakover": witness(r.breakover.as_ref()),
+            "ground_clearance": r.ground_clearance.as_ref().map(|c| json!({
+                "in_vehicle_m": v3(c.witness_in_vehicle),
+                "in_cloud_m": v3(c.witness_in_cloud),
+            })),
+        },
+        "points": {
+            "read": stats.points_in_file,
+            "dropped": stats.dropped_non_finite + p.non_finite,
+            "excluded": p.excluded,
+            "used": p.input - p.non_finite - p.excluded,
+            "ground": p.ground,
+            "tyre": p.tyre,
+            "body": p.body,
+            "body_in_band": p.body_in_band,
+            "outliers_below_envelope": p.outliers_below_envelope,
+        },
+        "frame": {
+            "origin_in_cloud_m": v3(r.frame.origin_in_cloud),
+            "x_axis_in_cloud": v3(r.frame.x_axis_in_cloud),
+            "y_axis_in_cloud": v3(r.frame.y_axis_in_cloud),
+            "z_axis_in_cloud": v3(r.frame.z_axis_in_cloud),
+            "yaw_deg": round(r.yaw_rad.to_degrees(), 3),
+            "ground_tilt_deg": round(r.ground.tilt_rad.to_degrees(), 3),
+        },
+        "noise_sigma_m": round(r.noise_sigma_m, 5),
+        "envelope_bin_m": r.bin_m,
+        "band_y_m": [finite_or_null(r.band_y_m.0), finite_or_null(r.band_y_m.1)],
+        "warnings": r.warnings,
+    })
+}
+
+fn finite_or_null(v: f64) -> Value {
+    if v.is_finite() {
+        json!(round(v, 4))
+    } else {
+        Value::Null
+    }
+}
+
+fn write_table(
+    out: &mut impl Write,
+    args: &AnglesArgs,
+    stats: &ReadStats,
+    r: &AnglesResult,
+) -> std::io::Result<()> {
+    let p = r.points;
+    writeln!(
+        out,
+        "{} ({} {}): {} points read, {} dropped (NaN/inf), {} excluded",
+        args.cloud.display(),
+        stats.format,
+        stats.encoding,
+        stats.points_in_file,
+        stats.dropped_non_finite + p.non_finite,
+        p.excluded
+    )?;
+    writeln!(
+        out,
+        "zone: {}",
+        match r.zone {
+            Zone::Tyre => "ahead of / behind the tyres (CFR/SAE)",
+            Zone::Axle => "ahead of / behind the axles (EU)",
+        }
+    )?;
+    writeln!(out)?;
+    writeln!(
+        out,
+        "  angle        degrees   witness x, y, z (m, vehicle frame)   support"
+    )?;
+    for (name, f) in [
+        ("approach", &r.approach),
+        ("departure", &r.departure),
+        ("breakover", &r.breakover),
+    ] {
+        match f {
+            Some(f) => {
+                let w = f.witness_in_vehicle;
+                writeln!(
+                    out,
+                    "  {name:<10} {:>8.2}   {:>7.3} {:>7.3} {:>7.3}               {:>6}",
+                    f.angle_rad.to_degrees(),
+                    w[0],
+                    w[1],
+                    w[2],
+                    f.support
+                )?;
+            }
+            None => writeln!(out, "  {name:<10}      n/a   (no body points in the zone)")?,
+        }
+    }
+    if let Some(c) = &r.ground_clearance {
+        let w = c.witness_in_vehicle;
+        writeln!(
+            out,
+            "  clearance  {:>7.3} m  {:>7.3} {:>7.3} {:>7.3}",
+            c.height_m, w[0], w[1], w[2]
+        )?;
+    }
+    writeln!(out)?;
+    write!(out, "wheelbase {:.3} m", r.wheelbase_m)?;
+    if let Some(t) = r.track_m {
+        write!(out, ", track {t:.3} m")?;
+    }
+    writeln!(
+        out,
+        ", yaw {:.2} deg, ground tilt {:.2} deg, noise {:.1} mm",
+        r.yaw_rad.to_degrees(),
+        r.ground.tilt_rad.to_degrees(),
+        r.noise_sigma_m * 1e3
+    )?;
+    writeln!(
+        out,
+        "  tyre  centre x, y (m)     loaded r   free r   width   fit rms"
+    )?;
+    for t in &r.tyres {
+        let c = t.centre_in_vehicle;
+        writeln!(
+            out,
+            "  {:<4} {:>7.3} {:>7.3}    {:>7.3}  {:>7.3}  {:>6.3}  {:>5.1} mm",
+            t.position.label(),
+            c[0],
+            c[1],
+            t.loaded_radius_m,
+            t.free_radius_m,
+            t.width_m,
+            t.residual_rms_m * 1e3
+        )?;
+    }
+    writeln!(
+        out,
+        "points: ground {}, tyre {}, body {} ({} in band, {} below the envelope: noise tail or outliers)",
+        p.ground, p.tyre, p.body, p.body_in_band, p.outliers_below_envelope
+    )?;
+    for w in &r.warnings {
+        writeln!(out, "warning: {w}")?;
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn parses_boxes_bands_and_rejects_bad_ones() {
+        let b = parse_box("-3.3,-2.6, -0.1,0.1,0.3,0.56").unwrap();
+        let close = |a: [f64; 3], b: [f64; 3]| a.iter().zip(b).all(|(x, y)| (x - y).abs() < 1e-12);
+        assert!(close(b.min_in_cloud, [-3.3, -0.1, 0.3]), "{b:?}");
+        assert!(close(b.max_in_cloud, [-2.6, 0.1, 0.56]), "{b:?}");
+        let e = parse_box("1,2,3").unwrap_err().to_string();
+        assert!(e.contains("six numbers"), "{e}");
+        let e = parse_box("2,1,0,1,0,1").unwrap_err().to_string();
+        assert!(e.contains("x0 (2) must not exceed x1 (1)"), "{e}");
+        let e = format!("{:#}", parse_box("a,1,0,1,0,1").unwrap_err());
+        assert!(e.contains("`a`"), "{e}");
+        assert_eq!(parse_band("full").unwrap(), Band::Full);
+        assert_eq!(parse_band("0.5").unwrap(), Band::HalfWidth(0.5));
+        assert!(parse_band("-1").is_err() && parse_band("wide").is_err());
+    }
+}
