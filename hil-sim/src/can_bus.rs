@@ -425,6 +425,33 @@ mod tests {
     }
 
     #[test]
+    fn candump_parser_never_panics_on_mangled_logs() {
+        // Seeded mutations of a valid log (the cargo-fuzz target `candump_log` does this with
+        // coverage guidance): truncation, byte flips, insertions. Errors are fine; panics are not.
+        use rand::{Rng, SeedableRng};
+        let good = "(1.000001) vcan0 200#03E80000FC180000\n(1.000002) vcan0 201#1000049FFE0C2300\n\
+                    (1.000003) vcan0 12345678#R\n(1.000004) vcan0 7FF#\n";
+        let alphabet = b"0123456789ABCDEFabcdef#.()R \n-_xX\t";
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(8);
+        for _ in 0..20_000 {
+            let mut bytes = good.as_bytes().to_vec();
+            for _ in 0..rng.random_range(1..6) {
+                let i = rng.random_range(0..bytes.len());
+                match rng.random_range(0..3) {
+                    0 => bytes.truncate(i),
+                    1 => bytes[i] = alphabet[rng.random_range(0..alphabet.len())],
+                    _ => bytes.insert(i, alphabet[rng.random_range(0..alphabet.len())]),
+                }
+                if bytes.is_empty() {
+                    break;
+                }
+            }
+            let text = String::from_utf8_lossy(&bytes);
+            let _ = parse_candump_log(&text);
+        }
+    }
+
+    #[test]
     fn socketcan_open_failure_is_an_error_not_a_panic() {
         // On a kernel without AF_CAN this fails at socket(); elsewhere the interface does not exist.
         let err = SocketCanBus::open("passangle-no-such-if").unwrap_err();

@@ -139,8 +139,11 @@ pub struct Trace {
     pub acks: u32,
     /// Link frames from the firmware that did not decode (must stay 0).
     pub host_decode_errors: u32,
-    /// Feedback frames the ESCs sent that the firmware's CAN task did not get (bus-off, loss).
+    /// Feedback frames the ESCs sent that the firmware's CAN task did not get in time although
+    /// its controller was on the bus (lost or late: must stay 0 on a clean bus).
     pub feedback_frames_lost: u64,
+    /// Feedback frames the firmware's controller missed because it was bus-off (by design).
+    pub feedback_frames_missed_bus_off: u64,
     /// When the onboard stand-in sent each heartbeat.
     pub heartbeats_sent: Vec<u64>,
     /// Scripted events as applied, for reports.
@@ -219,6 +222,14 @@ pub enum FilError {
     /// The firmware configuration failed validation.
     #[error("firmware configuration is invalid: {0}")]
     Config(String),
+    /// No scenario has this name.
+    #[error("unknown scenario `{name}`; known: {known}")]
+    UnknownScenario {
+        /// The name asked for.
+        name: String,
+        /// The known names, comma-separated.
+        known: String,
+    },
     /// The robot's wheel map disagrees with the firmware's.
     #[error(
         "robot wheel map (esc ids {robot_ids:?}, signs {robot_signs:?}) differs from the \
@@ -485,7 +496,7 @@ impl Fil {
     fn firmware_can_receive(&mut self, now: u64, sent: usize) -> Result<Vec<EscSample>, FilError> {
         let frames = recv_expected(self.fw_can.as_mut(), sent, self.config.can_wait)?;
         if self.can_off {
-            self.trace.feedback_frames_lost += sent as u64;
+            self.trace.feedback_frames_missed_bus_off += sent as u64;
             while self.fw_can.try_recv()?.is_some() {}
             return Ok(Vec::new());
         }

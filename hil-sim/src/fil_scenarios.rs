@@ -208,39 +208,51 @@ pub fn run(
     run_on(name, &mut fil, seed)
 }
 
+/// What judges a scenario's trace.
+type Judge = fn(&mut Outcome);
+
+/// Scenario `name`'s canonical name, length (microseconds), script and judge.
+fn script(name: &str, seed: u64) -> Option<(&'static str, u64, Vec<Event>, Judge)> {
+    Some(match name {
+        "cruise" => ("cruise", 7_500_000, cruise_events(), judge_cruise),
+        "heartbeat-loss" => (
+            "heartbeat-loss",
+            5_000_000,
+            heartbeat_loss_events(),
+            judge_heartbeat_loss,
+        ),
+        "esc-silent" => (
+            "esc-silent",
+            4_500_000,
+            esc_silent_events(),
+            judge_esc_silent,
+        ),
+        "over-temperature" => (
+            "over-temperature",
+            4_500_000,
+            over_temperature_events(),
+            judge_over_temperature,
+        ),
+        "bus-off" => ("bus-off", 7_000_000, bus_off_events(), judge_bus_off),
+        "link-flood" => ("link-flood", 3_500_000, flood_events(seed), judge_flood),
+        _ => return None,
+    })
+}
+
+/// How long scenario `name` runs, microseconds.
+pub fn duration_us(name: &str) -> Option<u64> {
+    script(name, 0).map(|(_, d, _, _)| d)
+}
+
 /// Runs scenario `name` on `fil` (fresh, at time 0).
 pub fn run_on(name: &str, fil: &mut Fil, seed: u64) -> Result<Outcome, FilError> {
     let started = Instant::now();
-    let (name, end_us, events, judge): (&'static str, u64, Vec<Event>, fn(&mut Outcome)) =
-        match name {
-            "cruise" => ("cruise", 7_500_000, cruise_events(), judge_cruise),
-            "heartbeat-loss" => (
-                "heartbeat-loss",
-                5_000_000,
-                heartbeat_loss_events(),
-                judge_heartbeat_loss,
-            ),
-            "esc-silent" => (
-                "esc-silent",
-                4_500_000,
-                esc_silent_events(),
-                judge_esc_silent,
-            ),
-            "over-temperature" => (
-                "over-temperature",
-                4_500_000,
-                over_temperature_events(),
-                judge_over_temperature,
-            ),
-            "bus-off" => ("bus-off", 7_000_000, bus_off_events(), judge_bus_off),
-            "link-flood" => ("link-flood", 3_500_000, flood_events(seed), judge_flood),
-            other => {
-                return Err(FilError::Config(format!(
-                    "unknown scenario `{other}`; known: {}",
-                    NAMES.join(", ")
-                )));
-            }
-        };
+    let Some((name, end_us, events, judge)) = script(name, seed) else {
+        return Err(FilError::UnknownScenario {
+            name: name.to_owned(),
+            known: NAMES.join(", "),
+        });
+    };
     fil.schedule(events);
     fil.run_until(end_us)?;
     let trace = fil.take_trace();

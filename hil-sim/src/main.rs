@@ -2,6 +2,7 @@
 
 use clap::{Parser, Subcommand};
 
+mod fil_cli;
 mod sensors_cli;
 
 /// passangle software-in-the-loop simulator.
@@ -20,6 +21,10 @@ enum Command {
     Lidar(sensors_cli::LidarArgs),
     /// Render the D435's Z16 depth frames for a scenario into a directory.
     Depth(sensors_cli::DepthArgs),
+    /// Run the firmware-in-the-loop scenarios (simulated ESCs and robot, real firmware logic).
+    Fil(fil_cli::FilArgs),
+    /// Run the simulated robot and firmware in real time with the MCU link on a pty.
+    Firmware(fil_cli::FirmwareArgs),
 }
 
 fn main() -> anyhow::Result<()> {
@@ -28,5 +33,7 @@ fn main() -> anyhow::Result<()> {
         Command::Truth(args) => sensors_cli::truth(&args),
         Command::Lidar(args) => sensors_cli::lidar(&args),
         Command::Depth(args) => sensors_cli::depth(&args),
+        Command::Fil(args) => fil_cli::fil(&args),
+        Command::Firmware(args) => fil_cli::firmware(&args),
     }
 }

@@ -8,7 +8,9 @@
 # Environment: VCAN_VM_CACHE (default <repo>/target/vcan-vm), VCAN_VM_ACCEL (kvm|tcg, default:
 # kvm only where kvm_intel/kvm_amd is loaded; a paravirtual /dev/kvm cannot boot a stock kernel),
 # VCAN_VM_MEM (default 1024 MB), VCAN_VM_TIMEOUT (seconds, default 1800).
-# In the guest: VCAN_VM_GUEST=1, CAN_UTILS=<dir with candump/cansend>, PATH extended with it.
+# VCAN_VM_OUT: a host folder that receives what the guest command leaves in $VCAN_VM_OUT_GUEST.
+# In the guest: VCAN_VM_GUEST=1, CAN_UTILS=<dir with candump/cansend>, PATH extended with it,
+# VCAN_VM_OUT_GUEST=<a writable folder whose files are copied back to $VCAN_VM_OUT on the host>.
 # Exit codes: the command's own; 77 = SKIPPED (qemu cannot run here at all, with the reason);
 # 124 = timeout; 125 = the guest failed before running the command.
 set -euo pipefail
@@ -46,12 +48,14 @@ esac
 echo "vcan-vm: booting the guest with $why" >&2
 
 xchg="$(mktemp -d "$cache/xchg.XXXXXX")"
+mkdir -p "$xchg/out"
 trap 'rm -rf "$xchg"' EXIT
 printf '%s\n' "$*" >"$xchg/cmd"
 pwd >"$xchg/cwd"
 {
   printf 'export PATH=%q\n' "$cache/canutils/usr/bin:$PATH"
   printf 'export CAN_UTILS=%q\n' "$cache/canutils/usr/bin"
+  printf 'export VCAN_VM_OUT_GUEST=/mnt/xchg/out\n'
   for v in RUST_BACKTRACE RUST_LOG CARGO_TARGET_DIR SIL_CAN_IFACE; do
     [[ -n "${!v:-}" ]] && printf 'export %s=%q\n' "$v" "${!v}"
   done
@@ -78,5 +82,8 @@ if [[ ! -f "$xchg/rc" ]]; then
   echo "vcan-vm: the guest ended without an exit code (qemu status $status, $accel, ${elapsed} s)" >&2; exit 125
 fi
 rc="$(cat "$xchg/rc")"
+if [[ -n "${VCAN_VM_OUT:-}" ]]; then
+  mkdir -p "$VCAN_VM_OUT" && cp -r "$xchg/out/." "$VCAN_VM_OUT/"
+fi
 echo "vcan-vm: guest command exited $rc ($accel, ${elapsed} s wall including boot)" >&2
 exit "$rc"
