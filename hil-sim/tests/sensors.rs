@@ -446,3 +446,30 @@ fn udp_output_reaches_a_loopback_listener_at_real_time_pace() {
     assert_eq!(data.join().expect("listener"), 151);
     assert_eq!(position.join().expect("listener"), 10);
 }
+
+#[test]
+fn command_line_errors_name_what_is_wrong() {
+    let stderr = |cmd: &mut Command| {
+        let out = cmd
+            .env("RUST_BACKTRACE", "0")
+            .output()
+            .expect("binary runs");
+        assert!(!out.status.success());
+        String::from_utf8_lossy(&out.stderr).into_owned()
+    };
+    let e = stderr(sim_bin().args(["lidar", "no/such/scenario.toml", "--pcap", "x.pcap"]));
+    assert!(e.contains("no/such/scenario.toml"), "{e}");
+    let scenario = crate_dir().join("scenarios/van-pass.toml");
+    let e = stderr(sim_bin().arg("lidar").arg(&scenario));
+    assert!(e.contains("--pcap") && e.contains("--udp"), "{e}");
+    let e =
+        stderr(
+            sim_bin()
+                .arg("depth")
+                .arg(&scenario)
+                .args(["--out", "/tmp", "--duration-s=-1"]),
+        );
+    assert!(e.contains("--duration-s"), "{e}");
+    let e = stderr(sim_bin().args(["truth", "hil-sim/vehicles/nope.toml"]));
+    assert!(e.contains("nope.toml"), "{e}");
+}
