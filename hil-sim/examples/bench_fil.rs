@@ -47,4 +47,33 @@ fn main() {
         "mean cost of one simulated 1 ms tick (judging included): {:.2} us",
         total_wall_s / (total_sim_s * 1e3) * 1e6
     );
+
+    // Sensitivity of the cruise figures to the C620's speed-reading noise (an assumption of the
+    // ESC model: 3 rpm by default) and to the wheels' slip stiffness.
+    println!();
+    println!(
+        "{:<34} {:>12} {:>14}",
+        "cruise variant", "ripple %", "odometry err %"
+    );
+    let mut variants: Vec<(String, FilConfig)> = Vec::new();
+    for noise_rpm in [0.0, 3.0, 10.0, 30.0] {
+        let mut c = FilConfig::default();
+        c.esc.speed_noise_rpm = noise_rpm;
+        variants.push((format!("speed noise {noise_rpm} rpm"), c));
+    }
+    for stiffness in [200.0, 800.0, 3200.0] {
+        let mut c = FilConfig::default();
+        c.robot.slip_stiffness_n_per_mps = stiffness;
+        variants.push((format!("slip stiffness {stiffness} N/(m/s)"), c));
+    }
+    for (label, config) in variants {
+        let o = fil_scenarios::run("cruise", config, &bus, LinkChoice::Memory)
+            .expect("in-process runs cannot fail to start");
+        println!(
+            "{label:<34} {:>12.3} {:>14.3}",
+            o.figure("cruise velocity ripple (std/mean)")
+                .unwrap_or(f64::NAN),
+            o.figure("odometry error / distance").unwrap_or(f64::NAN)
+        );
+    }
 }

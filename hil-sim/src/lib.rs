@@ -12,6 +12,13 @@
 //! - [`vlp16`]: the VLP-16 sensor model (firing timing, noise, dropouts) producing packets.
 //! - [`d435`]: the D435 depth camera model producing Z16 frames.
 //!
+//! Firmware in the loop (docs/sil.md): [`esc_model`] (C620 + M3508 with injectable faults),
+//! [`robot`] (mecanum chassis dynamics with slip; its [`robot::PoseHistory`] is the odometry
+//! truth), [`can_bus`] (the bus trait: in-process, SocketCAN), [`pty`] (the MCU link's byte pipe:
+//! in memory, pseudo-terminal), [`fil`] (the runner stepping `control::Controller` on a 1 ms
+//! clock) and [`fil_scenarios`] (the issue-8 scenarios with their figures and checks). The
+//! SocketCAN and pty ends and the real-time pacing are the only parts of these that touch the OS.
+//!
 //! Everything here is a pure function of (scenario, seed, time); the command line in `main.rs` is
 //! the only part that touches files, sockets and clocks.
 
