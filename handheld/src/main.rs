@@ -2,6 +2,7 @@
 //! offline commands.
 
 mod angles;
+mod field;
 mod lidar;
 
 use clap::{Parser, Subcommand};
@@ -20,6 +21,16 @@ enum Command {
     Lidar(lidar::LidarArgs),
     /// Approach, departure and ramp breakover angles of a vehicle's underside point cloud.
     Angles(angles::AnglesArgs),
+    /// Create a new pairing key for the radio link (copy it to the robot).
+    Pair(field::PairArgs),
+    /// Run a measurement: drive under the vehicle, show progress, print and save the angles.
+    Measure(field::MeasureArgs),
+    /// Show the robot's state: phase, sensors, firmware interlocks, results waiting, disk space.
+    Status(field::StatusArgs),
+    /// Abort the running measurement (the robot stops first).
+    Abort(field::AbortArgs),
+    /// Fetch the result and preview of an earlier run from the robot.
+    Fetch(field::FetchArgs),
 }
 
 fn main() -> anyhow::Result<()> {
@@ -27,5 +38,10 @@ fn main() -> anyhow::Result<()> {
     match cli.command {
         Command::Lidar(args) => lidar::run(&args, &mut std::io::stdout().lock()),
         Command::Angles(args) => angles::run(&args, &mut std::io::stdout().lock()),
+        Command::Pair(args) => field::pair(&args, &mut std::io::stdout().lock()),
+        Command::Measure(args) => field::measure(&args, &mut std::io::stdout().lock()),
+        Command::Status(args) => field::status(&args, &mut std::io::stdout().lock()),
+        Command::Abort(args) => field::abort(&args, &mut std::io::stdout().lock()),
+        Command::Fetch(args) => field::fetch(&args, &mut std::io::stdout().lock()),
     }
 }

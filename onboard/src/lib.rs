@@ -3,10 +3,14 @@
 //! function of its inputs: no clocks, no IO in the pipeline or the angle calculator.
 
 pub mod angles;
+pub mod client;
 pub mod cloud;
+pub mod config;
 pub mod link;
 pub mod pcap;
 pub mod pipeline;
+pub mod process;
 pub mod recorder;
 pub mod run;
+pub mod service;
 pub mod vlp16;

@@ -6,14 +6,18 @@
 //!   meta.json           run id, parameters, start time, outcome (rewritten atomically)
 //!   config.toml         the onboard configuration used
 //!   lidar.pcap          raw VLP-16 UDP packets (data and position), opens in Wireshark/VeloView
-//!   odometry.csv        wheel odometry: host_us,mcu_us,x_m,y_m,yaw_rad,vx_mps,vy_mps,wz_radps,w_fl,w_fr,w_rl,w_rr
-//!   depth/index.csv     frame,host_us,width,height,fx,fy,cx,cy,depth_scale_m
+//!   odometry.csv        wheel odometry: wall_us,mcu_us,x_m,y_m,yaw_rad,vx_mps,vy_mps,wz_radps,w_fl,w_fr,w_rl,w_rr
+//!   depth/index.csv     frame,wall_us,width,height,fx,fy,cx,cy,depth_scale_m
 //!   depth/NNNNNN.z16    one depth frame: width x height u16 little-endian, 0 = no return
 //!   result.json         the measurement ([`ResultRecord`])
 //!   cloud.ply           the fused cloud, vehicle frame, metres (binary PLY)
 //!   side_view.svg       the side-view report
 //!   DELIVERED           the handheld acknowledged the result
 //! ```
+//!
+//! Every stamp in the streams is the host's wall clock (`wall_us`, microseconds since the Unix
+//! epoch; the pcap's own clock), advanced monotonically by the service; `mcu_us` is the firmware's
+//! clock as reported.
 //!
 //! Whole files (`meta.json`, `config.toml`, `result.json`, `cloud.ply`, `side_view.svg`, each
 //! depth frame) are written atomically: a temporary file in the same directory, `fsync`, rename,
@@ -369,11 +373,11 @@ impl RunRecorder {
         };
         let odometry = stream(
             "odometry.csv",
-            b"host_us,mcu_us,x_m,y_m,yaw_rad,vx_mps,vy_mps,wz_radps,w_fl_radps,w_fr_radps,w_rl_radps,w_rr_radps\n",
+            b"wall_us,mcu_us,x_m,y_m,yaw_rad,vx_mps,vy_mps,wz_radps,w_fl_radps,w_fr_radps,w_rl_radps,w_rr_radps\n",
         );
         let depth_index = stream(
             "depth/index.csv",
-            b"frame,host_us,width,height,fx,fy,cx,cy,depth_scale_m\n",
+            b"frame,wall_us,width,height,fx,fy,cx,cy,depth_scale_m\n",
         );
         let lidar_path = dir.join("lidar.pcap");
         let lidar = match open_stream(&lidar_path).and_then(PcapWriter::new) {
@@ -428,12 +432,12 @@ impl RunRecorder {
     }
 
     /// Appends an odometry report with its host arrival time.
-    pub fn odometry(&mut self, host_us: u64, o: &Odometry) {
+    pub fn odometry(&mut self, wall_us: u64, o: &Odometry) {
         self.odometry.write(&mut self.errors, |w| {
             let [a, b, c, d] = o.wheel_speed_radps;
             writeln!(
                 w,
-                "{host_us},{},{},{},{},{},{},{},{a},{b},{c},{d}",
+                "{wall_us},{},{},{},{},{},{},{},{a},{b},{c},{d}",
                 o.stamp_us, o.x_m, o.y_m, o.yaw_rad, o.vx_mps, o.vy_mps, o.wz_radps
             )
         });
@@ -442,7 +446,7 @@ impl RunRecorder {
     /// Writes a depth frame (Z16, row-major) and its index line.
     pub fn depth_frame(
         &mut self,
-        host_us: u64,
+        wall_us: u64,
         width: u16,
         height: u16,
         depth: &[u16],
@@ -462,7 +466,7 @@ impl RunRecorder {
         self.depth_index.write(&mut self.errors, |w| {
             writeln!(
                 w,
-                "{n},{host_us},{width},{height},{},{},{},{},{}",
+                "{n},{wall_us},{width},{height},{},{},{},{},{}",
                 k.fx, k.fy, k.cx, k.cy, k.depth_scale_m
             )
         });

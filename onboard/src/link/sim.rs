@@ -185,3 +185,110 @@ mod tests {
         assert_eq!(p.pop(120_000).len(), 576);
     }
 }
+
+/// Two connected [`crate::service::Port`]s through a pair of [`LossyPipe`]s on the wall clock:
+/// the radio between a handheld and the onboard service when both run in one process (tests,
+/// `passangle-sim demo`). Cutting the line ([`LossyPortPair::set_cut`]) makes a peer vanish.
+#[derive(Debug, Clone)]
+pub struct LossyPortPair {
+    inner: std::sync::Arc<std::sync::Mutex<PairInner>>,
+}
+
+#[derive(Debug)]
+struct PairInner {
+    epoch: std::time::Instant,
+    a_to_b: LossyPipe,
+    b_to_a: LossyPipe,
+}
+
+/// One end of a [`LossyPortPair`].
+#[derive(Debug)]
+pub struct LossyPort {
+    inner: std::sync::Arc<std::sync::Mutex<PairInner>>,
+    is_a: bool,
+    pending: VecDeque<u8>,
+}
+
+impl LossyPortPair {
+    /// A pair with the same impairments both ways (seeds `seed` and `seed + 1`).
+    pub fn new(config: PipeConfig, seed: u64) -> (Self, LossyPort, LossyPort) {
+        let inner = std::sync::Arc::new(std::sync::Mutex::new(PairInner {
+            epoch: std::time::Instant::now(),
+            a_to_b: LossyPipe::new(config, seed),
+            b_to_a: LossyPipe::new(config, seed.wrapping_add(1)),
+        }));
+        let end = |is_a| LossyPort {
+            inner: std::sync::Arc::clone(&inner),
+            is_a,
+            pending: VecDeque::new(),
+        };
+        (
+            Self {
+                inner: std::sync::Arc::clone(&inner),
+            },
+            end(true),
+            end(false),
+        )
+    }
+
+    /// Cuts or restores both directions.
+    pub fn set_cut(&self, cut: bool) {
+        if let Ok(mut g) = self.inner.lock() {
+            g.a_to_b.set_cut(cut);
+            g.b_to_a.set_cut(cut);
+        }
+    }
+
+    /// Counters of the a->b and b->a directions.
+    pub fn stats(&self) -> (PipeStats, PipeStats) {
+        self.inner
+            .lock()
+            .map_or((PipeStats::default(), PipeStats::default()), |g| {
+                (g.a_to_b.stats(), g.b_to_a.stats())
+            })
+    }
+}
+
+impl std::io::Read for LossyPort {
+    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+        if self.pending.is_empty() {
+            let mut g = self
+                .inner
+                .lock()
+                .map_err(|_| std::io::Error::other("lossy pipe poisoned"))?;
+            let now = u64::try_from(g.epoch.elapsed().as_micros()).unwrap_or(u64::MAX);
+            let pipe = if self.is_a {
+                &mut g.b_to_a
+            } else {
+                &mut g.a_to_b
+            };
+            self.pending.extend(pipe.pop(now));
+        }
+        let n = buf.len().min(self.pending.len());
+        for (dst, src) in buf.iter_mut().zip(self.pending.drain(..n)) {
+            *dst = src;
+        }
+        Ok(n)
+    }
+}
+
+impl std::io::Write for LossyPort {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        let mut g = self
+            .inner
+            .lock()
+            .map_err(|_| std::io::Error::other("lossy pipe poisoned"))?;
+        let now = u64::try_from(g.epoch.elapsed().as_micros()).unwrap_or(u64::MAX);
+        let pipe = if self.is_a {
+            &mut g.a_to_b
+        } else {
+            &mut g.b_to_a
+        };
+        pipe.push(now, buf);
+        Ok(buf.len())
+    }
+
+    fn flush(&mut self) -> std::io::Result<()> {
+        Ok(())
+    }
+}

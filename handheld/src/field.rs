@@ -1,0 +1,344 @@
+//! The operator's commands over the radio link: `pair`, `measure`, `status`, `abort`, `fetch`.
+//! The link itself is `onboard::client` (shared with the simulator's demo).
+
+use std::io::{IsTerminal, Write};
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+use anyhow::Context;
+use clap::{Args, ValueEnum};
+use onboard::client::{Client, Measured, Observer};
+use onboard::service::Port;
+use protocol::bounded::Text;
+use protocol::common::LogLine;
+use protocol::radio::{Progress, StartMeasurement, Zone};
+
+fn default_key_file() -> PathBuf {
+    std::env::var_os("HOME").map_or_else(
+        || PathBuf::from("passangle.key"),
+        |h| PathBuf::from(h).join(".config/passangle/pairing.key"),
+    )
+}
+
+/// The radio port and pairing key every radio command needs.
+#[derive(Args, Debug)]
+pub struct LinkArgs {
+    /// Serial device of the radio modem.
+    #[arg(long, default_value = "/dev/ttyUSB0")]
+    pub port: String,
+    /// Baud rate of the radio modem.
+    #[arg(long, default_value_t = 57_600)]
+    pub baud: u32,
+    /// Pairing key file (written by `passangle pair`).
+    #[arg(long, default_value_os_t = default_key_file())]
+    pub key_file: PathBuf,
+    /// Seconds to wait for the robot to answer.
+    #[arg(long, default_value_t = 10.0)]
+    pub timeout_s: f64,
+}
+
+/// `passangle pair`.
+#[derive(Args, Debug)]
+pub struct PairArgs {
+    /// Where to write the new key (mode 0600); copy it to the robot's `radio.key-file`.
+    #[arg(long, default_value_os_t = default_key_file())]
+    pub key_file: PathBuf,
+}
+
+/// Zone convention.
+#[derive(Clone, Copy, Debug, ValueEnum)]
+pub enum ZoneArg {
+    /// Ahead of the tyre (CFR / SAE J1100).
+    Tyre,
+    /// Ahead of the axle (EU).
+    Axle,
+}
+
+/// `passangle measure`.
+#[derive(Args, Debug)]
+pub struct MeasureArgs {
+    #[command(flatten)]
+    link: LinkArgs,
+    /// Drive speed under the vehicle, m/s.
+    #[arg(long, default_value_t = 0.2)]
+    speed: f32,
+    /// Distance to drive, m (vehicle length plus about a metre each side).
+    #[arg(long, default_value_t = 7.0)]
+    distance: f32,
+    /// Vehicle identifier saved with the result (plate, VIN, test number; up to 32 bytes).
+    #[arg(long, default_value = "")]
+    vehicle_id: String,
+    /// Zone convention for approach and departure.
+    #[arg(long, value_enum, default_value_t = ZoneArg::Tyre)]
+    zone: ZoneArg,
+    /// Directory for the result JSON, the preview PLY and the side-view SVG.
+    #[arg(long, default_value = ".")]
+    out: PathBuf,
+    /// Longest the whole run may take, s.
+    #[arg(long, default_value_t = 300.0)]
+    run_timeout_s: f64,
+}
+
+/// `passangle fetch`.
+#[derive(Args, Debug)]
+pub struct FetchArgs {
+    #[command(flatten)]
+    link: LinkArgs,
+    /// The run number.
+    run: u32,
+    /// Directory for the files.
+    #[arg(long, default_value = ".")]
+    out: PathBuf,
+}
+
+/// `passangle abort`.
+#[derive(Args, Debug)]
+pub struct AbortArgs {
+    #[command(flatten)]
+    link: LinkArgs,
+    /// Run to abort (0: whatever runs).
+    #[arg(long, default_value_t = 0)]
+    run: u32,
+}
+
+/// `passangle status`.
+#[derive(Args, Debug)]
+pub struct StatusArgs {
+    #[command(flatten)]
+    link: LinkArgs,
+}
+
+/// Creates a new pairing key.
+pub fn pair(args: &PairArgs, out: &mut dyn Write) -> anyhow::Result<()> {
+    if let Some(dir) = args.key_file.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    }
+    let mut key = [0u8; protocol::auth::KEY_LEN];
+    std::fs::File::open("/dev/urandom")
+        .and_then(|mut f| std::io::Read::read_exact(&mut f, &mut key))
+        .context("reading /dev/urandom")?;
+    onboard::config::write_key(&args.key_file, &protocol::auth::Key(key))?;
+    writeln!(
+        out,
+        "wrote a new pairing key to {} (mode 0600).\ncopy it to the robot's radio.key-file (default /etc/passangle/pairing.key), owned by the service user, mode 0600.",
+        args.key_file.display()
+    )?;
+    Ok(())
+}
+
+fn open(link: &LinkArgs) -> anyhow::Result<Client> {
+    let key = onboard::config::read_key(&link.key_file)?;
+    let port: Box<dyn Port> = Box::new(
+        serialport::new(&link.port, link.baud)
+            .timeout(Duration::from_millis(2))
+            .open_native()
+            .with_context(|| {
+                format!("opening the radio port {} at {} baud", link.port, link.baud)
+            })?,
+    );
+    Ok(Client::new(port, key))
+}
+
+fn timeout(s: f64) -> Duration {
+    Duration::from_secs_f64(s.clamp(0.1, 86_400.0))
+}
+
+/// Live progress on stderr: one rewritten line on a terminal, plain lines otherwise.
+struct Bar {
+    tty: bool,
+}
+
+impl Bar {
+    fn line(&self, text: &str) {
+        let mut err = std::io::stderr().lock();
+        if self.tty {
+            let _ = write!(err, "\r\x1b[2K{text}");
+        } else {
+            let _ = writeln!(err, "{text}");
+        }
+        let _ = err.flush();
+    }
+}
+
+fn bar(percent: u8) -> String {
+    let filled = usize::from(percent.min(100)) / 5;
+    format!("[{}{}]", "#".repeat(filled), "-".repeat(20 - filled))
+}
+
+impl Observer for Bar {
+    fn progress(&mut self, p: &Progress) {
+        self.line(&format!(
+            "run {} {:<10} {} {:3}%  {:.2} m  {} lidar frames",
+            p.run_id,
+            p.phase.name(),
+            bar(p.percent),
+            p.percent,
+            p.travelled_m,
+            p.lidar_frames
+        ));
+    }
+    fn log(&mut self, l: &LogLine) {
+        if self.tty {
+            eprintln!();
+        }
+        eprintln!("robot {}: {}", l.level.name(), l.text.as_str());
+    }
+    fn preview(&mut self, received: usize, total: usize) {
+        let pct = (received * 100).checked_div(total).unwrap_or(100);
+        self.line(&format!(
+            "preview {} {received}/{total} chunks",
+            bar(pct as u8)
+        ));
+    }
+}
+
+fn deg(rad: f32) -> String {
+    if rad.is_finite() {
+        format!("{:.1}", rad.to_degrees())
+    } else {
+        "n/a".into()
+    }
+}
+
+/// Prints the result table.
+pub fn print_result(m: &Measured, out: &mut dyn Write) -> std::io::Result<()> {
+    let r = &m.result;
+    writeln!(out, "run {}  vehicle {:?}", r.run_id, r.vehicle_id.as_str())?;
+    writeln!(out, "  {:<18} {:>8} {:>9}", "angle", "degrees", "support")?;
+    writeln!(
+        out,
+        "  {:<18} {:>8} {:>9}",
+        "approach",
+        deg(r.approach_rad),
+        r.approach_support
+    )?;
+    writeln!(
+        out,
+        "  {:<18} {:>8} {:>9}",
+        "departure",
+        deg(r.departure_rad),
+        r.departure_support
+    )?;
+    writeln!(
+        out,
+        "  {:<18} {:>8} {:>9}",
+        "ramp breakover",
+        deg(r.breakover_rad),
+        r.breakover_support
+    )?;
+    writeln!(
+        out,
+        "  ground clearance {:.3} m, wheelbase {:.3} m, track {:.3} m",
+        r.ground_clearance_m, r.wheelbase_m, r.track_m
+    )?;
+    writeln!(
+        out,
+        "  tyre fit rms {:.1} mm, {} cloud points on the robot, warnings: {}",
+        r.tyre_fit_rms_m * 1e3,
+        r.cloud_points,
+        r.warnings
+    )?;
+    if let Some(t) = m.stop_to_result {
+        writeln!(
+            out,
+            "  robot at rest -> result here: {:.2} s",
+            t.as_secs_f64()
+        )?;
+    }
+    Ok(())
+}
+
+fn save_and_print(m: &Measured, dir: &Path, out: &mut dyn Write) -> anyhow::Result<()> {
+    print_result(m, out)?;
+    let files =
+        onboard::client::save(dir, m).with_context(|| format!("saving into {}", dir.display()))?;
+    writeln!(
+        out,
+        "saved {}, {}, {}",
+        files.json.display(),
+        files.ply.display(),
+        files.svg.display()
+    )?;
+    Ok(())
+}
+
+/// `passangle measure`.
+pub fn measure(args: &MeasureArgs, out: &mut dyn Write) -> anyhow::Result<()> {
+    let vehicle_id = Text::new(&args.vehicle_id)
+        .with_context(|| format!("--vehicle-id {:?} is longer than 32 bytes", args.vehicle_id))?;
+    let mut client = open(&args.link)?;
+    let hello = client
+        .connect(timeout(args.link.timeout_s))
+        .context("connecting to the robot")?;
+    if hello.version != protocol::PROTOCOL_VERSION {
+        anyhow::bail!(
+            "the robot speaks protocol version {}, this handheld {}",
+            hello.version,
+            protocol::PROTOCOL_VERSION
+        );
+    }
+    let counter_file = args.link.key_file.with_extension("counter");
+    let counter = onboard::client::next_counter(&counter_file)
+        .with_context(|| format!("updating {}", counter_file.display()))?;
+    let params = StartMeasurement {
+        vehicle_id,
+        speed_mps: args.speed,
+        distance_m: args.distance,
+        zone: match args.zone {
+            ZoneArg::Tyre => Zone::Tyre,
+            ZoneArg::Axle => Zone::Axle,
+        },
+    };
+    let mut bar = Bar {
+        tty: std::io::stderr().is_terminal(),
+    };
+    let m = client.measure(params, counter, timeout(args.run_timeout_s), &mut bar)?;
+    if bar.tty {
+        eprintln!();
+    }
+    save_and_print(&m, &args.out, out)
+}
+
+/// `passangle fetch`.
+pub fn fetch(args: &FetchArgs, out: &mut dyn Write) -> anyhow::Result<()> {
+    let mut client = open(&args.link)?;
+    let mut bar = Bar {
+        tty: std::io::stderr().is_terminal(),
+    };
+    let m = client.fetch(args.run, timeout(args.link.timeout_s.max(120.0)), &mut bar)?;
+    if bar.tty {
+        eprintln!();
+    }
+    save_and_print(&m, &args.out, out)
+}
+
+/// `passangle abort`.
+pub fn abort(args: &AbortArgs, out: &mut dyn Write) -> anyhow::Result<()> {
+    let mut client = open(&args.link)?;
+    client.abort(args.run, timeout(args.link.timeout_s))?;
+    writeln!(out, "abort acknowledged by the robot (it stops first)")?;
+    Ok(())
+}
+
+/// `passangle status`.
+pub fn status(args: &StatusArgs, out: &mut dyn Write) -> anyhow::Result<()> {
+    let mut client = open(&args.link)?;
+    let s = client.status(timeout(args.link.timeout_s))?;
+    let ok = |b: bool| if b { "ok" } else { "NOT OK" };
+    writeln!(out, "phase {} (run {})", s.phase, s.run_id)?;
+    writeln!(
+        out,
+        "firmware {}, lidar {}, camera {}",
+        ok(s.firmware_ok),
+        ok(s.lidar_ok),
+        ok(s.camera_ok)
+    )?;
+    writeln!(out, "interlocks: {}", s.interlocks)?;
+    writeln!(
+        out,
+        "results waiting for this handheld: {}",
+        s.pending_results
+    )?;
+    writeln!(out, "free space for recordings: {} MiB", s.disk_free_mib)?;
+    Ok(())
+}

@@ -1,0 +1,230 @@
+//! `passangle-onboard`: the robot's service (see `onboard::service` and docs/service.md).
+//!
+//! ```text
+//! passangle-onboard run --config /etc/passangle/onboard.toml
+//! passangle-onboard check-config /etc/passangle/onboard.toml
+//! ```
+//!
+//! Exit codes follow sysexits: 64 usage, 65 bad config data, 66 missing input, 69 a device is
+//! unavailable, 70 internal error.
+
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+
+use anyhow::Context;
+use clap::{Parser, Subcommand};
+use onboard::config::{CameraSource, OnboardConfig};
+use onboard::process::PipelineProcessor;
+use onboard::service::{self, Io, Notifier, Port};
+
+/// passangle onboard service: drives the robot under a vehicle and measures its angles.
+#[derive(Parser)]
+#[command(version, about)]
+struct Cli {
+    /// Log filter (tracing-subscriber EnvFilter syntax), e.g. `info`, `onboard=debug`.
+    #[arg(long, default_value = "info", global = true)]
+    log_level: String,
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Run the service.
+    Run {
+        /// Configuration file.
+        #[arg(long, default_value = "/etc/passangle/onboard.toml")]
+        config: PathBuf,
+    },
+    /// Check a configuration file and print the effective values of the main keys.
+    CheckConfig {
+        /// Configuration file.
+        file: PathBuf,
+    },
+}
+
+/// sysexits(3) codes.
+mod exit {
+    pub const DATAERR: u8 = 65;
+    pub const NOINPUT: u8 = 66;
+    pub const UNAVAILABLE: u8 = 69;
+    pub const SOFTWARE: u8 = 70;
+}
+
+struct SdNotify;
+
+impl Notifier for SdNotify {
+    fn ready(&mut self) {
+        let _ = sd_notify::notify(&[sd_notify::NotifyState::Ready]);
+    }
+    fn watchdog(&mut self) {
+        let _ = sd_notify::notify(&[sd_notify::NotifyState::Watchdog]);
+    }
+    fn status(&mut self, text: &str) {
+        let _ = sd_notify::notify(&[sd_notify::NotifyState::Status(text)]);
+    }
+    fn stopping(&mut self) {
+        let _ = sd_notify::notify(&[sd_notify::NotifyState::Stopping]);
+    }
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    // Logs go to stderr without ANSI colours or timestamps when under systemd (journald adds them).
+    let under_systemd = std::env::var_os("JOURNAL_STREAM").is_some();
+    let filter = tracing_subscriber::EnvFilter::try_new(&cli.log_level)
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info"));
+    let builder = tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr)
+        .with_ansi(!under_systemd);
+    if under_systemd {
+        builder.without_time().init();
+    } else {
+        builder.init();
+    }
+    match cli.command {
+        Command::CheckConfig { file } => check_config(&file),
+        Command::Run { config } => match run(&config) {
+            Ok(()) => ExitCode::SUCCESS,
+            Err((code, e)) => {
+                tracing::error!("{e:#}");
+                ExitCode::from(code)
+            }
+        },
+    }
+}
+
+fn check_config(file: &Path) -> ExitCode {
+    match OnboardConfig::load(file) {
+        Ok(c) => {
+            println!("{}: ok", file.display());
+            println!(
+                "  radio       {} at {} baud, key {}",
+                c.radio.port,
+                c.radio.baud,
+                c.radio.key_file.display()
+            );
+            println!(
+                "  mcu         {} at {} baud, heartbeat {} ms",
+                c.mcu.port, c.mcu.baud, c.mcu.heartbeat_period_ms
+            );
+            println!(
+                "  lidar       {} (position {:?})",
+                c.lidar.data_addr, c.lidar.position_addr
+            );
+            println!(
+                "  camera      {:?} {}",
+                c.camera.source,
+                c.camera.device.display()
+            );
+            println!("  recordings  {}", c.recording.root.display());
+            println!(
+                "  run         max {} m/s, {} m",
+                c.run.max_speed_mps, c.run.max_distance_m
+            );
+            ExitCode::SUCCESS
+        }
+        Err(e) => {
+            eprintln!("error: {e}");
+            ExitCode::from(match e {
+                onboard::config::ConfigError::Io { .. } => exit::NOINPUT,
+                _ => exit::DATAERR,
+            })
+        }
+    }
+}
+
+fn open_port(path: &str, baud: u32) -> anyhow::Result<Box<dyn Port>> {
+    let port = serialport::new(path, baud)
+        .timeout(Duration::from_millis(1))
+        .open_native()
+        .with_context(|| format!("opening serial port {path} at {baud} baud"))?;
+    Ok(Box::new(port))
+}
+
+fn run(config_path: &Path) -> Result<(), (u8, anyhow::Error)> {
+    let text = std::fs::read_to_string(config_path)
+        .with_context(|| format!("reading {}", config_path.display()))
+        .map_err(|e| (exit::NOINPUT, e))?;
+    let config = OnboardConfig::parse(&text, config_path).map_err(|e| (exit::DATAERR, e.into()))?;
+    let shutdown = Arc::new(AtomicBool::new(false));
+    // Before any other thread starts, so that every thread inherits the blocked signals.
+    install_signals(Arc::clone(&shutdown)).map_err(|e| (exit::SOFTWARE, e))?;
+    let unavailable = |e: anyhow::Error| (exit::UNAVAILABLE, e);
+    let radio = open_port(&config.radio.port, config.radio.baud).map_err(unavailable)?;
+    let mcu = open_port(&config.mcu.port, config.mcu.baud).map_err(unavailable)?;
+    let lidar = service::spawn_lidar_reader(&config.lidar, Arc::clone(&shutdown))
+        .context("opening the lidar socket")
+        .map_err(unavailable)?;
+    let depth = match config.camera.source {
+        CameraSource::None => None,
+        CameraSource::V4l2 => Some(open_v4l2(&config, Arc::clone(&shutdown)).map_err(unavailable)?),
+        CameraSource::Simulated => {
+            return Err((
+                exit::DATAERR,
+                anyhow::anyhow!(
+                    "{}: camera.source = \"simulated\" only works inside passangle-sim",
+                    config_path.display()
+                ),
+            ));
+        }
+    };
+    let processor = Arc::new(PipelineProcessor {
+        config: config.processing.clone(),
+    });
+    let io = Io {
+        radio,
+        mcu,
+        lidar,
+        depth,
+        crash: None,
+    };
+    service::run(
+        config,
+        text,
+        io,
+        processor,
+        &shutdown,
+        &mut SdNotify,
+        Arc::new(Mutex::new(service::ServiceStats::default())),
+    )
+    .map_err(|e| (exit::SOFTWARE, e.into()))
+}
+
+/// SIGTERM and SIGINT are blocked in every thread and awaited by one thread that sets `flag`:
+/// no async-signal handler, no unsafe code.
+fn install_signals(flag: Arc<AtomicBool>) -> anyhow::Result<()> {
+    use nix::sys::signal::{SigSet, Signal};
+    let mut set = SigSet::empty();
+    set.add(Signal::SIGTERM);
+    set.add(Signal::SIGINT);
+    set.thread_block().context("blocking SIGTERM/SIGINT")?;
+    std::thread::Builder::new()
+        .name("signals".into())
+        .spawn(move || {
+            if let Ok(sig) = set.wait() {
+                tracing::info!("{sig}: shutting down (the robot stops first)");
+                flag.store(true, Ordering::Relaxed);
+            }
+        })
+        .context("starting the signal thread")?;
+    Ok(())
+}
+
+/// V4L2 capture of the D435 depth node is not in this build yet (it needs the `v4l` crate and
+/// libclang for its bindings); until then a robot runs with `camera.source = "none"` (lidar and
+/// wheel odometry only) and the simulator feeds simulated depth frames.
+fn open_v4l2(
+    config: &OnboardConfig,
+    _shutdown: Arc<AtomicBool>,
+) -> anyhow::Result<std::sync::mpsc::Receiver<service::DepthFrame>> {
+    anyhow::bail!(
+        "camera.source = \"v4l2\" ({}): V4L2 depth capture is not implemented in this build; \
+         set camera.source = \"none\" to run on lidar and wheel odometry",
+        config.camera.device.display()
+    )
+}

@@ -1,0 +1,446 @@
+//! The handheld's imperative shell around [`HandheldRadio`]: a blocking client over any byte
+//! [`Port`] (the radio modem's serial port, a pseudo-terminal in the simulator). Used by
+//! `passangle measure/status/abort/fetch` and by `passangle-sim demo`.
+
+use std::fmt::Write as _;
+use std::io::{self, Read, Write};
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
+
+use protocol::auth::Key;
+use protocol::common::LogLine;
+use protocol::radio::{
+    MeasurementResult, Phase, Progress, Refused, RobotStatus, SignedStart, StartMeasurement,
+};
+use protocol::{Message, ids};
+
+use crate::link::handheld::{HandheldConfig, HandheldEvent, HandheldRadio};
+use crate::link::preview;
+use crate::recorder::ResultRecord;
+use crate::service::Port;
+
+/// Why a client command failed (each names what the operator should look at).
+#[derive(Debug, thiserror::Error)]
+pub enum ClientError {
+    /// The port failed.
+    #[error("radio port: {0}")]
+    Io(#[from] io::Error),
+    /// Nothing answered in time.
+    #[error("no answer from the robot within {0:?} (out of range, off, or another pairing key?)")]
+    Timeout(Duration),
+    /// The robot refused the command.
+    #[error("the robot refused {what}: {reason} ({detail})")]
+    Refused {
+        /// Which command.
+        what: &'static str,
+        /// Why.
+        reason: String,
+        /// Detail from the robot.
+        detail: String,
+    },
+    /// The run ended without a result.
+    #[error("run {run_id} {phase}: {log}")]
+    RunEnded {
+        /// The run.
+        run_id: u32,
+        /// Aborted or Failed.
+        phase: Phase,
+        /// The robot's last log lines.
+        log: String,
+    },
+    /// A command could not be encoded.
+    #[error("{0}")]
+    Send(#[from] crate::link::reliable::SendError),
+}
+
+/// What the operator sees while a run goes on.
+pub trait Observer {
+    /// Progress of the run.
+    fn progress(&mut self, p: &Progress);
+    /// A log line from the robot.
+    fn log(&mut self, l: &LogLine);
+    /// The result arrived; the preview follows (`received`/`total` chunks).
+    fn preview(&mut self, received: usize, total: usize);
+}
+
+/// An observer that ignores everything.
+#[derive(Debug, Default)]
+pub struct Quiet;
+
+impl Observer for Quiet {
+    fn progress(&mut self, _: &Progress) {}
+    fn log(&mut self, _: &LogLine) {}
+    fn preview(&mut self, _: usize, _: usize) {}
+}
+
+/// A measurement as the handheld received it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Measured {
+    /// The result.
+    pub result: MeasurementResult,
+    /// The decimated preview, millimetres.
+    pub preview_mm: Vec<[i16; 3]>,
+    /// From the first `Processing` progress (the robot is at rest) to the result's arrival.
+    pub stop_to_result: Option<Duration>,
+    /// From the result to the complete preview.
+    pub preview_time: Option<Duration>,
+}
+
+/// The blocking client.
+pub struct Client {
+    radio: HandheldRadio,
+    port: Box<dyn Port>,
+    epoch: Instant,
+    buf: Vec<u8>,
+    recent_log: Vec<String>,
+}
+
+fn wall_us() -> u64 {
+    SystemTime::now()
+        .duration_since(UNIX_EPOCH)
+        .map_or(0, |d| u64::try_from(d.as_micros()).unwrap_or(u64::MAX))
+}
+
+impl Client {
+    /// A client over `port` with the pairing key.
+    pub fn new(port: Box<dyn Port>, key: Key) -> Self {
+        Self {
+            radio: HandheldRadio::new(HandheldConfig::default(), key, (wall_us() / 1000) as u16),
+            port,
+            epoch: Instant::now(),
+            buf: vec![0; 4096],
+            recent_log: Vec::new(),
+        }
+    }
+
+    fn now_us(&self) -> u64 {
+        u64::try_from(self.epoch.elapsed().as_micros()).unwrap_or(u64::MAX)
+    }
+
+    /// Moves bytes for up to `timeout`, handing every event to `on_event` until it returns
+    /// `Some`. Returns that value, or [`ClientError::Timeout`].
+    pub fn pump<T>(
+        &mut self,
+        timeout: Duration,
+        mut on_event: impl FnMut(&mut HandheldRadio, &HandheldEvent) -> Option<Result<T, ClientError>>,
+    ) -> Result<T, ClientError> {
+        let end = Instant::now() + timeout;
+        loop {
+            let now = self.now_us();
+            let n = match self.port.read(&mut self.buf) {
+                Ok(n) => n,
+                Err(e)
+                    if matches!(
+                        e.kind(),
+                        io::ErrorKind::WouldBlock
+                            | io::ErrorKind::TimedOut
+                            | io::ErrorKind::Interrupted
+                    ) =>
+                {
+                    0
+                }
+                Err(e) => return Err(e.into()),
+            };
+            let mut events = self.radio.receive(now, &self.buf[..n]);
+            events.extend(self.radio.poll(now));
+            for e in &events {
+                if let HandheldEvent::Log(l) = e {
+                    self.recent_log.push(l.text.as_str().to_owned());
+                    if self.recent_log.len() > 5 {
+                        self.recent_log.remove(0);
+                    }
+                }
+                if let Some(done) = on_event(&mut self.radio, e) {
+                    self.flush_out(now)?;
+                    return done;
+                }
+            }
+            self.flush_out(now)?;
+            if Instant::now() >= end {
+                return Err(ClientError::Timeout(timeout));
+            }
+            if n == 0 {
+                std::thread::sleep(Duration::from_millis(2));
+            }
+        }
+    }
+
+    fn flush_out(&mut self, now: u64) -> Result<(), ClientError> {
+        let out = self.radio.transmit(now);
+        if !out.is_empty() {
+            self.port.write_all(&out)?;
+            self.port.flush()?;
+        }
+        Ok(())
+    }
+
+    /// Keeps the link running for `duration` (lets acks and the result ack leave).
+    pub fn linger(&mut self, duration: Duration) -> Result<(), ClientError> {
+        match self.pump::<()>(duration, |_, _| None) {
+            Err(ClientError::Timeout(_)) | Ok(()) => Ok(()),
+            Err(e) => Err(e),
+        }
+    }
+
+    /// Says hello and waits for the robot's.
+    pub fn connect(&mut self, timeout: Duration) -> Result<protocol::Hello, ClientError> {
+        self.radio.hello()?;
+        self.pump(timeout, |_, e| match e {
+            HandheldEvent::Hello(h) => Some(Ok(*h)),
+            _ => None,
+        })
+    }
+
+    /// Asks for the robot's status.
+    pub fn status(&mut self, timeout: Duration) -> Result<RobotStatus, ClientError> {
+        self.radio.request_status()?;
+        self.pump(timeout, |_, e| match e {
+            HandheldEvent::Status(s) => Some(Ok(*s)),
+            _ => None,
+        })
+    }
+
+    /// Sends an abort and waits for its ack.
+    pub fn abort(&mut self, run_id: u32, timeout: Duration) -> Result<(), ClientError> {
+        let seq = self.radio.abort(run_id)?;
+        self.pump(timeout, |_, e| match e {
+            HandheldEvent::Acked { msg_id, seq: s } if *msg_id == ids::ABORT && *s == seq => {
+                Some(Ok(()))
+            }
+            _ => None,
+        })
+    }
+
+    /// Fetches an earlier run's result and preview.
+    pub fn fetch(
+        &mut self,
+        run_id: u32,
+        timeout: Duration,
+        observer: &mut dyn Observer,
+    ) -> Result<Measured, ClientError> {
+        let seq = self.radio.fetch(run_id)?;
+        let mut result_at = None;
+        let out = self.pump(timeout, |radio, e| match e {
+            HandheldEvent::Refused(r) if r.msg_id == ids::FETCH_RUN && r.seq == seq => {
+                Some(Err(refused("fetch", r)))
+            }
+            HandheldEvent::Result(r) if r.run_id == run_id => {
+                result_at.get_or_insert_with(Instant::now);
+                observer.preview(0, usize::from(r.preview_chunks));
+                None
+            }
+            HandheldEvent::Complete { result, preview_mm } if result.run_id == run_id => {
+                Some(Ok(Measured {
+                    result: result.clone(),
+                    preview_mm: preview_mm.clone(),
+                    stop_to_result: None,
+                    preview_time: result_at.map(|t| t.elapsed()),
+                }))
+            }
+            _ => {
+                if let Some((got, total)) = radio.preview_progress(run_id) {
+                    observer.preview(got, total);
+                }
+                None
+            }
+        })?;
+        self.linger(Duration::from_millis(500))?;
+        Ok(out)
+    }
+
+    /// Starts a measurement and follows it to the result and its preview.
+    pub fn measure(
+        &mut self,
+        params: StartMeasurement,
+        counter: u64,
+        timeout: Duration,
+        observer: &mut dyn Observer,
+    ) -> Result<Measured, ClientError> {
+        let seq = self.radio.start(params, counter)?;
+        let mut run_id = None;
+        let mut at_rest = None;
+        let mut result_at: Option<Instant> = None;
+        let mut stop_to_result = None;
+        let out = self.pump(timeout, |radio, e| {
+            match e {
+                HandheldEvent::Refused(r)
+                    if r.msg_id == <SignedStart as Message>::ID && r.seq == seq =>
+                {
+                    return Some(Err(refused("the start", r)));
+                }
+                HandheldEvent::Lost { msg_id, .. } if *msg_id == <SignedStart as Message>::ID => {
+                    return Some(Err(ClientError::Timeout(timeout)));
+                }
+                HandheldEvent::Progress(p) => {
+                    if run_id.is_none() && p.phase == Phase::Checks {
+                        run_id = Some(p.run_id);
+                    }
+                    if Some(p.run_id) == run_id {
+                        observer.progress(p);
+                        if p.phase == Phase::Processing {
+                            at_rest.get_or_insert_with(Instant::now);
+                        }
+                        if matches!(p.phase, Phase::Aborted | Phase::Failed) {
+                            return Some(Err(ClientError::RunEnded {
+                                run_id: p.run_id,
+                                phase: p.phase,
+                                log: String::new(),
+                            }));
+                        }
+                    }
+                }
+                HandheldEvent::Log(l) => observer.log(l),
+                HandheldEvent::Result(r) if Some(r.run_id) == run_id || run_id.is_none() => {
+                    run_id = Some(r.run_id);
+                    if result_at.is_none() {
+                        result_at = Some(Instant::now());
+                        stop_to_result = at_rest.map(|t: Instant| t.elapsed());
+                    }
+                    observer.preview(0, usize::from(r.preview_chunks));
+                }
+                HandheldEvent::Complete { result, preview_mm } if Some(result.run_id) == run_id => {
+                    return Some(Ok(Measured {
+                        result: result.clone(),
+                        preview_mm: preview_mm.clone(),
+                        stop_to_result,
+                        preview_time: result_at.map(|t| t.elapsed()),
+                    }));
+                }
+                _ => {}
+            }
+            if let Some(id) = run_id
+                && let Some((got, total)) = radio.preview_progress(id)
+            {
+                observer.preview(got, total);
+            }
+            None
+        });
+        let out = match out {
+            Err(ClientError::RunEnded { run_id, phase, .. }) => Err(ClientError::RunEnded {
+                run_id,
+                phase,
+                log: self.recent_log.join("; "),
+            }),
+            other => other,
+        }?;
+        // Let the result ack leave (and be retransmitted if lost) before the program exits.
+        self.linger(Duration::from_secs(2))?;
+        Ok(out)
+    }
+}
+
+fn refused(what: &'static str, r: &Refused) -> ClientError {
+    ClientError::Refused {
+        what,
+        reason: r.reason.to_string(),
+        detail: r.detail.as_str().to_owned(),
+    }
+}
+
+/// Files the handheld saves for a measurement, under `dir`.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct SavedFiles {
+    /// `run-NNNNNN.json`.
+    pub json: PathBuf,
+    /// `run-NNNNNN-preview.ply`.
+    pub ply: PathBuf,
+    /// `run-NNNNNN-side.svg`.
+    pub svg: PathBuf,
+}
+
+/// Saves the result JSON, the preview as PLY and a side-view SVG of the preview.
+pub fn save(dir: &Path, m: &Measured) -> io::Result<SavedFiles> {
+    std::fs::create_dir_all(dir)?;
+    let stem = crate::recorder::run_dir_name(m.result.run_id);
+    let files = SavedFiles {
+        json: dir.join(format!("{stem}.json")),
+        ply: dir.join(format!("{stem}-preview.ply")),
+        svg: dir.join(format!("{stem}-side.svg")),
+    };
+    let json =
+        serde_json::to_vec_pretty(&ResultRecord::from_wire(&m.result)).map_err(io::Error::other)?;
+    std::fs::write(&files.json, json)?;
+    let cloud = crate::cloud::Cloud {
+        points_m: m
+            .preview_mm
+            .iter()
+            .map(|p| preview::dequantise(*p))
+            .collect(),
+    };
+    let mut ply = Vec::new();
+    crate::cloud::write_ply(
+        &mut ply,
+        &cloud,
+        crate::cloud::PlyEncoding::BinaryLittleEndian,
+    )?;
+    std::fs::write(&files.ply, ply)?;
+    std::fs::write(&files.svg, preview_svg(m))?;
+    Ok(files)
+}
+
+/// A side view (x right, z up) of the preview points with the three angles written on it.
+pub fn preview_svg(m: &Measured) -> String {
+    let (w, h) = (1000.0f64, 320.0f64);
+    let pts: Vec<(f64, f64)> = m
+        .preview_mm
+        .iter()
+        .map(|p| (f64::from(p[0]), f64::from(p[2])))
+        .collect();
+    let (mut x0, mut x1, mut z0, mut z1) = (f64::MAX, f64::MIN, f64::MAX, f64::MIN);
+    for &(x, z) in &pts {
+        x0 = x0.min(x);
+        x1 = x1.max(x);
+        z0 = z0.min(z);
+        z1 = z1.max(z);
+    }
+    if pts.is_empty() {
+        (x0, x1, z0, z1) = (0.0, 1.0, 0.0, 1.0);
+    }
+    let scale = ((w - 40.0) / (x1 - x0).max(1.0)).min((h - 80.0) / (z1 - z0).max(1.0));
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        r#"<svg xmlns="http://www.w3.org/2000/svg" width="{w}" height="{h}" viewBox="0 0 {w} {h}">"#
+    );
+    let _ = writeln!(s, r#"<rect width="{w}" height="{h}" fill="white"/>"#);
+    for (x, z) in pts {
+        let px = 20.0 + (x - x0) * scale;
+        let py = h - 20.0 - (z - z0) * scale;
+        let _ = writeln!(
+            s,
+            r##"<circle cx="{px:.1}" cy="{py:.1}" r="1.2" fill="#335"/>"##
+        );
+    }
+    let r = &m.result;
+    let _ = writeln!(
+        s,
+        r#"<text x="20" y="24" font-family="sans-serif" font-size="16">run {} {}: approach {:.1} deg, departure {:.1} deg, breakover {:.1} deg (preview, {} points)</text>"#,
+        r.run_id,
+        xml_escape(r.vehicle_id.as_str()),
+        r.approach_rad.to_degrees(),
+        r.departure_rad.to_degrees(),
+        r.breakover_rad.to_degrees(),
+        m.preview_mm.len()
+    );
+    s.push_str("</svg>\n");
+    s
+}
+
+fn xml_escape(s: &str) -> String {
+    s.replace('&', "&amp;")
+        .replace('<', "&lt;")
+        .replace('>', "&gt;")
+        .replace('"', "&quot;")
+}
+
+/// A start counter that never repeats for a key: microseconds since the Unix epoch, kept above
+/// the last one used (stored in `counter_file`).
+pub fn next_counter(counter_file: &Path) -> io::Result<u64> {
+    let last = std::fs::read_to_string(counter_file)
+        .ok()
+        .and_then(|t| t.trim().parse::<u64>().ok())
+        .unwrap_or(0);
+    let next = wall_us().max(last + 1);
+    std::fs::write(counter_file, format!("{next}\n"))?;
+    Ok(next)
+}

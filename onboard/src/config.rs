@@ -1,0 +1,612 @@
+//! The onboard service's configuration (`/etc/passangle/onboard.toml`) and the pairing files.
+//!
+//! Strict TOML: unknown keys are rejected and every error names the file, the key and the line
+//! (toml's own span report). Every key has a documented default except the two serial ports; the
+//! shipped `onboard/onboard.example.toml` lists them all and is checked by a test.
+//!
+//! Pairing: the pre-shared key is 32 random bytes stored as 64 hex digits in a file readable only
+//! by its owner (`passangle pair` writes it on the handheld; the same file is copied to the robot).
+//! The robot keeps the last accepted start counter in `counter-file` (written atomically before
+//! the robot moves), so a captured start cannot be replayed even after a restart.
+
+use std::fs;
+use std::io;
+use std::net::SocketAddr;
+use std::path::{Path, PathBuf};
+
+use protocol::auth::{KEY_LEN, Key};
+use protocol::mcu::McuConfig;
+use serde::{Deserialize, Serialize};
+
+use crate::recorder::{Intrinsics, write_atomic};
+use crate::run::RunConfig;
+
+/// A configuration or pairing-file error, naming the file and what was wrong.
+#[derive(Debug, thiserror::Error)]
+pub enum ConfigError {
+    /// The file could not be read or written.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The error.
+        source: io::Error,
+    },
+    /// The TOML did not parse or has unknown/mistyped keys (the message names key and line).
+    #[error("{path}: {message}")]
+    Parse {
+        /// The file.
+        path: PathBuf,
+        /// toml's report.
+        message: String,
+    },
+    /// A value is out of range.
+    #[error("{path}: `{key}` {problem}")]
+    Invalid {
+        /// The file.
+        path: PathBuf,
+        /// Dotted key.
+        key: &'static str,
+        /// What is wrong.
+        problem: String,
+    },
+}
+
+/// The whole onboard configuration.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(rename_all = "kebab-case", deny_unknown_fields)]
+pub struct OnboardConfig {
+    /// Where runs are recorded.
+    #[serde(default)]
+    pub recording: RecordingConfig,
+    /// The radio modem.
+    pub radio: RadioConfig,
+    /// The UART to the firmware.
+    pub mcu: McuLinkConfig,
+    /// The VLP-16.
+    #[serde(default)]
+    pub lidar: LidarConfig,
+    /// The D435 depth stream.
+    #[serde(default)]
+    pub camera: CameraConfig,
+    /// Run limits and timeouts.
+    #[serde(default)]
+    pub run: RunConfig,
+    /// The cloud preview sent over the radio.
+    #[serde(default)]
+    pub preview: PreviewConfig,
+    /// Cloud building and angles (`[processing]`, with the pipeline under `[processing.pipeline]`).
+    #[serde(default)]
+    pub processing: crate::process::ProcessConfig,
+}
+
+/// `[recording]`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case", deny_unknown_fields, default)]
+pub struct RecordingConfig {
+    /// Root directory of the run directories (default `/var/lib/passangle/runs`).
+    pub root: PathBuf,
+    /// How often the streams are flushed to disk, ms (default 1000).
+    pub flush_period_ms: u64,
+}
+
+impl Default for RecordingConfig {
+    fn default() -> Self {
+        Self {
+            root: PathBuf::from("/var/lib/passangle/runs"),
+            flush_period_ms: 1_000,
+        }
+    }
+}
+
+/// `[radio]`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case", deny_unknown_fields)]
+pub struct RadioConfig {
+    /// Serial device of the radio modem (required), e.g. `/dev/ttyUSB0`.
+    pub port: String,
+    /// Baud rate (default 57600).
+    #[serde(default = "default_radio_baud")]
+    pub baud: u32,
+    /// Pairing key file (default `/etc/passangle/pairing.key`).
+    #[serde(default = "default_key_file")]
+    pub key_file: PathBuf,
+    /// Last accepted start counter (default `/var/lib/passangle/start-counter`).
+    #[serde(default = "default_counter_file")]
+    pub counter_file: PathBuf,
+}
+
+fn default_radio_baud() -> u32 {
+    57_600
+}
+fn default_key_file() -> PathBuf {
+    PathBuf::from("/etc/passangle/pairing.key")
+}
+fn default_counter_file() -> PathBuf {
+    PathBuf::from("/var/lib/passangle/start-counter")
+}
+
+/// `[mcu]`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case", deny_unknown_fields)]
+pub struct McuLinkConfig {
+    /// Serial device of the STM32 board (required), e.g. `/dev/ttyACM0`.
+    pub port: String,
+    /// Baud rate (default 921600).
+    #[serde(default = "default_mcu_baud")]
+    pub baud: u32,
+    /// Heartbeat period, ms (default 20; the firmware stops after 100 ms without one).
+    #[serde(default = "default_heartbeat_ms")]
+    pub heartbeat_period_ms: u64,
+    /// Acceleration of the speed ramp, m/s^2 (default 0.3).
+    #[serde(default = "default_accel")]
+    pub accel_mps2: f32,
+    /// Jerk of the speed ramp, m/s^3 (default 1.0; 0 = trapezoid).
+    #[serde(default = "default_jerk")]
+    pub jerk_mps3: f32,
+    /// The firmware's configuration, sent after its hello.
+    #[serde(default)]
+    pub firmware: FirmwareConfig,
+}
+
+fn default_mcu_baud() -> u32 {
+    921_600
+}
+fn default_heartbeat_ms() -> u64 {
+    20
+}
+fn default_accel() -> f32 {
+    0.3
+}
+fn default_jerk() -> f32 {
+    1.0
+}
+
+/// `[mcu.firmware]`: mirrors [`McuConfig`] (see its field docs), with the robot's defaults.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case", deny_unknown_fields, default)]
+#[allow(missing_docs)] // each field is documented on `protocol::mcu::McuConfig`
+pub struct FirmwareConfig {
+    pub wheel_radius_m: f32,
+    pub half_length_m: f32,
+    pub half_width_m: f32,
+    pub esc_ids: [u8; 4],
+    pub wheel_signs: [i8; 4],
+    pub current_limit_a: f32,
+    pub speed_kp: f32,
+    pub speed_ki: f32,
+    pub speed_kd: f32,
+    pub max_speed_mps: f32,
+    pub max_accel_mps2: f32,
+    pub heartbeat_timeout_ms: u16,
+    pub feedback_timeout_ms: u16,
+    pub odometry_period_ms: u16,
+    pub over_temperature_c: u8,
+    pub over_current_a: f32,
+    pub stall_timeout_ms: u16,
+}
+
+impl Default for FirmwareConfig {
+    /// The 295 x 384 mm robot with 76 mm mecanum wheels on M3508 motors.
+    fn default() -> Self {
+        Self {
+            wheel_radius_m: 0.038,
+            half_length_m: 0.12,
+            half_width_m: 0.11,
+            esc_ids: [1, 2, 3, 4],
+            wheel_signs: [1, -1, 1, -1],
+            current_limit_a: 10.0,
+            speed_kp: 0.6,
+            speed_ki: 8.0,
+            speed_kd: 0.0,
+            max_speed_mps: 0.8,
+            max_accel_mps2: 1.0,
+            heartbeat_timeout_ms: 100,
+            feedback_timeout_ms: 10,
+            odometry_period_ms: 10,
+            over_temperature_c: 80,
+            over_current_a: 18.0,
+            stall_timeout_ms: 500,
+        }
+    }
+}
+
+impl FirmwareConfig {
+    /// From the wire form (e.g. the firmware's own defaults, `control::Config::to_mcu`).
+    pub fn from_wire(m: &McuConfig) -> Self {
+        Self {
+            wheel_radius_m: m.wheel_radius_m,
+            half_length_m: m.half_length_m,
+            half_width_m: m.half_width_m,
+            esc_ids: m.esc_ids,
+            wheel_signs: m.wheel_signs,
+            current_limit_a: m.current_limit_a,
+            speed_kp: m.speed_kp,
+            speed_ki: m.speed_ki,
+            speed_kd: m.speed_kd,
+            max_speed_mps: m.max_speed_mps,
+            max_accel_mps2: m.max_accel_mps2,
+            heartbeat_timeout_ms: m.heartbeat_timeout_ms,
+            feedback_timeout_ms: m.feedback_timeout_ms,
+            odometry_period_ms: m.odometry_period_ms,
+            over_temperature_c: m.over_temperature_c,
+            over_current_a: m.over_current_a,
+            stall_timeout_ms: m.stall_timeout_ms,
+        }
+    }
+
+    /// The wire form.
+    pub fn to_wire(&self) -> McuConfig {
+        McuConfig {
+            wheel_radius_m: self.wheel_radius_m,
+            half_length_m: self.half_length_m,
+            half_width_m: self.half_width_m,
+            esc_ids: self.esc_ids,
+            wheel_signs: self.wheel_signs,
+            current_limit_a: self.current_limit_a,
+            speed_kp: self.speed_kp,
+            speed_ki: self.speed_ki,
+            speed_kd: self.speed_kd,
+            max_speed_mps: self.max_speed_mps,
+            max_accel_mps2: self.max_accel_mps2,
+            heartbeat_timeout_ms: self.heartbeat_timeout_ms,
+            feedback_timeout_ms: self.feedback_timeout_ms,
+            odometry_period_ms: self.odometry_period_ms,
+            over_temperature_c: self.over_temperature_c,
+            over_current_a: self.over_current_a,
+            stall_timeout_ms: self.stall_timeout_ms,
+        }
+    }
+}
+
+/// `[lidar]`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case", deny_unknown_fields, default)]
+pub struct LidarConfig {
+    /// Data packets (default `0.0.0.0:2368`).
+    pub data_addr: SocketAddr,
+    /// Position packets (default `0.0.0.0:8308`; remove to ignore them).
+    pub position_addr: Option<SocketAddr>,
+    /// The lidar counts as alive while its last packet is younger than this, ms (default 500).
+    pub alive_timeout_ms: u64,
+}
+
+impl Default for LidarConfig {
+    fn default() -> Self {
+        Self {
+            data_addr: SocketAddr::from(([0, 0, 0, 0], 2368)),
+            position_addr: Some(SocketAddr::from(([0, 0, 0, 0], 8308))),
+            alive_timeout_ms: 500,
+        }
+    }
+}
+
+/// Where depth frames come from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum CameraSource {
+    /// The D435's UVC depth node through V4L2 (not implemented in this build: refused at start).
+    V4l2,
+    /// Frames pushed in by the embedding program (the simulator).
+    Simulated,
+    /// No camera: runs proceed on lidar and wheel odometry only (the checks skip the camera).
+    None,
+}
+
+/// `[camera]`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case", deny_unknown_fields, default)]
+pub struct CameraConfig {
+    /// Source (default `none` while V4L2 capture is not in the build).
+    pub source: CameraSource,
+    /// V4L2 device of the depth stream (default `/dev/video0`; the D435 exposes several nodes).
+    pub device: PathBuf,
+    /// Width, pixels (default 848).
+    pub width: u16,
+    /// Height, pixels (default 480).
+    pub height: u16,
+    /// Frames per second (default 30).
+    pub fps: u32,
+    /// Record every n-th frame (default 3: 10 Hz, enough for the near field at 0.2 m/s).
+    pub record_every: u32,
+    /// Intrinsics of the depth stream (V4L2 does not report them; defaults: D435 at 848x480).
+    pub intrinsics: Intrinsics,
+    /// The camera counts as alive while its last frame is younger than this, ms (default 500).
+    pub alive_timeout_ms: u64,
+}
+
+impl Default for CameraConfig {
+    fn default() -> Self {
+        Self {
+            source: CameraSource::None,
+            device: PathBuf::from("/dev/video0"),
+            width: 848,
+            height: 480,
+            fps: 30,
+            record_every: 3,
+            intrinsics: Intrinsics {
+                fx: 421.0,
+                fy: 421.0,
+                cx: 424.0,
+                cy: 240.0,
+                depth_scale_m: 0.001,
+            },
+            alive_timeout_ms: 500,
+        }
+    }
+}
+
+/// `[preview]`.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case", deny_unknown_fields, default)]
+pub struct PreviewConfig {
+    /// Largest number of preview points (default 1500: about 63 chunks, 13 s of airtime at 57600
+    /// baud after the result itself).
+    pub max_points: usize,
+    /// Decimation voxel, m (default 0.05, doubled until the count fits).
+    pub voxel_m: f64,
+}
+
+impl Default for PreviewConfig {
+    fn default() -> Self {
+        Self {
+            max_points: 1_500,
+            voxel_m: 0.05,
+        }
+    }
+}
+
+impl OnboardConfig {
+    /// Parses and checks a configuration text; `path` is only used in messages.
+    pub fn parse(text: &str, path: &Path) -> Result<Self, ConfigError> {
+        let config: Self = toml::from_str(text).map_err(|e| ConfigError::Parse {
+            path: path.to_owned(),
+            message: e.to_string(),
+        })?;
+        config.check(path)?;
+        Ok(config)
+    }
+
+    /// Reads, parses and checks a configuration file.
+    pub fn load(path: &Path) -> Result<Self, ConfigError> {
+        let text = fs::read_to_string(path).map_err(|source| ConfigError::Io {
+            path: path.to_owned(),
+            source,
+        })?;
+        Self::parse(&text, path)
+    }
+
+    /// Range checks the types cannot express.
+    pub fn check(&self, path: &Path) -> Result<(), ConfigError> {
+        let bad = |key: &'static str, problem: String| {
+            Err(ConfigError::Invalid {
+                path: path.to_owned(),
+                key,
+                problem,
+            })
+        };
+        if self.radio.baud == 0 {
+            return bad("radio.baud", "must be above 0".into());
+        }
+        if self.mcu.baud == 0 {
+            return bad("mcu.baud", "must be above 0".into());
+        }
+        if !(5..=50).contains(&self.mcu.heartbeat_period_ms) {
+            return bad(
+                "mcu.heartbeat-period-ms",
+                format!(
+                    "{} is outside 5..=50 (the firmware stops after {} ms without one)",
+                    self.mcu.heartbeat_period_ms, self.mcu.firmware.heartbeat_timeout_ms
+                ),
+            );
+        }
+        if u64::from(self.mcu.firmware.heartbeat_timeout_ms) < 2 * self.mcu.heartbeat_period_ms {
+            return bad(
+                "mcu.firmware.heartbeat-timeout-ms",
+                "must be at least twice mcu.heartbeat-period-ms".into(),
+            );
+        }
+        if !(self.mcu.accel_mps2 > 0.0 && self.mcu.accel_mps2 <= self.mcu.firmware.max_accel_mps2) {
+            return bad(
+                "mcu.accel-mps2",
+                format!(
+                    "must be in (0, mcu.firmware.max-accel-mps2 = {}]",
+                    self.mcu.firmware.max_accel_mps2
+                ),
+            );
+        }
+        if !(self.mcu.jerk_mps3 >= 0.0 && self.mcu.jerk_mps3.is_finite()) {
+            return bad("mcu.jerk-mps3", "must be finite and >= 0".into());
+        }
+        if self.run.max_speed_mps > self.mcu.firmware.max_speed_mps || self.run.max_speed_mps <= 0.0
+        {
+            return bad(
+                "run.max-speed-mps",
+                format!(
+                    "must be in (0, mcu.firmware.max-speed-mps = {}]",
+                    self.mcu.firmware.max_speed_mps
+                ),
+            );
+        }
+        if self.run.progress_period_us == 0 {
+            return bad("run.progress-period-us", "must be above 0".into());
+        }
+        let k = &self.camera.intrinsics;
+        if !(k.fx > 0.0 && k.fy > 0.0 && k.depth_scale_m > 0.0) {
+            return bad(
+                "camera.intrinsics",
+                "fx, fy and depth-scale-m must be above 0".into(),
+            );
+        }
+        if self.camera.record_every == 0 {
+            return bad("camera.record-every", "must be at least 1".into());
+        }
+        if self.preview.max_points == 0
+            || self.preview.voxel_m.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater)
+        {
+            return bad("preview", "max-points and voxel-m must be above 0".into());
+        }
+        Ok(())
+    }
+}
+
+/// Reads a pairing key file (64 hex digits, surrounding whitespace ignored).
+pub fn read_key(path: &Path) -> Result<Key, ConfigError> {
+    let text = fs::read_to_string(path).map_err(|source| ConfigError::Io {
+        path: path.to_owned(),
+        source,
+    })?;
+    parse_key(text.trim()).ok_or_else(|| ConfigError::Parse {
+        path: path.to_owned(),
+        message: format!(
+            "expected {} hex digits (a key written by `passangle pair`)",
+            2 * KEY_LEN
+        ),
+    })
+}
+
+fn parse_key(hex: &str) -> Option<Key> {
+    if hex.len() != 2 * KEY_LEN || !hex.is_ascii() {
+        return None;
+    }
+    let mut key = [0u8; KEY_LEN];
+    for (i, b) in key.iter_mut().enumerate() {
+        *b = u8::from_str_radix(&hex[2 * i..2 * i + 2], 16).ok()?;
+    }
+    Some(Key(key))
+}
+
+/// Writes a new key file readable by its owner only (mode 0600); refuses to overwrite.
+pub fn write_key(path: &Path, key: &Key) -> Result<(), ConfigError> {
+    use std::io::Write;
+    use std::os::unix::fs::OpenOptionsExt;
+    let hex: String = key.0.iter().fold(String::new(), |mut s, b| {
+        use std::fmt::Write as _;
+        let _ = write!(s, "{b:02x}");
+        s
+    });
+    let io_err = |source| ConfigError::Io {
+        path: path.to_owned(),
+        source,
+    };
+    let mut f = fs::OpenOptions::new()
+        .write(true)
+        .create_new(true)
+        .mode(0o600)
+        .open(path)
+        .map_err(io_err)?;
+    f.write_all(format!("{hex}\n").as_bytes()).map_err(io_err)?;
+    f.sync_all().map_err(io_err)
+}
+
+/// Reads the persisted last start counter (0 if the file does not exist yet).
+pub fn read_counter(path: &Path) -> Result<u64, ConfigError> {
+    match fs::read_to_string(path) {
+        Ok(text) => text.trim().parse().map_err(|e| ConfigError::Parse {
+            path: path.to_owned(),
+            message: format!("expected one decimal counter: {e}"),
+        }),
+        Err(e) if e.kind() == io::ErrorKind::NotFound => Ok(0),
+        Err(source) => Err(ConfigError::Io {
+            path: path.to_owned(),
+            source,
+        }),
+    }
+}
+
+/// Persists the last start counter atomically.
+pub fn write_counter(path: &Path, counter: u64) -> Result<(), ConfigError> {
+    write_atomic(path, format!("{counter}\n").as_bytes()).map_err(|e| ConfigError::Parse {
+        path: path.to_owned(),
+        message: e.to_string(),
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const MINIMAL: &str = "[radio]\nport = \"/dev/ttyUSB0\"\n[mcu]\nport = \"/dev/ttyACM0\"\n";
+
+    #[test]
+    fn minimal_config_takes_the_documented_defaults() {
+        let c = OnboardConfig::parse(MINIMAL, Path::new("x.toml")).unwrap();
+        assert_eq!(c.radio.baud, 57_600);
+        assert_eq!(c.mcu.heartbeat_period_ms, 20);
+        assert_eq!(c.run, RunConfig::default());
+        assert_eq!(c.lidar.data_addr.port(), 2368);
+        assert_eq!(c.camera.source, CameraSource::None);
+    }
+
+    #[test]
+    fn the_shipped_example_is_valid_and_complete() {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("onboard.example.toml");
+        let c = OnboardConfig::load(&path).unwrap();
+        // The example spells out every default: parsing it equals parsing the minimal file.
+        let mut min = OnboardConfig::parse(MINIMAL, Path::new("x.toml")).unwrap();
+        min.radio.port.clone_from(&c.radio.port);
+        min.mcu.port.clone_from(&c.mcu.port);
+        assert_eq!(c, min, "example and defaults disagree");
+    }
+
+    #[test]
+    fn unknown_keys_and_bad_values_are_named() {
+        let e = OnboardConfig::parse(
+            &format!("{MINIMAL}[run]\nmax-sped-mps = 1.0\n"),
+            Path::new("a.toml"),
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.contains("a.toml") && e.contains("max-sped-mps") && e.contains("line 6"),
+            "{e}"
+        );
+        let e = OnboardConfig::parse("[radio]\nport = \"x\"\n", Path::new("b.toml"))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("mcu"), "{e}");
+        let e = OnboardConfig::parse(
+            &MINIMAL.replace("[mcu]\n", "[mcu]\nheartbeat-period-ms = 200\n"),
+            Path::new("c.toml"),
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains("`mcu.heartbeat-period-ms`"), "{e}");
+        let e = OnboardConfig::parse(
+            &format!("{MINIMAL}[run]\nmax-speed-mps = 3.0\n"),
+            Path::new("d.toml"),
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains("`run.max-speed-mps`"), "{e}");
+    }
+
+    #[test]
+    fn key_and_counter_files_round_trip() {
+        use std::os::unix::fs::PermissionsExt;
+        let dir = std::env::temp_dir().join(format!("passangle-cfg-{}", std::process::id()));
+        let _ = fs::remove_dir_all(&dir);
+        fs::create_dir_all(&dir).unwrap();
+        let p = dir.join("k");
+        let key = Key([0xab; KEY_LEN]);
+        write_key(&p, &key).unwrap();
+        assert_eq!(read_key(&p).unwrap(), key);
+        assert_eq!(
+            fs::metadata(&p).unwrap().permissions().mode() & 0o777,
+            0o600
+        );
+        assert!(write_key(&p, &key).is_err(), "never overwrites a key");
+        fs::write(dir.join("bad"), "abc").unwrap();
+        assert!(
+            read_key(&dir.join("bad"))
+                .unwrap_err()
+                .to_string()
+                .contains("64 hex digits")
+        );
+        let c = dir.join("c");
+        assert_eq!(read_counter(&c).unwrap(), 0);
+        write_counter(&c, 1_700_000_000_000_123).unwrap();
+        assert_eq!(read_counter(&c).unwrap(), 1_700_000_000_000_123);
+        fs::remove_dir_all(&dir).unwrap();
+    }
+}

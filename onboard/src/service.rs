@@ -1,0 +1,842 @@
+//! The onboard service's imperative shell: moves bytes, packets, frames and time between the IO
+//! (serial ports, the lidar socket, the camera, the disk) and the pure cores ([`OnboardRadio`],
+//! [`McuSession`], [`RunMachine`], [`RunRecorder`]).
+//!
+//! It lives in the library so that the `passangle-onboard` binary and the simulator's demo run the
+//! very same loop: the binary opens real serial ports and sockets, the simulator hands in
+//! pseudo-terminals and a simulated camera. One thread runs the loop (every
+//! [`LOOP_PERIOD`]); the lidar socket and the camera have their own reader threads feeding bounded
+//! channels; processing a run runs on a worker thread so the loop (heartbeats, radio) never stalls.
+//!
+//! Safety: on shutdown, and whenever the loop ends for any reason, the MCU gets an immediate stop;
+//! if the process dies instead, the firmware stops by heartbeat loss.
+
+use std::io::{self, Read, Write};
+use std::net::SocketAddrV4;
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc::{Receiver, SyncSender, TryRecvError, sync_channel};
+use std::thread;
+use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
+
+use protocol::common::LogLevel;
+use protocol::radio::{MeasurementResult, Phase, RefuseReason, RobotStatus, StartMeasurement};
+
+use crate::cloud::Cloud;
+use crate::config::{self, CameraSource, OnboardConfig};
+use crate::link::mcu::{McuEvent, McuSession, McuSessionConfig, MotionIntent};
+use crate::link::preview;
+use crate::link::radio::{OnboardRadio, RadioRequest, START_ID};
+use crate::link::reliable::LinkConfig;
+use crate::recorder::{self, RecordedOutcome, Recording, ResultRecord, RunRecorder};
+use crate::run::{Action, Observations, Outcome, RunMachine};
+use crate::vlp16::Vlp16Packet;
+
+/// Period of the main loop.
+pub const LOOP_PERIOD: Duration = Duration::from_millis(2);
+
+/// A byte stream to a peer (a serial port, a pseudo-terminal, an in-memory pipe). Reads return
+/// `Ok(0)`, `WouldBlock` or `TimedOut` when nothing is there; they must not block for long.
+pub trait Port: Read + Write + Send {}
+impl<T: Read + Write + Send> Port for T {}
+
+/// One UDP datagram from the lidar.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct LidarPacket {
+    /// Wall clock at reception, ns since the Unix epoch (the pcap stamp).
+    pub wall_ns: u64,
+    /// Sender.
+    pub src: SocketAddrV4,
+    /// Receiver (the bound address).
+    pub dst: SocketAddrV4,
+    /// UDP payload.
+    pub payload: Vec<u8>,
+    /// From the position port (8308) rather than the data port.
+    pub position: bool,
+}
+
+/// One depth frame (Z16).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct DepthFrame {
+    /// Width, pixels.
+    pub width: u16,
+    /// Height, pixels.
+    pub height: u16,
+    /// Row-major depth in units of the configured depth scale, 0 = no return.
+    pub depth: Vec<u16>,
+}
+
+/// What processing a run gets.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ProcessInput {
+    /// The run directory (streams flushed).
+    pub run_dir: PathBuf,
+    /// The run.
+    pub run_id: u32,
+    /// Its parameters.
+    pub params: StartMeasurement,
+    /// Distance driven, m.
+    pub travelled_m: f32,
+    /// The drive ended early.
+    pub short_run: bool,
+}
+
+/// What processing a run produces.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Processed {
+    /// The result (`preview_chunks` is set when offered).
+    pub result: MeasurementResult,
+    /// The cloud, vehicle frame, metres.
+    pub cloud: Cloud,
+    /// The side-view report.
+    pub svg: String,
+}
+
+/// Builds the cloud and computes the angles of a recorded run (see `crate::process`).
+pub trait Processor: Send + Sync {
+    /// Processes one run; `Err` says why it failed, for the operator.
+    fn process(&self, input: &ProcessInput) -> Result<Processed, String>;
+}
+
+/// systemd notifications (the binary sends them with `sd_notify`; tests ignore them).
+pub trait Notifier {
+    /// Sockets, ports and camera are open.
+    fn ready(&mut self);
+    /// The loop is alive.
+    fn watchdog(&mut self);
+    /// A one-line status for `systemctl status`.
+    fn status(&mut self, text: &str);
+    /// Shutting down.
+    fn stopping(&mut self);
+}
+
+/// A notifier that does nothing.
+#[derive(Debug, Default)]
+pub struct NoNotify;
+
+impl Notifier for NoNotify {
+    fn ready(&mut self) {}
+    fn watchdog(&mut self) {}
+    fn status(&mut self, _: &str) {}
+    fn stopping(&mut self) {}
+}
+
+/// Everything the loop reads from and writes to.
+pub struct Io {
+    /// The radio modem.
+    pub radio: Box<dyn Port>,
+    /// The UART to the firmware.
+    pub mcu: Box<dyn Port>,
+    /// Lidar packets (from [`spawn_lidar_reader`] or the simulator).
+    pub lidar: Receiver<LidarPacket>,
+    /// Depth frames (`None`: no camera).
+    pub depth: Option<Receiver<DepthFrame>>,
+    /// Fault injection for the simulator: when set, the loop ends at once *without* stopping the
+    /// robot or closing the run, as if the process had been killed (`None` in production).
+    pub crash: Option<Arc<AtomicBool>>,
+}
+
+/// Why the service could not start or had to stop.
+#[derive(Debug, thiserror::Error)]
+pub enum ServiceError {
+    /// Configuration or pairing files.
+    #[error(transparent)]
+    Config(#[from] config::ConfigError),
+    /// The recording root.
+    #[error(transparent)]
+    Recorder(#[from] recorder::RecorderError),
+    /// A port failed for good.
+    #[error("{what}: {source}")]
+    Io {
+        /// Which port.
+        what: &'static str,
+        /// The error.
+        source: io::Error,
+    },
+}
+
+/// Counters exposed for logs and tests.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct ServiceStats {
+    /// Lidar data packets that passed the checked view.
+    pub lidar_packets: u64,
+    /// Lidar packets that did not (wrong length, bad block flags, ...): dropped and counted.
+    pub lidar_malformed: u64,
+    /// Lidar frames (revolutions) seen in the current or last run.
+    pub lidar_frames: u32,
+    /// Depth frames received.
+    pub depth_frames: u64,
+    /// Starts refused (authentication, replay, busy, parameters).
+    pub starts_refused: u64,
+}
+
+/// Handle to read the service's counters from another thread (tests, the simulator).
+pub type SharedStats = Arc<std::sync::Mutex<ServiceStats>>;
+
+fn wall_us() -> u64 {
+    SystemTime::now()
+        .duration_since(UNIX_EPOCH)
+        .map_or(0, |d| u64::try_from(d.as_micros()).unwrap_or(u64::MAX))
+}
+
+fn is_quiet(e: &io::Error) -> bool {
+    matches!(
+        e.kind(),
+        io::ErrorKind::WouldBlock | io::ErrorKind::TimedOut | io::ErrorKind::Interrupted
+    )
+}
+
+fn read_available(port: &mut dyn Port, buf: &mut [u8]) -> io::Result<usize> {
+    match port.read(buf) {
+        Ok(n) => Ok(n),
+        Err(e) if is_quiet(&e) => Ok(0),
+        Err(e) => Err(e),
+    }
+}
+
+struct Worker {
+    run_id: u32,
+    rx: Receiver<Result<Processed, String>>,
+}
+
+/// The service state between loop iterations.
+struct Service {
+    config: OnboardConfig,
+    config_text: String,
+    radio: OnboardRadio,
+    mcu: McuSession,
+    run: RunMachine,
+    recorder: Option<RunRecorder>,
+    params: Option<StartMeasurement>,
+    worker: Option<Worker>,
+    processor: Arc<dyn Processor>,
+    stats: ServiceStats,
+    shared: SharedStats,
+    last_lidar_us: Option<u64>,
+    last_depth_us: Option<u64>,
+    last_azimuth: Option<u16>,
+    depth_seen: u64,
+    odometry_xy_m: Option<[f32; 2]>,
+    epoch: Instant,
+    /// Wall clock at `epoch`, us since the Unix epoch: recordings stamp everything on the wall
+    /// clock (the pcap's clock), advanced by the monotonic clock so stamps never go backwards.
+    wall_epoch_us: u64,
+}
+
+fn millis(ms: u64) -> u64 {
+    ms.saturating_mul(1_000)
+}
+
+/// Runs the service until `shutdown` is set. `config_text` is recorded with every run.
+pub fn run(
+    config: OnboardConfig,
+    config_text: String,
+    mut io: Io,
+    processor: Arc<dyn Processor>,
+    shutdown: &AtomicBool,
+    notifier: &mut dyn Notifier,
+    shared: SharedStats,
+) -> Result<(), ServiceError> {
+    let key = config::read_key(&config.radio.key_file)?;
+    let last_counter = config::read_counter(&config.radio.counter_file)?;
+    std::fs::create_dir_all(&config.recording.root).map_err(|e| recorder::RecorderError::Io {
+        path: config.recording.root.clone(),
+        source: e,
+    })?;
+    let next_run_id = recorder::next_run_id(&config.recording.root)?;
+    let epoch = Instant::now();
+    // Seqs start from the clock so a restarted service does not reuse the seqs the peer remembers.
+    let seed_seq = (wall_us() / 1_000) as u16;
+    let mcu = McuSession::new(
+        McuSessionConfig {
+            link: LinkConfig::MCU,
+            heartbeat_period_us: millis(config.mcu.heartbeat_period_ms),
+            resend_us: 200_000,
+            firmware: config.mcu.firmware.to_wire(),
+            accel_mps2: config.mcu.accel_mps2,
+            jerk_mps3: config.mcu.jerk_mps3,
+            status_timeout_us: 500_000,
+        },
+        seed_seq,
+    );
+    let mut s = Service {
+        radio: OnboardRadio::new(
+            LinkConfig::RADIO,
+            key,
+            last_counter,
+            seed_seq.wrapping_add(0x8000),
+        ),
+        mcu,
+        run: RunMachine::new(config.run, next_run_id),
+        recorder: None,
+        params: None,
+        worker: None,
+        processor,
+        stats: ServiceStats::default(),
+        shared,
+        last_lidar_us: None,
+        last_depth_us: None,
+        last_azimuth: None,
+        depth_seen: 0,
+        odometry_xy_m: None,
+        epoch,
+        wall_epoch_us: wall_us(),
+        config,
+        config_text,
+    };
+    s.recover_runs();
+    notifier.ready();
+    notifier.status("idle");
+    let result = s.main_loop(&mut io, shutdown, notifier);
+    if io.crash.as_ref().is_some_and(|c| c.load(Ordering::Relaxed)) {
+        // Simulated kill: leave everything as a dead process would.
+        std::mem::forget(s.recorder.take());
+        return result;
+    }
+    // Whatever ended the loop: stop the robot now.
+    s.mcu.set_intent(MotionIntent::StopNow);
+    let now = s.now_us();
+    s.mcu.poll(now);
+    let bytes = s.mcu.transmit(now);
+    let _ = io.mcu.write_all(&bytes);
+    let _ = io.mcu.flush();
+    if let Some(r) = s.recorder.take() {
+        r.finish(RecordedOutcome::Aborted("service stopped".into()));
+    }
+    notifier.stopping();
+    result
+}
+
+impl Service {
+    fn now_us(&self) -> u64 {
+        u64::try_from(self.epoch.elapsed().as_micros()).unwrap_or(u64::MAX)
+    }
+
+    fn wall_of(&self, mono_us: u64) -> u64 {
+        self.wall_epoch_us.saturating_add(mono_us)
+    }
+
+    /// At start: report crashed runs, and offer the newest undelivered result again.
+    fn recover_runs(&mut self) {
+        let root = self.config.recording.root.clone();
+        let last = self.run.run_id().max(1);
+        let next = recorder::next_run_id(&root).unwrap_or(last);
+        let mut offered = false;
+        for run_id in (1..next).rev().take(50) {
+            let Ok(rec) = Recording::open_run(&root, run_id) else {
+                continue;
+            };
+            if rec.incomplete {
+                tracing::warn!(run_id, dir = %rec.dir.display(), "run did not finish (crash?): recording kept, marked INCOMPLETE");
+            }
+            if !offered && !rec.delivered && rec.result.is_some() {
+                offered = true;
+                self.offer_recorded(&rec);
+            }
+        }
+    }
+
+    fn offer_recorded(&mut self, rec: &Recording) -> bool {
+        let Some(result) = &rec.result else {
+            return false;
+        };
+        let points = crate::cloud::read_cloud(&rec.dir.join("cloud.ply"))
+            .map(|(c, _)| c.points_m)
+            .unwrap_or_default();
+        let p = self.config.preview;
+        let preview_mm = preview::decimate(&points, p.voxel_m, p.max_points);
+        match self.radio.deliver(result.to_wire(), &preview_mm) {
+            Ok(()) => true,
+            Err(e) => {
+                tracing::error!("cannot offer run {}: {e}", result.run_id);
+                false
+            }
+        }
+    }
+
+    fn main_loop(
+        &mut self,
+        io: &mut Io,
+        shutdown: &AtomicBool,
+        notifier: &mut dyn Notifier,
+    ) -> Result<(), ServiceError> {
+        let mut buf = [0u8; 4096];
+        let mut next_watchdog = 0;
+        let mut next_flush = 0;
+        let mut last_phase = Phase::Idle;
+        while !shutdown.load(Ordering::Relaxed)
+            && !io.crash.as_ref().is_some_and(|c| c.load(Ordering::Relaxed))
+        {
+            let loop_start = Instant::now();
+            let now = self.now_us();
+            let n =
+                read_available(io.radio.as_mut(), &mut buf).map_err(|source| ServiceError::Io {
+                    what: "radio port",
+                    source,
+                })?;
+            for req in self.radio.receive(now, &buf[..n]) {
+                self.on_request(now, req);
+            }
+            let n =
+                read_available(io.mcu.as_mut(), &mut buf).map_err(|source| ServiceError::Io {
+                    what: "MCU port",
+                    source,
+                })?;
+            for ev in self.mcu.receive(now, &buf[..n]) {
+                self.on_mcu(now, ev);
+            }
+            self.drain_lidar(now, &io.lidar);
+            if let Some(depth) = &io.depth {
+                self.drain_depth(now, depth);
+            }
+            self.check_worker(now);
+            let obs = self.observations(now);
+            let actions = self.run.tick(now, &obs);
+            self.execute(now, actions);
+            self.radio.poll(now);
+            self.mcu.poll(now);
+            let out = self.mcu.transmit(now);
+            if !out.is_empty() {
+                io.mcu.write_all(&out).map_err(|source| ServiceError::Io {
+                    what: "MCU port",
+                    source,
+                })?;
+            }
+            let out = self.radio.transmit(now);
+            if !out.is_empty() {
+                io.radio
+                    .write_all(&out)
+                    .map_err(|source| ServiceError::Io {
+                        what: "radio port",
+                        source,
+                    })?;
+            }
+            if now >= next_watchdog {
+                next_watchdog = now + 1_000_000;
+                notifier.watchdog();
+            }
+            if now >= next_flush {
+                next_flush = now + millis(self.config.recording.flush_period_ms);
+                if let Some(r) = &mut self.recorder {
+                    r.flush();
+                }
+                self.report_recorder_errors();
+            }
+            if self.run.phase() != last_phase {
+                last_phase = self.run.phase();
+                notifier.status(&format!("run {}: {}", self.run.run_id(), last_phase));
+            }
+            if let Ok(mut shared) = self.shared.lock() {
+                *shared = self.stats;
+            }
+            if let Some(rest) = LOOP_PERIOD.checked_sub(loop_start.elapsed()) {
+                thread::sleep(rest);
+            }
+        }
+        Ok(())
+    }
+
+    fn observations(&self, now: u64) -> Observations {
+        let fresh = |t: Option<u64>, timeout_ms: u64| {
+            t.is_some_and(|t| now.saturating_sub(t) <= millis(timeout_ms))
+        };
+        Observations {
+            lidar_ok: fresh(self.last_lidar_us, self.config.lidar.alive_timeout_ms),
+            camera_ok: self.config.camera.source == CameraSource::None
+                || fresh(self.last_depth_us, self.config.camera.alive_timeout_ms),
+            firmware_ok: self.mcu.firmware_ok(now),
+            interlocks: self.mcu.interlocks(),
+            at_rest: self.mcu.at_rest(),
+            odometry_xy_m: self.odometry_xy_m,
+            handheld_silent_us: self.radio.handheld_silent_us(now),
+            lidar_frames: self.stats.lidar_frames,
+        }
+    }
+
+    fn on_request(&mut self, now: u64, req: RadioRequest) {
+        match req {
+            RadioRequest::Start { params, seq } => {
+                // Persist the counter before acting, or a restart would accept a replay.
+                if let Err(e) = config::write_counter(
+                    &self.config.radio.counter_file,
+                    self.radio.last_counter(),
+                ) {
+                    tracing::error!("refusing start: {e}");
+                    self.stats.starts_refused += 1;
+                    self.radio.refuse(
+                        START_ID,
+                        seq,
+                        RefuseReason::Interlocked,
+                        "cannot persist the start counter",
+                    );
+                    return;
+                }
+                let actions = self.run.start(now, params, seq);
+                self.execute(now, actions);
+            }
+            RadioRequest::Abort { run_id } => {
+                let actions = self.run.abort(now, run_id);
+                self.execute(now, actions);
+            }
+            RadioRequest::ResultAck { run_id } => {
+                if let Err(e) = recorder::mark_delivered(&self.config.recording.root, run_id) {
+                    tracing::warn!("run {run_id}: result acknowledged, but {e}");
+                } else {
+                    tracing::info!(run_id, "result delivered to the handheld");
+                }
+            }
+            RadioRequest::Fetch { run_id, seq } => {
+                let offered = Recording::open_run(&self.config.recording.root, run_id)
+                    .is_ok_and(|rec| self.offer_recorded(&rec));
+                if !offered {
+                    self.radio.refuse(
+                        protocol::ids::FETCH_RUN,
+                        seq,
+                        RefuseReason::UnknownRun,
+                        &format!("run {run_id} has no result on the robot"),
+                    );
+                }
+            }
+            RadioRequest::Status => {
+                let status = self.status(now);
+                if let Err(e) = self.radio.send_status(&status) {
+                    tracing::error!("status: {e}");
+                }
+            }
+            RadioRequest::Refused { reason, detail } => {
+                if matches!(reason, RefuseReason::BadTag | RefuseReason::Replay) {
+                    self.stats.starts_refused += 1;
+                }
+                tracing::warn!(%reason, "refused radio command: {detail}");
+            }
+        }
+    }
+
+    fn status(&self, now: u64) -> RobotStatus {
+        let obs = self.observations(now);
+        RobotStatus {
+            phase: self.run.phase(),
+            run_id: self.run.run_id(),
+            firmware_ok: obs.firmware_ok,
+            lidar_ok: obs.lidar_ok,
+            camera_ok: obs.camera_ok,
+            interlocks: obs.interlocks,
+            pending_results: self.radio.pending_results(),
+            disk_free_mib: recorder::disk_free_mib(&self.config.recording.root).unwrap_or(0),
+        }
+    }
+
+    fn on_mcu(&mut self, now: u64, ev: McuEvent) {
+        match ev {
+            McuEvent::Hello(h) => tracing::info!(version = h.version, "firmware said hello"),
+            McuEvent::Odometry { rx_us, odometry } => {
+                self.odometry_xy_m = Some([odometry.x_m, odometry.y_m]);
+                let wall = self.wall_of(rx_us);
+                if let Some(r) = &mut self.recorder {
+                    r.odometry(wall, &odometry);
+                }
+            }
+            McuEvent::Status(_) => {}
+            McuEvent::Rejected(r) => {
+                let text = format!(
+                    "firmware rejected {:#06x}: {} {}",
+                    r.msg_id,
+                    r.reason,
+                    r.field.as_str()
+                );
+                tracing::warn!("{text}");
+                self.radio.send_log(LogLevel::Warn, &text);
+                if r.msg_id == protocol::ids::DRIVE && self.run.is_active() {
+                    let actions = self.run.abort(now, 0);
+                    self.execute(now, actions);
+                }
+            }
+            McuEvent::Log(l) => tracing::info!(target: "firmware", "{}", l.text.as_str()),
+            McuEvent::Undecodable(e) => tracing::debug!("MCU frame: {e}"),
+        }
+    }
+
+    fn drain_lidar(&mut self, now: u64, rx: &Receiver<LidarPacket>) {
+        loop {
+            let p = match rx.try_recv() {
+                Ok(p) => p,
+                Err(TryRecvError::Empty | TryRecvError::Disconnected) => return,
+            };
+            if p.position {
+                if let Some(r) = &mut self.recorder {
+                    r.lidar_packet(p.wall_ns, p.src, p.dst, &p.payload);
+                }
+                continue;
+            }
+            let Ok(view) = Vlp16Packet::new_checked(&p.payload[..]) else {
+                self.stats.lidar_malformed += 1;
+                continue;
+            };
+            if view.check_fields().is_err() {
+                self.stats.lidar_malformed += 1;
+                continue;
+            }
+            self.stats.lidar_packets += 1;
+            self.last_lidar_us = Some(now);
+            let azimuth = view.azimuth_raw(0);
+            if self.last_azimuth.is_some_and(|a| azimuth < a) && self.run.is_active() {
+                self.stats.lidar_frames += 1;
+            }
+            self.last_azimuth = Some(azimuth);
+            if let Some(r) = &mut self.recorder {
+                r.lidar_packet(p.wall_ns, p.src, p.dst, &p.payload);
+            }
+        }
+    }
+
+    fn drain_depth(&mut self, now: u64, rx: &Receiver<DepthFrame>) {
+        while let Ok(f) = rx.try_recv() {
+            self.stats.depth_frames += 1;
+            let expected = usize::from(f.width) * usize::from(f.height);
+            if f.depth.len() != expected {
+                tracing::warn!(
+                    len = f.depth.len(),
+                    expected,
+                    "depth frame of the wrong size dropped"
+                );
+                continue;
+            }
+            self.last_depth_us = Some(now);
+            self.depth_seen += 1;
+            if self
+                .depth_seen
+                .is_multiple_of(u64::from(self.config.camera.record_every))
+                && let Some(r) = &mut self.recorder
+            {
+                r.depth_frame(
+                    self.wall_epoch_us.saturating_add(now),
+                    f.width,
+                    f.height,
+                    &f.depth,
+                    &self.config.camera.intrinsics,
+                );
+            }
+        }
+    }
+
+    fn check_worker(&mut self, now: u64) {
+        let Some(w) = &self.worker else { return };
+        let outcome = match w.rx.try_recv() {
+            Ok(o) => o,
+            Err(TryRecvError::Empty) => return,
+            Err(TryRecvError::Disconnected) => Err("processing thread died".to_owned()),
+        };
+        let run_id = w.run_id;
+        self.worker = None;
+        let outcome = outcome.map(|p| self.finish_processing(&p));
+        let actions = self.run.processing_finished(now, run_id, outcome);
+        self.execute(now, actions);
+    }
+
+    fn finish_processing(&mut self, p: &Processed) {
+        let preview_cfg = self.config.preview;
+        let preview_mm = preview::decimate(
+            &p.cloud.points_m,
+            preview_cfg.voxel_m,
+            preview_cfg.max_points,
+        );
+        // The result goes out first: the files follow (they take longer and may hit a full disk).
+        if let Err(e) = self.radio.deliver(p.result.clone(), &preview_mm) {
+            tracing::error!("cannot send the result: {e}");
+        }
+        if let Some(r) = &mut self.recorder {
+            r.save_result(&ResultRecord::from_wire(&p.result));
+            let mut ply = Vec::new();
+            if crate::cloud::write_ply(
+                &mut ply,
+                &p.cloud,
+                crate::cloud::PlyEncoding::BinaryLittleEndian,
+            )
+            .is_ok()
+            {
+                r.save_file("cloud.ply", &ply);
+            }
+            r.save_file("side_view.svg", p.svg.as_bytes());
+        }
+    }
+
+    fn execute(&mut self, now: u64, actions: Vec<Action>) {
+        for a in actions {
+            match a {
+                Action::Refuse {
+                    seq,
+                    reason,
+                    detail,
+                } => {
+                    self.stats.starts_refused += 1;
+                    tracing::warn!(%reason, "start refused: {detail}");
+                    self.radio.refuse(START_ID, seq, reason, &detail);
+                }
+                Action::BeginRecording { run_id, params } => {
+                    self.stats.lidar_frames = 0;
+                    match RunRecorder::begin(
+                        &self.config.recording.root,
+                        run_id,
+                        &params,
+                        wall_us(),
+                        &self.config_text,
+                    ) {
+                        Ok(r) => {
+                            tracing::info!(run_id, dir = %r.dir().display(), "recording");
+                            self.recorder = Some(r);
+                        }
+                        Err(e) => {
+                            let text = format!("run {run_id}: cannot record: {e}");
+                            tracing::error!("{text}");
+                            self.radio.send_log(LogLevel::Error, &text);
+                        }
+                    }
+                    self.params = Some(params);
+                }
+                Action::Motion(intent) => self.mcu.set_intent(intent),
+                Action::StartProcessing {
+                    run_id,
+                    travelled_m,
+                    short_run,
+                } => {
+                    self.start_worker(run_id, travelled_m, short_run);
+                }
+                Action::CancelProcessing { .. } => self.worker = None,
+                Action::FinishRecording { run_id, outcome } => {
+                    if let Some(r) = self.recorder.take() {
+                        let recorded = match outcome {
+                            Outcome::Completed => RecordedOutcome::Completed,
+                            Outcome::Aborted(s) => RecordedOutcome::Aborted(s),
+                            Outcome::Failed(s) => RecordedOutcome::Failed(s),
+                        };
+                        for e in r.finish(recorded) {
+                            tracing::error!(run_id, "{e}");
+                        }
+                    }
+                }
+                Action::Progress(p) => {
+                    let _ = self.radio.send_progress(&p);
+                }
+                Action::Log { level, text } => {
+                    match level {
+                        LogLevel::Error => tracing::error!("{text}"),
+                        LogLevel::Warn => tracing::warn!("{text}"),
+                        _ => tracing::info!("{text}"),
+                    }
+                    self.radio.send_log(level, &text);
+                }
+            }
+        }
+        let _ = now;
+    }
+
+    fn start_worker(&mut self, run_id: u32, travelled_m: f32, short_run: bool) {
+        let Some(params) = self.params.clone() else {
+            return;
+        };
+        let run_dir = self
+            .config
+            .recording
+            .root
+            .join(recorder::run_dir_name(run_id));
+        if let Some(r) = &mut self.recorder {
+            r.flush();
+        }
+        let input = ProcessInput {
+            run_dir,
+            run_id,
+            params,
+            travelled_m,
+            short_run,
+        };
+        let (tx, rx): (SyncSender<_>, _) = sync_channel(1);
+        let processor = Arc::clone(&self.processor);
+        let spawned = thread::Builder::new()
+            .name(format!("process-run-{run_id}"))
+            .spawn(move || {
+                let _ = tx.send(processor.process(&input));
+            });
+        match spawned {
+            Ok(_) => self.worker = Some(Worker { run_id, rx }),
+            Err(e) => {
+                let now = self.now_us();
+                let actions = self.run.processing_finished(
+                    now,
+                    run_id,
+                    Err(format!("cannot start processing: {e}")),
+                );
+                self.execute(now, actions);
+            }
+        }
+    }
+
+    fn report_recorder_errors(&mut self) {
+        let Some(r) = &mut self.recorder else { return };
+        for e in r.take_new_errors() {
+            tracing::error!("recording: {e}");
+            self.radio
+                .send_log(LogLevel::Error, &format!("recording: {e}"));
+        }
+    }
+}
+
+/// Starts a thread that reads the lidar socket(s) into a bounded channel (about 2 s of packets;
+/// when the loop falls behind, the newest packets are dropped and the reader logs it).
+pub fn spawn_lidar_reader(
+    config: &config::LidarConfig,
+    shutdown: Arc<AtomicBool>,
+) -> Result<Receiver<LidarPacket>, crate::vlp16::source::SourceError> {
+    use crate::vlp16::source::{PACKET_BUF_LEN, PacketKind, PacketSource, SourceError, UdpSource};
+    let mut source = UdpSource::bind(
+        config.data_addr,
+        config.position_addr,
+        Duration::from_millis(100),
+    )?;
+    let to_v4 = |a: Option<std::net::SocketAddr>| match a {
+        Some(std::net::SocketAddr::V4(v4)) => v4,
+        _ => SocketAddrV4::new([0, 0, 0, 0].into(), 0),
+    };
+    let data_dst = to_v4(source.data_addr().ok());
+    let position_dst = to_v4(source.position_addr());
+    let (tx, rx) = sync_channel(4_000);
+    thread::Builder::new()
+        .name("lidar".into())
+        .spawn(move || {
+            let mut buf = [0u8; PACKET_BUF_LEN];
+            let mut dropped = 0u64;
+            while !shutdown.load(Ordering::Relaxed) {
+                match source.next_packet(&mut buf) {
+                    Ok(Some(meta)) => {
+                        let position = meta.kind == PacketKind::Position;
+                        let packet = LidarPacket {
+                            wall_ns: wall_us().saturating_mul(1_000),
+                            src: to_v4(meta.src),
+                            dst: if position { position_dst } else { data_dst },
+                            payload: buf[..meta.len].to_vec(),
+                            position,
+                        };
+                        if tx.try_send(packet).is_err() {
+                            dropped += 1;
+                            if dropped.is_power_of_two() {
+                                tracing::warn!(
+                                    dropped,
+                                    "lidar packets dropped: the service loop falls behind"
+                                );
+                            }
+                        }
+                    }
+                    Ok(None) | Err(SourceError::TimedOut(_)) => {}
+                    Err(e) => {
+                        tracing::error!("lidar: {e}");
+                        thread::sleep(Duration::from_millis(100));
+                    }
+                }
+            }
+        })
+        .map_err(|e| SourceError::Io {
+            what: "starting the lidar thread".into(),
+            source: e,
+        })?;
+    Ok(rx)
+}

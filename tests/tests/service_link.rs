@@ -1,0 +1,539 @@
+//! End-to-end tests of the onboard service and the handheld client, in one process, in real time:
+//! the real `onboard::service` loop, the real handheld `Client`, the radio as a seeded lossy pipe,
+//! and the real firmware logic (`control::Controller` in hil-sim's firmware-in-the-loop runner,
+//! with simulated ESCs and robot physics) on the MCU link. The robot's true motion comes from the
+//! simulated physics, so "the robot does not move" and "the robot stops" are checked on it.
+//!
+//! Not covered here: the point-cloud pipeline. Processing is a test double that derives its
+//! result from the recorded files (so the recording is exercised) and keeps a copy, so the test
+//! can check the handheld received exactly what was produced.
+
+// Test helpers outside #[test] fns: unwrap is the right failure; `{:?}` quotes paths for TOML.
+#![allow(
+    clippy::unwrap_used,
+    clippy::needless_pass_by_value,
+    clippy::unnecessary_debug_formatting,
+    clippy::unused_self
+)]
+
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc::{SyncSender, sync_channel};
+use std::sync::{Arc, Mutex};
+use std::thread::{self, JoinHandle};
+use std::time::{Duration, Instant};
+
+use hil_sim::can_bus::InProcessBus;
+use hil_sim::fil::{Fil, FilConfig, Pacing};
+use hil_sim::pty::{ByteLink, MemPipe};
+use hil_sim::robot::PoseSample;
+use onboard::client::{Client, ClientError, Quiet};
+use onboard::cloud::Cloud;
+use onboard::config::{CameraSource, FirmwareConfig, OnboardConfig};
+use onboard::link::sim::{LossyPortPair, PipeConfig};
+use onboard::recorder::{RecordedOutcome, Recording};
+use onboard::service::{
+    self, Io, LidarPacket, NoNotify, ProcessInput, Processed, Processor, ServiceStats, SharedStats,
+};
+use protocol::auth::{KEY_LEN, Key};
+use protocol::bounded::Text;
+use protocol::radio::{MeasurementResult, ResultWarnings, StartMeasurement, Zone};
+
+/// Adapts hil-sim's in-memory byte pipe to `Read + Write`.
+struct MemPort {
+    pipe: MemPipe,
+    buf: Vec<u8>,
+}
+
+impl std::io::Read for MemPort {
+    fn read(&mut self, out: &mut [u8]) -> std::io::Result<usize> {
+        if self.buf.is_empty() {
+            self.pipe.read_available(&mut self.buf)?;
+        }
+        let n = out.len().min(self.buf.len());
+        out[..n].copy_from_slice(&self.buf[..n]);
+        self.buf.drain(..n);
+        Ok(n)
+    }
+}
+
+impl std::io::Write for MemPort {
+    fn write(&mut self, b: &[u8]) -> std::io::Result<usize> {
+        self.pipe.write_all(b)?;
+        Ok(b.len())
+    }
+    fn flush(&mut self) -> std::io::Result<()> {
+        Ok(())
+    }
+}
+
+/// A processing double: its "angles" encode what the recording holds.
+struct CountingProcessor {
+    produced: Arc<Mutex<Vec<MeasurementResult>>>,
+}
+
+impl Processor for CountingProcessor {
+    fn process(&self, input: &ProcessInput) -> Result<Processed, String> {
+        let rec = Recording::open(&input.run_dir).map_err(|e| e.to_string())?;
+        let (odometry, _) = rec.odometry().map_err(|e| e.to_string())?;
+        let pcap_bytes = std::fs::metadata(input.run_dir.join("lidar.pcap"))
+            .map_err(|e| e.to_string())?
+            .len();
+        let last_x = odometry.last().map_or(0.0, |(_, o)| o.x_m);
+        let result = MeasurementResult {
+            run_id: input.run_id,
+            vehicle_id: input.params.vehicle_id.clone(),
+            approach_rad: 0.1 + last_x,
+            departure_rad: odometry.len() as f32 * 1e-4,
+            breakover_rad: pcap_bytes as f32 * 1e-7,
+            ground_clearance_m: 0.2,
+            wheelbase_m: input.travelled_m,
+            track_m: 1.5,
+            approach_support: 11,
+            departure_support: 12,
+            breakover_support: 13,
+            tyre_fit_rms_m: 0.003,
+            warnings: ResultWarnings::EMPTY,
+            cloud_points: 400,
+            preview_chunks: 0,
+        };
+        self.produced.lock().unwrap().push(result.clone());
+        let cloud = Cloud {
+            points_m: (0..400)
+                .map(|i| {
+                    [
+                        f64::from(i) * 0.01,
+                        f64::from(i % 7) * 0.1,
+                        0.2 + f64::from(i % 5) * 0.01,
+                    ]
+                })
+                .collect(),
+        };
+        Ok(Processed {
+            result,
+            cloud,
+            svg: "<svg/>".into(),
+        })
+    }
+}
+
+/// A valid VLP-16 data packet (strongest return, VLP-16) with blocks starting at `azimuth`.
+fn data_packet(azimuth: u16, malformed: bool) -> Vec<u8> {
+    let mut p = vec![0u8; 1206];
+    for b in 0..12 {
+        let o = b * 100;
+        p[o] = 0xFF;
+        p[o + 1] = if malformed && b == 3 { 0x00 } else { 0xEE };
+        let az = (azimuth + b as u16 * 40) % 36_000;
+        p[o + 2..o + 4].copy_from_slice(&az.to_le_bytes());
+        for c in 0..32 {
+            p[o + 4 + 3 * c..o + 6 + 3 * c].copy_from_slice(&500u16.to_le_bytes());
+        }
+    }
+    p[1204] = 0x37;
+    p[1205] = 0x22;
+    p
+}
+
+fn feed_lidar(tx: SyncSender<LidarPacket>, stop: Arc<AtomicBool>, malformed_every: Option<u64>) {
+    let mut azimuth = 0u16;
+    let mut n = 0u64;
+    while !stop.load(Ordering::Relaxed) {
+        n += 1;
+        let malformed = malformed_every.is_some_and(|k| n.is_multiple_of(k));
+        let packet = LidarPacket {
+            wall_ns: 1_700_000_000_000_000_000 + n * 1_327_000,
+            src: "192.168.1.201:2368".parse().unwrap(),
+            dst: "192.168.1.100:2368".parse().unwrap(),
+            payload: data_packet(azimuth, malformed),
+            position: false,
+        };
+        if !malformed {
+            azimuth = (azimuth + 480) % 36_000;
+        }
+        let _ = tx.try_send(packet);
+        thread::sleep(Duration::from_millis(5));
+    }
+}
+
+struct Rig {
+    dir: PathBuf,
+    radio: LossyPortPair,
+    handheld_port: Option<onboard::link::sim::LossyPort>,
+    key: Key,
+    truth: Arc<Mutex<Vec<PoseSample>>>,
+    produced: Arc<Mutex<Vec<MeasurementResult>>>,
+    stats: SharedStats,
+    stop: Arc<AtomicBool>,
+    crash: Arc<AtomicBool>,
+    threads: Vec<JoinHandle<()>>,
+}
+
+fn temp_dir(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("passangle-e2e-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+impl Rig {
+    fn start(
+        name: &str,
+        radio: PipeConfig,
+        malformed_every: Option<u64>,
+        last_counter: Option<u64>,
+    ) -> Self {
+        let dir = temp_dir(name);
+        let key = Key([0x5a; KEY_LEN]);
+        onboard::config::write_key(&dir.join("pairing.key"), &key).unwrap();
+        if let Some(c) = last_counter {
+            onboard::config::write_counter(&dir.join("counter"), c).unwrap();
+        }
+        let text = format!(
+            "[recording]\nroot = {:?}\n[radio]\nport = \"mem\"\nkey-file = {:?}\ncounter-file = {:?}\n[mcu]\nport = \"mem\"\n[camera]\nsource = \"none\"\n",
+            dir.join("runs"),
+            dir.join("pairing.key"),
+            dir.join("counter")
+        );
+        let mut config = OnboardConfig::parse(&text, Path::new("e2e.toml")).unwrap();
+        let fw = control::Config::default();
+        config.mcu.firmware = FirmwareConfig::from_wire(&fw.to_mcu());
+        config.run.max_speed_mps = config.mcu.firmware.max_speed_mps.min(0.5);
+        config.mcu.accel_mps2 = config
+            .mcu
+            .accel_mps2
+            .min(config.mcu.firmware.max_accel_mps2);
+        assert_eq!(config.camera.source, CameraSource::None);
+
+        let stop = Arc::new(AtomicBool::new(false));
+        let crash = Arc::new(AtomicBool::new(false));
+        let truth = Arc::new(Mutex::new(Vec::new()));
+        let mut threads = Vec::new();
+
+        // Firmware in the loop, real time.
+        let (fw_uart, onboard_uart) = MemPipe::pair();
+        let (stand_in, _unused) = MemPipe::pair();
+        let bus = InProcessBus::new();
+        let fil_config = FilConfig {
+            pacing: Pacing::RealTime,
+            ..FilConfig::default()
+        };
+        {
+            let (stop, truth) = (Arc::clone(&stop), Arc::clone(&truth));
+            // The runner is not Send: build it on its own thread.
+            threads.push(thread::spawn(move || {
+                let mut fil = Fil::new(
+                    fil_config,
+                    Box::new(bus.node()),
+                    Box::new(bus.node()),
+                    Box::new(fw_uart),
+                    Box::new(stand_in),
+                )
+                .unwrap();
+                let mut t = 0;
+                while !stop.load(Ordering::Relaxed) {
+                    t += 10_000;
+                    fil.run_until(t).unwrap();
+                    let _ = fil.take_trace();
+                    truth.lock().unwrap().push(fil.truth());
+                }
+            }));
+        }
+        thread::sleep(Duration::from_millis(50));
+
+        let (lidar_tx, lidar_rx) = sync_channel(4_000);
+        {
+            let stop = Arc::clone(&stop);
+            threads.push(thread::spawn(move || {
+                feed_lidar(lidar_tx, stop, malformed_every);
+            }));
+        }
+
+        let (pair, handheld_port, onboard_port) = LossyPortPair::new(radio, 77);
+        let produced = Arc::new(Mutex::new(Vec::new()));
+        let stats: SharedStats = Arc::new(Mutex::new(ServiceStats::default()));
+        {
+            let io = Io {
+                radio: Box::new(onboard_port),
+                mcu: Box::new(MemPort {
+                    pipe: onboard_uart,
+                    buf: Vec::new(),
+                }),
+                lidar: lidar_rx,
+                depth: None,
+                crash: Some(Arc::clone(&crash)),
+            };
+            let processor = Arc::new(CountingProcessor {
+                produced: Arc::clone(&produced),
+            });
+            let (stop, stats) = (Arc::clone(&stop), Arc::clone(&stats));
+            threads.push(thread::spawn(move || {
+                service::run(config, text, io, processor, &stop, &mut NoNotify, stats).unwrap();
+            }));
+        }
+        Self {
+            dir,
+            radio: pair,
+            handheld_port: Some(handheld_port),
+            key,
+            truth,
+            produced,
+            stats,
+            stop,
+            crash,
+            threads,
+        }
+    }
+
+    fn client(&mut self, key: Key) -> Client {
+        Client::new(Box::new(self.handheld_port.take().unwrap()), key)
+    }
+
+    fn max_abs_x_m(&self) -> f64 {
+        self.truth
+            .lock()
+            .unwrap()
+            .iter()
+            .map(|p| p.x_m.abs())
+            .fold(0.0, f64::max)
+    }
+
+    fn latest(&self) -> PoseSample {
+        *self.truth.lock().unwrap().last().unwrap()
+    }
+
+    fn wait_firmware_ready(&self) {
+        // The service needs the firmware's hello, config and a status before checks pass.
+        thread::sleep(Duration::from_millis(800));
+    }
+
+    fn finish(mut self) {
+        self.stop.store(true, Ordering::Relaxed);
+        for t in self.threads.drain(..) {
+            t.join().unwrap();
+        }
+        let _ = std::fs::remove_dir_all(&self.dir);
+    }
+}
+
+fn params(distance_m: f32) -> StartMeasurement {
+    StartMeasurement {
+        vehicle_id: Text::truncated("E2E-1"),
+        speed_mps: 0.3,
+        distance_m,
+        zone: Zone::Tyre,
+    }
+}
+
+#[test]
+fn full_run_over_a_radio_with_20_percent_loss_and_corruption_delivers_the_exact_result() {
+    let mut rig = Rig::start("lossy", PipeConfig::radio_lossy(0.2, 0.2), None, None);
+    rig.wait_firmware_ready();
+    let key = rig.key.clone();
+    let mut client = rig.client(key);
+    client.connect(Duration::from_secs(10)).unwrap();
+    let m = client
+        .measure(params(0.6), 1_000, Duration::from_secs(60), &mut Quiet)
+        .unwrap();
+    let produced = rig.produced.lock().unwrap().clone();
+    assert_eq!(produced.len(), 1);
+    let mut expect = produced[0].clone();
+    expect.preview_chunks = m.result.preview_chunks;
+    assert_eq!(m.result, expect, "exactly the result the robot produced");
+    assert!(m.result.preview_chunks > 0 && !m.preview_mm.is_empty());
+    let truth_x = rig.latest().x_m;
+    assert!(truth_x > 0.55, "the robot drove the distance: {truth_x}");
+    assert!(rig.latest().vx_mps.abs() < 0.01, "and stopped");
+    let (up, down) = rig.radio.stats();
+    assert!(
+        up.lost > 0 && down.lost > 0 && down.corrupted > 0,
+        "{up:?} {down:?}"
+    );
+    println!(
+        "stop -> result on the handheld: {:?}; preview {} points in {:?}; radio up {up:?} down {down:?}",
+        m.stop_to_result,
+        m.preview_mm.len(),
+        m.preview_time
+    );
+    let rec = Recording::open_run(&rig.dir.join("runs"), m.result.run_id).unwrap();
+    assert!(!rec.incomplete);
+    assert_eq!(rec.meta.outcome, RecordedOutcome::Completed);
+    assert!(rec.delivered, "the handheld's ack reached the robot");
+    assert!(
+        rec.odometry().unwrap().0.len() > 100,
+        "wheel odometry recorded"
+    );
+    rig.finish();
+}
+
+#[test]
+fn an_unauthenticated_start_is_refused_and_the_robot_does_not_move() {
+    let mut rig = Rig::start("auth", PipeConfig::CLEAN, None, Some(5_000));
+    rig.wait_firmware_ready();
+    let mut wrong = rig.client(Key([0x11; KEY_LEN]));
+    let e = wrong
+        .measure(params(0.6), 10_000, Duration::from_secs(10), &mut Quiet)
+        .unwrap_err();
+    assert!(
+        matches!(&e, ClientError::Refused { reason, .. } if reason == "BadTag"),
+        "{e}"
+    );
+    let stats = *rig.stats.lock().unwrap();
+    assert!(stats.starts_refused >= 1, "{stats:?}");
+    thread::sleep(Duration::from_millis(500));
+    assert!(
+        rig.max_abs_x_m() < 0.001,
+        "robot moved {} m",
+        rig.max_abs_x_m()
+    );
+    rig.finish();
+}
+
+#[test]
+fn a_replayed_start_counter_is_refused() {
+    let mut rig = Rig::start("replay", PipeConfig::CLEAN, None, Some(5_000));
+    rig.wait_firmware_ready();
+    let key = rig.key.clone();
+    let mut client = rig.client(key);
+    let e = client
+        .measure(params(0.6), 4_999, Duration::from_secs(10), &mut Quiet)
+        .unwrap_err();
+    assert!(
+        matches!(&e, ClientError::Refused { reason, .. } if reason == "Replay"),
+        "{e}"
+    );
+    thread::sleep(Duration::from_millis(500));
+    assert!(
+        rig.max_abs_x_m() < 0.001,
+        "robot moved {} m",
+        rig.max_abs_x_m()
+    );
+    assert!(rig.produced.lock().unwrap().is_empty());
+    rig.finish();
+}
+
+#[test]
+fn the_handheld_vanishing_mid_run_stops_the_robot() {
+    let mut rig = Rig::start("vanish", PipeConfig::CLEAN, None, None);
+    rig.wait_firmware_ready();
+    let key = rig.key.clone();
+    let mut client = rig.client(key);
+    let handle = thread::spawn(move || {
+        client.measure(params(5.0), 1_000, Duration::from_secs(30), &mut Quiet)
+    });
+    // Wait until the robot moves, then cut the radio.
+    let t0 = Instant::now();
+    while rig.latest().vx_mps < 0.2 {
+        assert!(t0.elapsed() < Duration::from_secs(10), "never drove");
+        thread::sleep(Duration::from_millis(20));
+    }
+    rig.radio.set_cut(true);
+    let cut_at = Instant::now();
+    while rig.latest().vx_mps.abs() > 0.005 {
+        assert!(
+            cut_at.elapsed() < Duration::from_secs(6),
+            "robot still moving {:?}",
+            rig.latest()
+        );
+        thread::sleep(Duration::from_millis(20));
+    }
+    println!(
+        "robot at rest {:?} after the radio went silent (handheld timeout 2 s)",
+        cut_at.elapsed()
+    );
+    assert!(
+        rig.latest().x_m < 4.0,
+        "stopped well before the requested 5 m"
+    );
+    // The run closes once the firmware reports idle (after its hold time).
+    let mut rec = Recording::open_run(&rig.dir.join("runs"), 1).unwrap();
+    while rec.meta.outcome == RecordedOutcome::Running && cut_at.elapsed() < Duration::from_secs(10)
+    {
+        thread::sleep(Duration::from_millis(50));
+        rec = Recording::open_run(&rig.dir.join("runs"), 1).unwrap();
+    }
+    assert!(
+        matches!(&rec.meta.outcome, RecordedOutcome::Aborted(r) if r.contains("handheld silent")),
+        "{:?}",
+        rec.meta.outcome
+    );
+    assert!(handle.join().unwrap().is_err());
+    rig.finish();
+}
+
+#[test]
+fn the_onboard_killed_mid_run_leaves_an_incomplete_recording_and_the_firmware_stops() {
+    let mut rig = Rig::start("kill", PipeConfig::CLEAN, None, None);
+    rig.wait_firmware_ready();
+    let key = rig.key.clone();
+    let mut client = rig.client(key);
+    let handle = thread::spawn(move || {
+        client.measure(params(5.0), 1_000, Duration::from_secs(8), &mut Quiet)
+    });
+    let t0 = Instant::now();
+    while rig.latest().vx_mps < 0.2 {
+        assert!(t0.elapsed() < Duration::from_secs(10), "never drove");
+        thread::sleep(Duration::from_millis(20));
+    }
+    thread::sleep(Duration::from_millis(1_500));
+    rig.crash.store(true, Ordering::Relaxed);
+    let killed_at = Instant::now();
+    while rig.latest().vx_mps.abs() > 0.005 {
+        assert!(
+            killed_at.elapsed() < Duration::from_secs(3),
+            "robot still moving {:?}",
+            rig.latest()
+        );
+        thread::sleep(Duration::from_millis(10));
+    }
+    println!(
+        "firmware stopped the robot {:?} after the onboard died (heartbeat timeout 100 ms + ramp)",
+        killed_at.elapsed()
+    );
+    let rec = Recording::open_run(&rig.dir.join("runs"), 1).unwrap();
+    assert!(rec.incomplete, "INCOMPLETE marker left");
+    assert_eq!(rec.meta.outcome, RecordedOutcome::Running);
+    let (odo, _) = rec.odometry().unwrap();
+    assert!(
+        !odo.is_empty(),
+        "what was flushed before the crash is readable"
+    );
+    assert!(handle.join().unwrap().is_err());
+    rig.finish();
+}
+
+#[test]
+fn malformed_lidar_packets_change_nothing_but_a_counter() {
+    let mut rig = Rig::start("malformed", PipeConfig::CLEAN, Some(10), None);
+    rig.wait_firmware_ready();
+    let key = rig.key.clone();
+    let mut client = rig.client(key);
+    let m = client
+        .measure(params(0.6), 1_000, Duration::from_secs(60), &mut Quiet)
+        .unwrap();
+    println!(
+        "clean radio: robot at rest -> result on the handheld {:?}, preview of {} points {:?} later",
+        m.stop_to_result,
+        m.preview_mm.len(),
+        m.preview_time
+    );
+    let stats = *rig.stats.lock().unwrap();
+    assert!(stats.lidar_malformed > 0, "{stats:?}");
+    let ratio = stats.lidar_malformed as f64 / (stats.lidar_malformed + stats.lidar_packets) as f64;
+    assert!((ratio - 0.1).abs() < 0.02, "{ratio}");
+    // Only valid packets were recorded: every pcap record is a full VLP-16 packet.
+    let pcap = rig.dir.join("runs/run-000001/lidar.pcap");
+    let mut reader = onboard::pcap::PcapReader::new(std::fs::File::open(pcap).unwrap()).unwrap();
+    let mut n = 0;
+    while let Some(r) = reader.next_record().unwrap() {
+        let udp = onboard::pcap::udp_in_frame(r.link_type, r.data).unwrap();
+        onboard::vlp16::Vlp16Packet::new_checked(udp.payload)
+            .unwrap()
+            .check_fields()
+            .unwrap();
+        n += 1;
+    }
+    assert!(n > 50);
+    assert_eq!(m.result.run_id, 1);
+    rig.finish();
+}
