@@ -41,7 +41,7 @@ use serde::Deserialize;
 
 use crate::geometry::{Isometry, Rot3, Vec3};
 use crate::trajectory::Trajectory;
-use crate::world::{Scene, SurfaceId, base_reflectivity};
+use crate::world::{Candidates, Scene, SurfaceId, base_reflectivity};
 
 /// Elevation of each laser id in firing order, degrees (manual Table 9-1).
 pub const ELEVATION_DEG: [f64; 16] = [
@@ -201,6 +201,8 @@ pub struct Vlp16Sim<'a, T: Trajectory> {
     /// Per channel (sequence * 16 + laser): sin and cos of the azimuth turned since the block start.
     channel_offsets: [(f64, f64); 32],
     omega_rad_per_s: f64,
+    /// Test only the primitives in the wedge each packet sweeps (see `packet_candidates`).
+    culling: bool,
 }
 
 impl<'a, T: Trajectory> Vlp16Sim<'a, T> {
@@ -221,6 +223,7 @@ impl<'a, T: Trajectory> Vlp16Sim<'a, T> {
             robot_from_lidar: config.robot_from_lidar(),
             channel_offsets,
             omega_rad_per_s,
+            culling: true,
             config,
             seed,
             lasers,
@@ -262,6 +265,11 @@ impl<'a, T: Trajectory> Vlp16Sim<'a, T> {
         let mut normals = NormalPairs::default();
         let pose_start = self.world_from_lidar_at(t0);
         let pose_end = self.world_from_lidar_at(t0 + PACKET_S);
+        let candidates = if self.culling {
+            self.packet_candidates(&pose_start, &pose_end, t0)
+        } else {
+            Candidates::ALL
+        };
         for (b, block) in blocks.iter_mut().enumerate() {
             let t_block = t0 + b as f64 * BLOCK_S;
             let azimuth_block = self.azimuth_at(t_block);
@@ -277,8 +285,14 @@ impl<'a, T: Trajectory> Vlp16Sim<'a, T> {
                     // Azimuth of this firing = block azimuth + the channel's fixed offset.
                     let (sin_d, cos_d) = self.channel_offsets[channel];
                     let azimuth = (sin_b * cos_d + cos_b * sin_d, cos_b * cos_d - sin_b * sin_d);
-                    let (repr, hit) =
-                        self.fire(&world_from_lidar, azimuth, laser, &mut rng, &mut normals);
+                    let (repr, hit) = self.fire(
+                        &world_from_lidar,
+                        azimuth,
+                        laser,
+                        candidates,
+                        &mut rng,
+                        &mut normals,
+                    );
                     block.channels[channel] = repr;
                     truth(&FiringTruth {
                         time_s: t_seq + laser as f64 * FIRING_S,
@@ -297,6 +311,39 @@ impl<'a, T: Trajectory> Vlp16Sim<'a, T> {
             return_mode: ReturnMode::Strongest,
             product: Product::Vlp16,
         }
+    }
+
+    /// The primitives this packet's rays can hit: the wedge the head sweeps during the packet, seen
+    /// from above, widened by 0.02 rad plus twice the sensor's tilt from vertical (a tilted head's
+    /// rays, at most 15 degrees off its equator, bend sideways by less than 0.27 x the tilt). No
+    /// culling when the head is tilted more than 0.3 rad.
+    fn packet_candidates(&self, start: &Isometry, end: &Isometry, t0: f64) -> Candidates {
+        let tilt = |m: &Isometry| m.rotation.0[2][2].clamp(-1.0, 1.0).acos();
+        let tilt_rad = tilt(start).max(tilt(end));
+        if tilt_rad > 0.3 {
+            return Candidates::ALL;
+        }
+        let bearing = |m: &Isometry, t: f64| {
+            let (s, c) = self.azimuth_at(t).sin_cos();
+            let d = m.apply_vector(Vec3::new(s, c, 0.0));
+            d.y.atan2(d.x)
+        };
+        let (a, b) = (bearing(start, t0), bearing(end, t0 + PACKET_S));
+        let sweep =
+            (b - a + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU) - std::f64::consts::PI;
+        self.scene.candidates_in_wedge(
+            start.translation,
+            a + sweep / 2.0,
+            sweep.abs() / 2.0 + 0.02 + 2.0 * tilt_rad,
+        )
+    }
+
+    /// The same sensor without per-packet culling (every ray tests every primitive); for tests
+    /// and for the benchmark's comparison.
+    #[must_use]
+    pub fn without_culling(mut self) -> Self {
+        self.culling = false;
+        self
     }
 
     /// `world_from_lidar` at simulation time `t_s`.
@@ -318,6 +365,7 @@ impl<'a, T: Trajectory> Vlp16Sim<'a, T> {
         world_from_lidar: &Isometry,
         (sin_a, cos_a): (f64, f64),
         laser: usize,
+        candidates: Candidates,
         rng: &mut ChaCha8Rng,
         normals: &mut NormalPairs,
     ) -> (ChannelRepr, Option<(SurfaceId, Vec3)>) {
@@ -328,7 +376,10 @@ impl<'a, T: Trajectory> Vlp16Sim<'a, T> {
             distance_raw: 0,
             reflectivity: 0,
         };
-        let Some(hit) = self.scene.cast(origin, dir, self.config.max_range_m + 1.0) else {
+        let Some(hit) =
+            self.scene
+                .cast_among(origin, dir, self.config.max_range_m + 1.0, candidates)
+        else {
             return (none, None);
         };
         let truth = Some((hit.surface, origin + dir * hit.range_m));
@@ -479,6 +530,37 @@ mod tests {
                 let p = Vec3::new(3.0, -2.0, 0.5);
                 let error = (exact.apply(p) - lerp.apply(p)).norm();
                 assert!(error < 5e-5, "t0 {t0} f {f}: {error} m at 3.6 m");
+            }
+        }
+    }
+
+    #[test]
+    fn culling_never_changes_a_packet() {
+        // Strong vibration and a tilted mount make the wedges as uncertain as the model allows.
+        let scene = Scene::from_vehicle(&test_sedan());
+        let sigma = 2f64.to_radians();
+        let traj = StraightRun {
+            vibration: Vibration::new(sigma, sigma, 8),
+            ..run()
+        };
+        for (rpm, mount_rpy_deg) in [
+            (600.0, [0.0, 0.0, 0.0]),
+            (1200.0, [3.0, -5.0, 30.0]),
+            (300.0, [0.0, 0.0, 90.0]),
+        ] {
+            let cfg = Vlp16Config {
+                rpm,
+                mount_rpy_deg,
+                ..Vlp16Config::default()
+            };
+            let fast = Vlp16Sim::new(&scene, &traj, cfg.clone(), 3);
+            let full = Vlp16Sim::new(&scene, &traj, cfg, 3).without_culling();
+            for k in (0..6000).step_by(7) {
+                assert_eq!(
+                    fast.data_packet(k),
+                    full.data_packet(k),
+                    "packet {k} at {rpm} rpm"
+                );
             }
         }
     }

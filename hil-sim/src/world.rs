@@ -6,7 +6,9 @@
 //! side-view polygon extruded along y (the ray is clipped to the y slab, then crossed with the
 //! polygon's edges in the x-z plane), parts are axis-aligned boxes and finite cylinders. Each
 //! primitive carries a bounding box that rejects most rays cheaply; a scene has ~10 primitives, so no
-//! hierarchy is needed. [`Scene::cast`] returns the nearest hit with its surface normal and which
+//! hierarchy is needed. Sensors that fire many rays in a narrow horizontal wedge (a VLP-16 packet
+//! sweeps under 10 degrees) first ask [`Scene::candidates_in_wedge`] which primitives the wedge can
+//! reach and cast with [`Scene::cast_among`]; tests check that this never changes a hit. [`Scene::cast`] returns the nearest hit with its surface normal and which
 //! surface it was; [`Scene::distance_to_surface`] is an independent distance function used by tests
 //! to check that simulated points lie on the surface they were cast on.
 //!
@@ -179,6 +181,18 @@ impl Scene {
 
     /// Cast a ray from `origin` along the unit vector `dir`; the nearest hit closer than `max_range_m`.
     pub fn cast(&self, origin: Vec3, dir: Vec3, max_range_m: f64) -> Option<Hit> {
+        self.cast_among(origin, dir, max_range_m, Candidates::ALL)
+    }
+
+    /// [`Scene::cast`] testing only the primitives in `candidates` (and the ground). Callers must
+    /// make sure no other primitive can be hit, e.g. with [`Scene::candidates_in_wedge`].
+    pub fn cast_among(
+        &self,
+        origin: Vec3,
+        dir: Vec3,
+        max_range_m: f64,
+        candidates: Candidates,
+    ) -> Option<Hit> {
         let inv = Vec3::new(1.0 / dir.x, 1.0 / dir.y, 1.0 / dir.z);
         let mut best: Option<Hit> = None;
         let mut t_max = max_range_m;
@@ -210,20 +224,25 @@ impl Scene {
             );
         }
         for (i, ty) in self.tyres.iter().enumerate() {
-            if ty.bounds.hit(origin, inv, t_max)
+            if candidates.has_tyre(i)
+                && ty.bounds.hit(origin, inv, t_max)
                 && let Some((t, n)) = hit_tyre(ty, origin, dir, t_max)
             {
                 keep(t, n, SurfaceKind::Tyre, i, &mut t_max);
             }
         }
         for (i, pr) in self.prisms.iter().enumerate() {
-            if pr.bounds.hit(origin, inv, t_max)
+            if candidates.has_prism(i)
+                && pr.bounds.hit(origin, inv, t_max)
                 && let Some((t, n)) = hit_prism(pr, origin, dir, t_max)
             {
                 keep(t, n, SurfaceKind::Body, i, &mut t_max);
             }
         }
         for (i, part) in self.parts.iter().enumerate() {
+            if !candidates.has_part(i) {
+                continue;
+            }
             let found = match part {
                 PartPrim::Box { min, max } => {
                     if (Aabb {
@@ -258,6 +277,41 @@ impl Scene {
         best
     }
 
+    /// The primitives a ray from `origin` can hit when its horizontal direction lies within
+    /// `half_width_rad` of the world angle `mid_rad` (counter-clockwise from +x): every primitive
+    /// whose bounding box, grown by 1 cm, overlaps that wedge seen from above, or contains the
+    /// origin's x-y position. Conservative: widen the wedge for any doubt.
+    pub fn candidates_in_wedge(
+        &self,
+        origin: Vec3,
+        mid_rad: f64,
+        half_width_rad: f64,
+    ) -> Candidates {
+        let mut c = Candidates {
+            tyres: 0,
+            prisms: 0,
+            parts: 0,
+        };
+        let visible = |b: &Aabb| aabb_in_wedge(b, origin, mid_rad, half_width_rad);
+        for (i, t) in self.tyres.iter().enumerate().take(64) {
+            c.tyres |= u64::from(visible(&t.bounds)) << i;
+        }
+        for (i, p) in self.prisms.iter().enumerate().take(64) {
+            c.prisms |= u64::from(visible(&p.bounds)) << i;
+        }
+        for (i, part) in self.parts.iter().enumerate().take(64) {
+            let b = match part {
+                PartPrim::Box { min, max } => Aabb {
+                    min: *min,
+                    max: *max,
+                },
+                PartPrim::Cylinder { bounds, .. } => *bounds,
+            };
+            c.parts |= u64::from(visible(&b)) << i;
+        }
+        c
+    }
+
     /// Distance from `p` to the surface `id` (independent of the ray caster; for tests and checks).
     pub fn distance_to_surface(&self, id: SurfaceId, p: Vec3) -> f64 {
         let i = usize::from(id.index);
@@ -277,6 +331,74 @@ impl Scene {
                 .map_or(f64::INFINITY, |pa| part_distance(pa, p)),
         }
     }
+}
+
+/// Which primitives [`Scene::cast_among`] tests: one bit per tyre, body prism and part (primitives
+/// past the 64th are always tested).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Candidates {
+    tyres: u64,
+    prisms: u64,
+    parts: u64,
+}
+
+impl Candidates {
+    /// Every primitive.
+    pub const ALL: Self = Self {
+        tyres: u64::MAX,
+        prisms: u64::MAX,
+        parts: u64::MAX,
+    };
+
+    fn bit(mask: u64, i: usize) -> bool {
+        i >= 64 || mask & (1 << i) != 0
+    }
+
+    fn has_tyre(self, i: usize) -> bool {
+        Self::bit(self.tyres, i)
+    }
+
+    fn has_prism(self, i: usize) -> bool {
+        Self::bit(self.prisms, i)
+    }
+
+    fn has_part(self, i: usize) -> bool {
+        Self::bit(self.parts, i)
+    }
+}
+
+/// Wrap an angle to (-pi, pi].
+fn wrap_pi(a: f64) -> f64 {
+    let w = (a + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU) - std::f64::consts::PI;
+    if w <= -std::f64::consts::PI {
+        w + std::f64::consts::TAU
+    } else {
+        w
+    }
+}
+
+/// Whether the box (grown by 1 cm), seen from above from `o`, overlaps the wedge `mid +- half`.
+fn aabb_in_wedge(b: &Aabb, o: Vec3, mid_rad: f64, half_rad: f64) -> bool {
+    const GROW_M: f64 = 0.01;
+    let (x0, x1, y0, y1) = (
+        b.min.x - GROW_M,
+        b.max.x + GROW_M,
+        b.min.y - GROW_M,
+        b.max.y + GROW_M,
+    );
+    if (x0..=x1).contains(&o.x) && (y0..=y1).contains(&o.y) {
+        return true;
+    }
+    // Outside the rectangle, it subtends less than pi: measure its corners from its centre's bearing.
+    let centre = (f64::midpoint(y0, y1) - o.y).atan2(f64::midpoint(x0, x1) - o.x);
+    let (mut lo, mut hi) = (0.0f64, 0.0f64);
+    for (x, y) in [(x0, y0), (x0, y1), (x1, y0), (x1, y1)] {
+        let dev = wrap_pi((y - o.y).atan2(x - o.x) - centre);
+        lo = lo.min(dev);
+        hi = hi.max(dev);
+    }
+    let (rect_mid, rect_half) = (centre + f64::midpoint(lo, hi), (hi - lo) / 2.0);
+    wrap_pi(rect_mid - mid_rad).abs() <= rect_half + half_rad
 }
 
 fn part_prim(part: &Part) -> PartPrim {
@@ -612,6 +734,36 @@ mod tests {
             (hit.range_m - (0.79 - 0.1125)).abs() < 1e-12,
             "sidewall: {}",
             hit.range_m
+        );
+    }
+
+    #[test]
+    fn wedge_culling_never_changes_a_hit() {
+        let s = scene();
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(12);
+        let mut culled = 0usize;
+        for _ in 0..20_000 {
+            let o = Vec3::new(
+                rng.random_range(-4.5..2.0),
+                rng.random_range(-0.6..0.6),
+                rng.random_range(0.05..0.13),
+            );
+            let heading: f64 = rng.random_range(-3.2..3.2);
+            let half: f64 = rng.random_range(0.01..0.3);
+            let a = heading + rng.random_range(-half..half);
+            let elevation: f64 = rng.random_range(-0.3..0.3);
+            let d = Vec3::new(
+                a.cos() * elevation.cos(),
+                a.sin() * elevation.cos(),
+                elevation.sin(),
+            );
+            let c = s.candidates_in_wedge(o, heading, half);
+            culled += usize::from(c.tyres.count_ones() < 4);
+            assert_eq!(s.cast_among(o, d, 100.0, c), s.cast(o, d, 100.0));
+        }
+        assert!(
+            culled > 10_000,
+            "the wedges culled tyres only {culled} times"
         );
     }
 
