@@ -8,9 +8,10 @@
 //! primitive carries a bounding box that rejects most rays cheaply; a scene has ~10 primitives, so no
 //! hierarchy is needed. Sensors that fire many rays in a narrow horizontal wedge (a VLP-16 packet
 //! sweeps under 10 degrees) first ask [`Scene::candidates_in_wedge`] which primitives the wedge can
-//! reach and cast with [`Scene::cast_among`]; tests check that this never changes a hit. [`Scene::cast`] returns the nearest hit with its surface normal and which
-//! surface it was; [`Scene::distance_to_surface`] is an independent distance function used by tests
-//! to check that simulated points lie on the surface they were cast on.
+//! reach and cast with [`Scene::cast_among`]; tests check that this never changes a hit.
+//! [`Scene::cast`] returns the nearest hit with its surface normal and which surface it was;
+//! [`Scene::distance_to_surface`] is an independent distance function used by tests to check that
+//! simulated points lie on the surface they were cast on.
 //!
 //! Known approximation: the rim disc spans the full tyre radius in its recessed plane instead of
 //! having an inner lip, so a ray entering the rim opening obliquely stops on the disc slightly
