@@ -25,6 +25,9 @@ use std::fmt::Write as _;
 
 use control::kinematics::Geometry;
 
+use crate::geometry::{Pose, Vec3};
+use crate::trajectory::{SampledTrajectory, TrajectoryError};
+
 /// Standard gravity, m/s^2.
 const G_MPS2: f32 = 9.81;
 
@@ -107,6 +110,9 @@ pub struct PoseSample {
     pub vy_mps: f32,
     /// Yaw rate, rad/s.
     pub wz_radps: f32,
+    /// Forward distance the wheel encoders report, m: `r` times the mean wheel angle (the
+    /// forward-kinematics x increment). Exceeds the true distance by the wheels' creep.
+    pub wheel_distance_m: f64,
 }
 
 /// The robot's poses over a run, one per simulated millisecond: the ground truth for odometry and
@@ -135,6 +141,7 @@ impl PoseHistory {
                     vx_mps: lerpf(a.vx_mps, b.vx_mps),
                     vy_mps: lerpf(a.vy_mps, b.vy_mps),
                     wz_radps: lerpf(a.wz_radps, b.wz_radps),
+                    wheel_distance_m: lerp(a.wheel_distance_m, b.wheel_distance_m),
                 })
             }
             (Some(a), None) => Some(*a),
@@ -143,14 +150,51 @@ impl PoseHistory {
         }
     }
 
-    /// The history as CSV (`stamp_us,x_m,y_m,yaw_rad,vx_mps,vy_mps,wz_radps`), for other tools.
+    /// The history as a [`SampledTrajectory`] for the VLP-16 and D435 models: the odometry
+    /// frame (the robot's pose at time 0) is placed at `world_from_start` in the world (vehicle)
+    /// frame. Planar: the start pose's roll and pitch are kept, yaw and position compose.
+    pub fn to_trajectory(
+        &self,
+        world_from_start: &Pose,
+    ) -> Result<SampledTrajectory, TrajectoryError> {
+        let (sin, cos) = world_from_start.yaw_rad.sin_cos();
+        let p0 = world_from_start.position_m;
+        let samples = self
+            .samples
+            .iter()
+            .map(|s| {
+                let pose = Pose {
+                    position_m: Vec3::new(
+                        p0.x + cos * s.x_m - sin * s.y_m,
+                        p0.y + sin * s.x_m + cos * s.y_m,
+                        p0.z,
+                    ),
+                    roll_rad: world_from_start.roll_rad,
+                    pitch_rad: world_from_start.pitch_rad,
+                    yaw_rad: world_from_start.yaw_rad + s.yaw_rad,
+                };
+                (s.stamp_us as f64 * 1e-6, pose, s.wheel_distance_m)
+            })
+            .collect();
+        SampledTrajectory::new(samples)
+    }
+
+    /// The history as CSV (`stamp_us,x_m,y_m,yaw_rad,vx_mps,vy_mps,wz_radps,wheel_distance_m`).
     pub fn to_csv(&self) -> String {
-        let mut out = String::from("stamp_us,x_m,y_m,yaw_rad,vx_mps,vy_mps,wz_radps\n");
+        let mut out =
+            String::from("stamp_us,x_m,y_m,yaw_rad,vx_mps,vy_mps,wz_radps,wheel_distance_m\n");
         for p in &self.samples {
             let _ = writeln!(
                 out,
-                "{},{:.6},{:.6},{:.6},{:.5},{:.5},{:.5}",
-                p.stamp_us, p.x_m, p.y_m, p.yaw_rad, p.vx_mps, p.vy_mps, p.wz_radps
+                "{},{:.6},{:.6},{:.6},{:.5},{:.5},{:.5},{:.6}",
+                p.stamp_us,
+                p.x_m,
+                p.y_m,
+                p.yaw_rad,
+                p.vx_mps,
+                p.vy_mps,
+                p.wz_radps,
+                p.wheel_distance_m
             );
         }
         out
@@ -236,6 +280,9 @@ impl Robot {
             vx_mps: self.vx_mps,
             vy_mps: self.vy_mps,
             wz_radps: self.wz_radps,
+            wheel_distance_m: f64::from(self.params.geometry.wheel_radius_m)
+                * self.wheel_rad.iter().sum::<f64>()
+                / 4.0,
         }
     }
 
@@ -344,6 +391,37 @@ mod tests {
         }
         let s = robot.sample(0);
         assert!(s.vx_mps.abs() < 1e-3, "{s:?}");
+    }
+
+    #[test]
+    fn history_becomes_a_sensor_trajectory_placed_in_the_world() {
+        use crate::trajectory::Trajectory as _;
+        let mut robot = Robot::new(RobotParams::default());
+        let mut history = PoseHistory::default();
+        for k in 0..=2000u64 {
+            history.samples.push(robot.sample(k * 1000));
+            robot.advance([0.12, -0.12, 0.12, -0.12], 0.001);
+        }
+        let start = Pose {
+            position_m: Vec3::new(-3.0, 0.5, 0.0),
+            roll_rad: 0.0,
+            pitch_rad: 0.0,
+            yaw_rad: std::f64::consts::FRAC_PI_2,
+        };
+        let traj = history.to_trajectory(&start).unwrap();
+        let end = history.samples.last().unwrap();
+        let p = traj.pose_at(2.0);
+        // Forward along the robot's x = along the world's y here.
+        assert!((p.position_m.x + 3.0).abs() < 1e-6, "{p:?}");
+        assert!((p.position_m.y - (0.5 + end.x_m)).abs() < 1e-6, "{p:?}");
+        assert!((p.yaw_rad - std::f64::consts::FRAC_PI_2).abs() < 1e-6);
+        // The encoders see a little more than the true distance (creep).
+        let wheel = traj.wheel_distance_at(2.0);
+        assert!(
+            wheel > end.x_m && wheel < end.x_m * 1.02,
+            "{wheel} vs {}",
+            end.x_m
+        );
     }
 
     #[test]
