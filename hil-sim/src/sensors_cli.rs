@@ -25,8 +25,11 @@ use std::time::{Duration, Instant};
 use anyhow::{Context, bail};
 use clap::Args;
 use hil_sim::d435::D435Sim;
+use hil_sim::geometry::Pose;
 use hil_sim::scenario::Scenario;
-use hil_sim::trajectory::write_truth_csv;
+use hil_sim::trajectory::{
+    SampledTrajectory, StraightRun, Trajectory, parse_trajectory_csv, write_truth_csv,
+};
 use hil_sim::truth::{TruthOptions, Zone, true_angles};
 use hil_sim::vehicle::Vehicle;
 use hil_sim::vlp16::{Datagram, Vlp16Sim};
@@ -72,6 +75,14 @@ pub struct LidarArgs {
     /// Pace UDP output at the sensor's real rate instead of as fast as possible.
     #[arg(long)]
     realtime: bool,
+    /// Drive the sensor along this trajectory CSV (ground-truth or robot pose-history format)
+    /// instead of the scenario's straight run; the recording ends with the file.
+    #[arg(long)]
+    trajectory: Option<PathBuf>,
+    /// The trajectory file's poses are relative to the scenario's start pose (default: they are in
+    /// the vehicle frame already).
+    #[arg(long)]
+    trajectory_from_start: bool,
     /// Ground-truth CSV path (default: next to the pcap, `.truth.csv`).
     #[arg(long)]
     truth: Option<PathBuf>,
@@ -88,6 +99,14 @@ pub struct DepthArgs {
     /// Output directory (created).
     #[arg(long)]
     out: PathBuf,
+    /// Drive the sensor along this trajectory CSV (ground-truth or robot pose-history format)
+    /// instead of the scenario's straight run; the recording ends with the file.
+    #[arg(long)]
+    trajectory: Option<PathBuf>,
+    /// The trajectory file's poses are relative to the scenario's start pose (default: they are in
+    /// the vehicle frame already).
+    #[arg(long)]
+    trajectory_from_start: bool,
     /// Override the scenario's duration, seconds.
     #[arg(long)]
     duration_s: Option<f64>,
@@ -149,10 +168,62 @@ fn load_scenario(path: &Path, duration_override: Option<f64>) -> anyhow::Result<
     Ok(scenario)
 }
 
-fn write_truth(path: &Path, scenario: &Scenario) -> anyhow::Result<()> {
+/// The robot's motion: the scenario's straight run or a trajectory file.
+enum Motion {
+    Scenario(StraightRun),
+    File(SampledTrajectory),
+}
+
+impl Trajectory for Motion {
+    fn pose_at(&self, t_s: f64) -> Pose {
+        match self {
+            Motion::Scenario(r) => r.pose_at(t_s),
+            Motion::File(f) => f.pose_at(t_s),
+        }
+    }
+
+    fn wheel_distance_at(&self, t_s: f64) -> f64 {
+        match self {
+            Motion::Scenario(r) => r.wheel_distance_at(t_s),
+            Motion::File(f) => f.wheel_distance_at(t_s),
+        }
+    }
+}
+
+/// The motion to simulate; a trajectory file also caps the scenario's duration at its end.
+fn load_motion(
+    file: Option<&Path>,
+    from_start: bool,
+    scenario: &mut Scenario,
+) -> anyhow::Result<Motion> {
+    let Some(path) = file else {
+        return Ok(Motion::Scenario(scenario.run.clone()));
+    };
+    let text = fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    let mut trajectory = parse_trajectory_csv(&text)
+        .with_context(|| format!("trajectory file {}", path.display()))?;
+    if from_start {
+        let start = scenario.run.pose_at(0.0);
+        trajectory = trajectory.relative_to(&Pose {
+            roll_rad: 0.0,
+            pitch_rad: 0.0,
+            ..start
+        });
+    }
+    if trajectory.end_time_s() <= 0.0 {
+        bail!(
+            "trajectory file {}: it ends at t = 0; nothing to simulate",
+            path.display()
+        );
+    }
+    scenario.duration_s = scenario.duration_s.min(trajectory.end_time_s());
+    Ok(Motion::File(trajectory))
+}
+
+fn write_truth(path: &Path, motion: &Motion, duration_s: f64) -> anyhow::Result<()> {
     let mut out =
         BufWriter::new(File::create(path).with_context(|| format!("creating {}", path.display()))?);
-    write_truth_csv(&mut out, &scenario.run, scenario.duration_s, TRUTH_STEP_S)?;
+    write_truth_csv(&mut out, motion, duration_s, TRUTH_STEP_S)?;
     out.flush()
         .with_context(|| format!("writing {}", path.display()))
 }
@@ -162,11 +233,16 @@ pub fn lidar(args: &LidarArgs) -> anyhow::Result<()> {
     if args.pcap.is_none() && args.udp.is_none() {
         bail!("give --pcap FILE and/or --udp HOST:PORT");
     }
-    let scenario = load_scenario(&args.scenario, args.duration_s)?;
+    let mut scenario = load_scenario(&args.scenario, args.duration_s)?;
+    let motion = load_motion(
+        args.trajectory.as_deref(),
+        args.trajectory_from_start,
+        &mut scenario,
+    )?;
     let scene = Scene::from_vehicle(&scenario.vehicle);
     let sim = Vlp16Sim::new(
         &scene,
-        &scenario.run,
+        &motion,
         scenario.file.lidar.clone(),
         scenario.lidar_seed(),
     );
@@ -227,7 +303,7 @@ pub fn lidar(args: &LidarArgs) -> anyhow::Result<()> {
     }
     let wall_s = started.elapsed().as_secs_f64();
     if let Some(p) = &truth_path {
-        write_truth(p, &scenario)?;
+        write_truth(p, &motion, scenario.duration_s)?;
     }
     println!(
         "{data} data + {position} position packets, {:.2} s simulated in {wall_s:.2} s ({:.1}x real time)",
@@ -242,10 +318,15 @@ pub fn lidar(args: &LidarArgs) -> anyhow::Result<()> {
 
 /// `passangle-sim depth SCENARIO --out DIR`: render the D435's Z16 frames.
 pub fn depth(args: &DepthArgs) -> anyhow::Result<()> {
-    let scenario = load_scenario(&args.scenario, args.duration_s)?;
+    let mut scenario = load_scenario(&args.scenario, args.duration_s)?;
+    let motion = load_motion(
+        args.trajectory.as_deref(),
+        args.trajectory_from_start,
+        &mut scenario,
+    )?;
     let scene = Scene::from_vehicle(&scenario.vehicle);
     let config = scenario.file.depth.clone();
-    let sim = D435Sim::new(&scene, &scenario.run, config.clone(), scenario.depth_seed());
+    let sim = D435Sim::new(&scene, &motion, config.clone(), scenario.depth_seed());
     let frames_dir = args.out.join("depth");
     fs::create_dir_all(&frames_dir)
         .with_context(|| format!("creating {}", frames_dir.display()))?;
@@ -288,7 +369,7 @@ pub fn depth(args: &DepthArgs) -> anyhow::Result<()> {
     fs::write(args.out.join("depth.csv"), index).context("writing depth.csv")?;
     fs::write(args.out.join("camera.toml"), camera_toml(&scenario)?)
         .context("writing camera.toml")?;
-    write_truth(&args.out.join("truth.csv"), &scenario)?;
+    write_truth(&args.out.join("truth.csv"), &motion, scenario.duration_s)?;
     let wall_s = started.elapsed().as_secs_f64();
     println!(
         "{n} frames {}x{} in {} ({wall_s:.1} s, {:.1} frames/s on {workers} threads)",

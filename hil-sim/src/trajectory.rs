@@ -18,6 +18,8 @@
 //! seconds since the scenario start (the sensors' clocks are offset from it by fixed amounts given in
 //! their own files); the pose is `world_from_robot` in the vehicle frame; `wheel_distance_m` is the
 //! distance the wheel encoders would report (it exceeds the true distance by the slip).
+//! [`parse_trajectory_csv`] reads such files (and the robot simulation's pose history) back into a
+//! [`SampledTrajectory`], so a recorded or externally simulated motion can drive the sensors.
 
 use std::f64::consts::TAU;
 use std::io::Write;
@@ -290,6 +292,125 @@ pub fn write_truth_csv(
     Ok(())
 }
 
+/// Why a trajectory CSV was rejected (line numbers count from 1, comments included).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum TrajectoryCsvError {
+    /// No header line with the required columns.
+    #[error("no header line: need columns time_s (or stamp_us), x_m, y_m and yaw_rad")]
+    NoHeader,
+    /// A required column is missing from the header.
+    #[error("line {line}: header lacks column `{column}`")]
+    MissingColumn {
+        /// Header line.
+        line: usize,
+        /// The column.
+        column: &'static str,
+    },
+    /// A data line has too few fields or a field is not a finite number.
+    #[error("line {line}: field `{column}` is missing or not a finite number")]
+    BadField {
+        /// The line.
+        line: usize,
+        /// The column.
+        column: String,
+    },
+    /// The samples do not form a trajectory.
+    #[error("{0}")]
+    Samples(#[from] TrajectoryError),
+}
+
+/// Parse a trajectory CSV: lines starting with `#` are comments, the first other line is the
+/// header, then one sample per line. Columns are found by name, in any order: `time_s` or
+/// `stamp_us` (microseconds), `x_m`, `y_m`, `yaw_rad`, and optionally `z_m`, `roll_rad`,
+/// `pitch_rad`, `wheel_distance_m` (0 when absent); other columns are ignored. Reads both this
+/// crate's ground-truth files and the robot simulation's pose history
+/// (`stamp_us,x_m,y_m,yaw_rad,...`). Never panics.
+pub fn parse_trajectory_csv(text: &str) -> Result<SampledTrajectory, TrajectoryCsvError> {
+    let mut lines = text
+        .lines()
+        .enumerate()
+        .filter(|(_, l)| !l.trim().is_empty() && !l.starts_with('#'));
+    let (header_index, header) = lines.next().ok_or(TrajectoryCsvError::NoHeader)?;
+    let names: Vec<&str> = header.split(',').map(str::trim).collect();
+    let find = |name: &str| names.iter().position(|n| *n == name);
+    let required = |name: &'static str| {
+        find(name).ok_or(TrajectoryCsvError::MissingColumn {
+            line: header_index + 1,
+            column: name,
+        })
+    };
+    let (time_col, time_scale) = match (find("time_s"), find("stamp_us")) {
+        (Some(c), _) => (c, 1.0),
+        (None, Some(c)) => (c, 1e-6),
+        (None, None) => {
+            return Err(TrajectoryCsvError::MissingColumn {
+                line: header_index + 1,
+                column: "time_s",
+            });
+        }
+    };
+    let (x, y, yaw) = (required("x_m")?, required("y_m")?, required("yaw_rad")?);
+    let optional = [
+        find("z_m"),
+        find("roll_rad"),
+        find("pitch_rad"),
+        find("wheel_distance_m"),
+    ];
+    let mut samples = Vec::new();
+    for (index, line) in lines {
+        let fields: Vec<&str> = line.split(',').map(str::trim).collect();
+        let get = |col: usize| -> Result<f64, TrajectoryCsvError> {
+            fields
+                .get(col)
+                .and_then(|f| f.parse::<f64>().ok())
+                .filter(|v| v.is_finite())
+                .ok_or_else(|| TrajectoryCsvError::BadField {
+                    line: index + 1,
+                    column: names[col].to_owned(),
+                })
+        };
+        let opt = |col: Option<usize>| col.map_or(Ok(0.0), get);
+        let pose = Pose {
+            position_m: Vec3::new(get(x)?, get(y)?, opt(optional[0])?),
+            roll_rad: opt(optional[1])?,
+            pitch_rad: opt(optional[2])?,
+            yaw_rad: get(yaw)?,
+        };
+        samples.push((get(time_col)? * time_scale, pose, opt(optional[3])?));
+    }
+    Ok(SampledTrajectory::new(samples)?)
+}
+
+impl SampledTrajectory {
+    /// The same motion started from `start` instead of the origin: every pose `p` becomes
+    /// `start * p` (for files whose poses are relative to where the robot began).
+    #[must_use]
+    pub fn relative_to(&self, start: &Pose) -> Self {
+        let world_from_start = start.to_isometry();
+        let samples = self
+            .samples
+            .iter()
+            .map(|(t, p, w)| {
+                let m = world_from_start.compose(&p.to_isometry());
+                let r = &m.rotation.0;
+                let pose = Pose {
+                    position_m: m.translation,
+                    roll_rad: r[2][1].atan2(r[2][2]),
+                    pitch_rad: (-r[2][0]).clamp(-1.0, 1.0).asin(),
+                    yaw_rad: r[1][0].atan2(r[0][0]),
+                };
+                (*t, pose, *w)
+            })
+            .collect();
+        Self { samples }
+    }
+
+    /// Time of the last sample, seconds.
+    pub fn end_time_s(&self) -> f64 {
+        self.samples.last().map_or(0.0, |s| s.0)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -366,6 +487,62 @@ mod tests {
         let p1 = Pose { yaw_rad: -3.1, ..p };
         let t = SampledTrajectory::new(vec![(0.0, p0, 0.0), (1.0, p1, 0.0)]).expect("valid");
         assert!(t.pose_at(0.5).yaw_rad.abs() > 3.1);
+    }
+
+    #[test]
+    fn truth_csv_parses_back_into_the_same_trajectory() {
+        let mut out = Vec::new();
+        write_truth_csv(&mut out, &run(), 2.0, 0.01).expect("in memory");
+        let parsed = parse_trajectory_csv(&String::from_utf8(out).expect("ascii")).expect("valid");
+        for t in [0.0, 0.731, 1.999] {
+            let (a, b) = (parsed.pose_at(t), run().pose_at(t));
+            assert!((a.position_m - b.position_m).norm() < 1e-5, "t {t}");
+            assert!(
+                (a.pitch_rad - b.pitch_rad).abs() < 1e-5 && (a.yaw_rad - b.yaw_rad).abs() < 1e-6
+            );
+        }
+        assert!((parsed.end_time_s() - 2.0).abs() < 1e-9);
+    }
+
+    #[test]
+    fn robot_history_csv_reads_with_microsecond_stamps_and_errors_name_the_line() {
+        let text = "stamp_us,x_m,y_m,yaw_rad,vx_mps,vy_mps,wz_radps,wheel_distance_m\n0,0,0,0,0,0,0,0\n1000000,0.3,0,0,0.3,0,0,0.31\n";
+        let t = parse_trajectory_csv(text).expect("valid");
+        assert!((t.pose_at(0.5).position_m.x - 0.15).abs() < 1e-12);
+        assert!((t.wheel_distance_at(1.0) - 0.31).abs() < 1e-12);
+        let start = Pose {
+            position_m: Vec3::new(2.0, 0.1, 0.0),
+            yaw_rad: std::f64::consts::PI,
+            ..Pose::default()
+        };
+        let moved = t.relative_to(&start).pose_at(1.0);
+        assert!((moved.position_m - Vec3::new(1.7, 0.1, 0.0)).norm() < 1e-12);
+        assert!((moved.yaw_rad.abs() - std::f64::consts::PI).abs() < 1e-12);
+        let bad = text.replace("1000000,0.3", "1000000,abc");
+        assert_eq!(
+            parse_trajectory_csv(&bad),
+            Err(TrajectoryCsvError::BadField {
+                line: 3,
+                column: "x_m".into()
+            })
+        );
+        assert_eq!(
+            parse_trajectory_csv("# only a comment\ntime_s,x_m,y_m\n"),
+            Err(TrajectoryCsvError::MissingColumn {
+                line: 2,
+                column: "yaw_rad"
+            })
+        );
+        assert_eq!(parse_trajectory_csv(""), Err(TrajectoryCsvError::NoHeader));
+    }
+
+    proptest::proptest! {
+        #[test]
+        fn arbitrary_csv_never_panics(body in "[0-9a-z_,. eE+\\-\n#]{0,300}") {
+            let _ = parse_trajectory_csv(&body);
+            let _ = parse_trajectory_csv(&format!("time_s,x_m,y_m,yaw_rad\n{body}"));
+            let _ = parse_trajectory_csv(&format!("stamp_us,yaw_rad,x_m,y_m,z_m,roll_rad,pitch_rad\n{body}"));
+        }
     }
 
     #[test]

@@ -473,3 +473,64 @@ fn command_line_errors_name_what_is_wrong() {
     let e = stderr(sim_bin().args(["truth", "hil-sim/vehicles/nope.toml"]));
     assert!(e.contains("nope.toml"), "{e}");
 }
+
+#[test]
+fn a_trajectory_file_drives_the_sensor_and_caps_the_duration() {
+    let dir = temp_dir("trajectory");
+    let traj = dir.join("traj.csv");
+    // The robot simulation's pose-history format: 0.15 m forward in 0.5 s, relative to the start.
+    std::fs::write(
+        &traj,
+        "stamp_us,x_m,y_m,yaw_rad,vx_mps\n0,0,0,0,0.3\n500000,0.15,0,0,0.3\n",
+    )
+    .expect("write");
+    let pcap = dir.join("out.pcap");
+    let out = sim_bin()
+        .arg("lidar")
+        .arg(crate_dir().join("scenarios/sedan-pass.toml"))
+        .arg("--pcap")
+        .arg(&pcap)
+        .arg("--trajectory")
+        .arg(&traj)
+        .arg("--trajectory-from-start")
+        .output()
+        .expect("binary runs");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(String::from_utf8_lossy(&out.stdout).starts_with("377 data + 26 position packets"));
+    let truth = std::fs::read_to_string(dir.join("out.truth.csv")).expect("truth");
+    let last: Vec<f64> = truth
+        .lines()
+        .last()
+        .expect("a sample")
+        .split(',')
+        .map(|f| f.parse().expect("number"))
+        .collect();
+    // Scenario start (2.0, 0.0) heading 180 degrees: 0.15 m forward ends at x = 1.85.
+    assert!(
+        (last[0] - 0.5).abs() < 1e-9 && (last[1] - 1.85).abs() < 1e-6 && last[2].abs() < 1e-6,
+        "{last:?}"
+    );
+    assert!((last[6].abs() - std::f64::consts::PI).abs() < 1e-6);
+    let bad = dir.join("bad.csv");
+    std::fs::write(&bad, "time_s,x_m,y_m\n0,0,0\n").expect("write");
+    let out = sim_bin()
+        .env("RUST_BACKTRACE", "0")
+        .arg("lidar")
+        .arg(crate_dir().join("scenarios/sedan-pass.toml"))
+        .arg("--pcap")
+        .arg(dir.join("bad.pcap"))
+        .arg("--trajectory")
+        .arg(&bad)
+        .output()
+        .expect("binary runs");
+    let e = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success() && e.contains("bad.csv") && e.contains("yaw_rad"),
+        "{e}"
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}
