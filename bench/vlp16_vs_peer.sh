@@ -38,10 +38,10 @@ PY
 pin=()
 if command -v taskset >/dev/null; then pin=(taskset -c 0); fi
 cargo build --release -q -p onboard --example bench_vlp16
-# Interleaved rounds, best figure per side: other load on the machine hits both alike.
+# Five interleaved rounds, best figure per side: other load on the machine hits both alike.
 field() { sed -n "s/.*$1=\([^ ]*\).*/\1/p"; }
 ours_pps=0; peer_pps=0; ours_points=0; peer_points=0
-for round in 1 2 3; do
+for round in 1 2 3 4 5; do
   ours="$("${pin[@]}" "${CARGO_TARGET_DIR:-target}/release/examples/bench_vlp16" "$scratch/capture.pcap" "$seconds")"
   peer="$("${pin[@]}" python3 bench/peer_velodyne_decoder.py "$scratch/capture.pcap" "$((seconds / 2))")"
   echo "round $round: $(echo "$ours" | tr '\n' ' ')"

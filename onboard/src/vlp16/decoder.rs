@@ -356,10 +356,11 @@ fn channel_fractions() -> [f64; 32] {
 }
 
 /// sin and cos of a small angle by fifth-order Taylor series (|d| < 0.2 rad: error < 1e-7).
+/// Multiplications by reciprocals only: divisions here were the hottest instructions.
 fn small_sin_cos(d: f64) -> (f64, f64) {
     let d2 = d * d;
-    let sin = d * (1.0 - d2 / 6.0 * (1.0 - d2 / 20.0));
-    let cos = 1.0 - d2 / 2.0 * (1.0 - d2 / 12.0 * (1.0 - d2 / 30.0));
+    let sin = d * (1.0 - d2 * (1.0 / 6.0) * (1.0 - d2 * (1.0 / 20.0)));
+    let cos = 1.0 - d2 * 0.5 * (1.0 - d2 * (1.0 / 12.0) * (1.0 - d2 * (1.0 / 30.0)));
     (sin, cos)
 }
 
@@ -722,12 +723,18 @@ impl FrameAssembler {
             azimuth_rad: [0.0; LASERS],
             time_us: [0.0; LASERS],
         };
-        let rounded = self.config.azimuth_interpolation == AzimuthInterpolation::PacketMeanRounded;
-        for laser in 0..LASERS {
-            let mut offset_raw = rotation.step_raw * self.fractions[seq * LASERS + laser];
-            if rounded {
-                offset_raw = (rotation.azimuth_raw + offset_raw).round() - rotation.azimuth_raw;
+        let mut offsets_raw = [0.0; LASERS];
+        for (laser, offset_raw) in offsets_raw.iter_mut().enumerate() {
+            *offset_raw = rotation.step_raw * self.fractions[seq * LASERS + laser];
+        }
+        // A loop of its own: inside the loop below, LLVM evaluated `round` (a libm call on
+        // baseline x86-64) for both settings, 9 % of the decoding time.
+        if self.config.azimuth_interpolation == AzimuthInterpolation::PacketMeanRounded {
+            for offset_raw in &mut offsets_raw {
+                *offset_raw = (rotation.azimuth_raw + *offset_raw).round() - rotation.azimuth_raw;
             }
+        }
+        for (laser, &offset_raw) in offsets_raw.iter().enumerate() {
             let (sin_d, cos_d) = small_sin_cos(offset_raw * RAW_TO_RAD);
             f.sin_a[laser] = (rotation.sin_b * cos_d + rotation.cos_b * sin_d) as f32;
             f.cos_a[laser] = (rotation.cos_b * cos_d - rotation.sin_b * sin_d) as f32;
