@@ -4,6 +4,7 @@
 mod angles;
 mod field;
 mod lidar;
+mod replay;
 
 use clap::{Parser, Subcommand};
 
@@ -31,6 +32,8 @@ enum Command {
     Abort(field::AbortArgs),
     /// Fetch the result and preview of an earlier run from the robot.
     Fetch(field::FetchArgs),
+    /// Rebuild a recorded run's point cloud offline (optionally with another pipeline config).
+    Replay(replay::ReplayArgs),
 }
 
 fn main() -> anyhow::Result<()> {
@@ -43,5 +46,6 @@ fn main() -> anyhow::Result<()> {
         Command::Status(args) => field::status(&args, &mut std::io::stdout().lock()),
         Command::Abort(args) => field::abort(&args, &mut std::io::stdout().lock()),
         Command::Fetch(args) => field::fetch(&args, &mut std::io::stdout().lock()),
+        Command::Replay(args) => replay::run(&args, &mut std::io::stdout().lock()),
     }
 }
