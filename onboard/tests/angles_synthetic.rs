@@ -254,3 +254,32 @@ fn truth_matches_hand_checks() {
         t.approach_rad.to_degrees()
     );
 }
+
+#[test]
+fn a_scan_that_stops_short_is_flagged_and_a_hitch_end_is_not() {
+    let v = synth::sedan();
+    // Drop everything ahead of x = 2.0 m: the bumper's front face is never seen.
+    let cut: Vec<[f64; 3]> = synth::sample(&v, Scan::noiseless(0.005))
+        .into_iter()
+        .filter(|p| p[0] < 2.0)
+        .collect();
+    let r = compute_angles(&cut, &AnglesConfig::default()).unwrap();
+    assert!(
+        r.warnings
+            .iter()
+            .any(|w| w.starts_with("approach: the limiting point is at the end")),
+        "{:?}",
+        r.warnings
+    );
+    let hitch = run(
+        &synth::pickup_with_hitch(),
+        Scan::noiseless(0.005),
+        Pose::IDENTITY,
+        &AnglesConfig::default(),
+    );
+    assert!(
+        !hitch.warnings.iter().any(|w| w.contains("at the end")),
+        "{:?}",
+        hitch.warnings
+    );
+}

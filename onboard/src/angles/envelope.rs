@@ -2,8 +2,9 @@
 //!
 //! Body points inside the lateral band are binned along x (`bin_m`). In each bin the lowest *mode*
 //! of the heights is found: the lowest window of height `2 w` that holds at least `min_support`
-//! points, then re-centred three times on the mean of the points within `w` of it (a flat-kernel
-//! mean shift). `w` is 2.5 x the noise sigma (at least 1 mm), so on a noisy flat surface the mode is
+//! points, then re-centred on the mean of the points within `w` of it until it stops moving (a
+//! flat-kernel mean shift that climbs from the noise tail to the surface; a peak with more than
+//! twice its points in the next `2 w` above it is a tail fluctuation, and the climb goes on). `w` is 2.5 x the noise sigma (at least 1 mm), so on a noisy flat surface the mode is
 //! the surface itself, not its low noise tail; a lone low outlier (fewer than `min_support` points
 //! within `2 w`) never forms a mode and is counted in `outliers_below`.
 //!
@@ -54,6 +55,8 @@ pub(crate) struct Envelope {
 /// 3 cm x 3 cm columns (x, y); each column with at least 12 points gets a least-squares plane
 /// `z = a x + b y + c`; columns steeper than 45 degrees are skipped; the estimate is the median of
 /// the columns' residual standard deviations (robust to the few columns that straddle an edge).
+/// Range noise projects unevenly (rays near the sensor's path see it vertically, grazing rays
+/// little), so this is a typical, not a worst-case, figure.
 /// `None` if fewer than 10 columns qualify.
 pub(crate) fn surface_noise(points: &[[f64; 3]]) -> Option<f64> {
     const CELL_M: f64 = 0.03;
@@ -185,16 +188,39 @@ fn bin_mode(bin: &[[f64; 3]], params: EnvelopeParams) -> Option<(usize, usize)> 
         }
     }
     let (mut lo, mut hi) = first?;
-    for _ in 0..3 {
-        let mean = bin[lo..hi].iter().map(|p| p[2]).sum::<f64>() / (hi - lo) as f64;
-        let nlo = bin.partition_point(|p| p[2] < mean - w);
-        let nhi = bin.partition_point(|p| p[2] <= mean + w);
-        if nhi - nlo < m || (nlo, nhi) == (lo, hi) {
+    let window = |centre: f64| {
+        (
+            bin.partition_point(|p| p[2] < centre - w),
+            bin.partition_point(|p| p[2] <= centre + w),
+        )
+    };
+    for _ in 0..32 {
+        // Mean shift to a local density peak.
+        for _ in 0..64 {
+            let (nlo, nhi) = window(mean_z(&bin[lo..hi]));
+            if nhi - nlo < m || (nlo, nhi) == (lo, hi) {
+                break;
+            }
+            (lo, hi) = (nlo, nhi);
+        }
+        // A peak in the noise tail of a denser surface just above it is not a surface of its
+        // own: if the next 2 w above hold more than twice its points, keep climbing.
+        let mean = mean_z(&bin[lo..hi]);
+        let above = bin.partition_point(|p| p[2] <= mean + 3.0 * w) - hi;
+        if above <= 2 * (hi - lo) {
+            break;
+        }
+        let (nlo, nhi) = window(mean + w);
+        if nhi - nlo < m {
             break;
         }
         (lo, hi) = (nlo, nhi);
     }
     Some((lo, hi))
+}
+
+fn mean_z(points: &[[f64; 3]]) -> f64 {
+    points.iter().map(|p| p[2]).sum::<f64>() / points.len().max(1) as f64
 }
 
 /// The two samples of a bin: its mode's line at the lowest and the highest x.

@@ -443,7 +443,7 @@ pub fn compute_angles(
         warnings,
     };
     geometry_warnings(&mut result, config);
-    finding_warnings(&mut result, body.unsupported_bins, config);
+    finding_warnings(&mut result, body.unsupported_bins, body.ends, config);
     Ok(result)
 }
 
@@ -561,6 +561,8 @@ fn settle_frame(
 /// The body's envelope and the figures that shaped it.
 struct Body {
     samples: Vec<EnvelopeSample>,
+    /// Per end of the band's points (rear, front): x of the end and the highest z within 3 cm of it.
+    ends: [(f64, f64); 2],
     noise_sigma_m: f64,
     bin_m: f64,
     unsupported_bins: usize,
@@ -590,6 +592,7 @@ fn classify(
         }
     }
     counts.body_in_band = band_points.len();
+    let ends = band_ends(&band_points);
     // Range noise seen by a low sensor is mostly along the underside; measure it on the body too.
     let body_sigma = envelope::surface_noise(&band_points).unwrap_or(0.0);
     let noise_sigma_m = config.noise_m.unwrap_or(noise_sigma_m.max(body_sigma));
@@ -612,6 +615,7 @@ fn classify(
     samples.sort_by(|a, b| a.x_m.total_cmp(&b.x_m));
     Body {
         samples,
+        ends,
         noise_sigma_m,
         bin_m,
         unsupported_bins: env.unsupported_bins + env.fringe_bins,
@@ -825,6 +829,23 @@ fn band(fits: &[(TyrePosition, TyreFit)], band: Band, warnings: &mut Vec<String>
     }
 }
 
+/// The rear and front ends of the band's points: their x and the highest z within 3 cm of each.
+fn band_ends(points: &[V3]) -> [(f64, f64); 2] {
+    let x_min = points.iter().map(|p| p[0]).fold(f64::INFINITY, f64::min);
+    let x_max = points
+        .iter()
+        .map(|p| p[0])
+        .fold(f64::NEG_INFINITY, f64::max);
+    let top = |x_end: f64| {
+        points
+            .iter()
+            .filter(|p| (p[0] - x_end).abs() < 0.03)
+            .map(|p| p[2])
+            .fold(f64::NEG_INFINITY, f64::max)
+    };
+    [(x_min, top(x_min)), (x_max, top(x_max))]
+}
+
 /// 5 mm, doubled while the median occupied bin holds fewer than 3 x `min_support` points (max 4 cm).
 fn auto_bin(points: &[V3], min_support: usize) -> f64 {
     let mut bin = 0.005;
@@ -1000,38 +1021,34 @@ fn geometry_warnings(r: &mut AnglesResult, config: &AnglesConfig) {
     }
 }
 
-fn finding_warnings(r: &mut AnglesResult, unsupported_bins: usize, config: &AnglesConfig) {
+fn finding_warnings(
+    r: &mut AnglesResult,
+    unsupported_bins: usize,
+    ends: [(f64, f64); 2],
+    config: &AnglesConfig,
+) {
     let w = &mut r.warnings;
-    let (x_min, x_max) = match (r.envelope.first(), r.envelope.last()) {
-        (Some(a), Some(b)) => (a.x_m, b.x_m),
-        _ => (0.0, 0.0),
-    };
-    for (name, f, edge) in [
-        ("approach", &r.approach, x_max),
-        ("departure", &r.departure, x_min),
+    let [rear_end, front_end] = ends;
+    for (name, f, (edge, end_top)) in [
+        ("approach", &r.approach, front_end),
+        ("departure", &r.departure, rear_end),
     ] {
         match f {
             None => w.push(format!(
                 "{name}: no body points in the zone; angle not determined"
             )),
-            Some(f) => {
-                // A scan that ends mid-underside has no face rising at its end: the samples near
-                // the end are no higher than the witness.
-                let end_top = r
-                    .envelope
-                    .iter()
-                    .filter(|s| (s.x_m - edge).abs() < 0.03)
-                    .map(|s| s.z_m)
-                    .fold(f64::NEG_INFINITY, f64::max);
+            // A scan that ends mid-underside has no face rising at its end: the band's points
+            // near the end are no higher than the witness.
+            Some(f)
                 if (f.witness_in_vehicle[0] - edge).abs() < 0.03
-                    && end_top < f.witness_in_vehicle[2] + 0.03
-                {
-                    w.push(format!(
-                        "{name}: the limiting point is at the end of the scanned body with no face rising there; \
-                         the vehicle may extend beyond the cloud"
-                    ));
-                }
+                    && end_top < f.witness_in_vehicle[2] + 0.03 =>
+            {
+                w.push(format!(
+                    "{name}: the limiting point is at the end of the scanned body with no face rising there; \
+                     the vehicle may extend beyond the cloud"
+                ));
             }
+            Some(_) => {}
         }
     }
     if r.breakover.is_none() {

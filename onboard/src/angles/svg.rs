@@ -141,7 +141,7 @@ fn witness(s: &mut String, v: &View, p: (f64, f64), colour: &str, label: &str, a
         v.x(p.0),
         v.y(p.1),
         v.x(p.0),
-        v.y(p.1) - 12.0
+        v.y(p.1) - 16.0
     );
 }
 
