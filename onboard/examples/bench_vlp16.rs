@@ -4,13 +4,15 @@
 //! cargo run --release -p onboard --example bench_vlp16 -- FILE.pcap [SECONDS]
 //! ```
 //!
-//! Two figures, each the best of repeated passes lasting about SECONDS (default 3) in total:
+//! Two figures, each the best and the median of repeated passes (about SECONDS in total,
+//! default 3):
 //! - `end_to_end`: open the capture, read pcap records, unwrap Ethernet/IPv4/UDP, decode every
 //!   return to x/y/z and cut frames: what velodyne-decoder's `read_pcap` does, and what
 //!   `bench/vlp16_vs_peer.sh` compares with it;
 //! - `decode_only`: the frame assembler alone on payloads already in memory.
 //!
-//! Output lines are `name points=N seconds=S points_per_s=P` so scripts can parse them.
+//! Output lines are `name points=N seconds=S points_per_s=P median_points_per_s=M` (S and P of
+//! the best pass) so scripts can parse them.
 
 use std::error::Error;
 use std::path::{Path, PathBuf};
@@ -61,25 +63,34 @@ fn decode_only(payloads: &[(Vec<u8>, u64)]) -> Result<u64, Box<dyn Error>> {
     Ok(points)
 }
 
-/// Runs `pass` repeatedly for about `budget`; returns (points per pass, best seconds per pass).
+/// Runs `pass` repeatedly for about `budget` (at least 5 times); returns (points per pass,
+/// best seconds per pass, median seconds per pass).
 fn measure(
     budget: Duration,
     mut pass: impl FnMut() -> Result<u64, Box<dyn Error>>,
-) -> Result<(u64, f64), Box<dyn Error>> {
+) -> Result<(u64, f64, f64), Box<dyn Error>> {
     let points = pass()?; // warm-up: page cache, allocator
-    let mut best = f64::INFINITY;
+    let mut times = Vec::new();
     let started = Instant::now();
-    let mut runs = 0;
-    while runs < 3 || started.elapsed() < budget {
+    while times.len() < 5 || started.elapsed() < budget {
         let t = Instant::now();
         let n = pass()?;
-        best = best.min(t.elapsed().as_secs_f64());
+        times.push(t.elapsed().as_secs_f64());
         if n != points {
             return Err(format!("pass decoded {n} points, the first {points}").into());
         }
-        runs += 1;
     }
-    Ok((points, best))
+    times.sort_by(f64::total_cmp);
+    Ok((points, times[0], times[times.len() / 2]))
+}
+
+fn report(name: &str, (points, best, median): (u64, f64, f64)) {
+    let n = points as f64;
+    println!(
+        "{name} points={points} seconds={best:.6} points_per_s={:.0} median_points_per_s={:.0}",
+        n / best,
+        n / median
+    );
 }
 
 fn main() -> Result<(), Box<dyn Error>> {
@@ -91,11 +102,7 @@ fn main() -> Result<(), Box<dyn Error>> {
     let seconds: f64 = args.next().map(|s| s.parse()).transpose()?.unwrap_or(3.0);
     let budget = Duration::from_secs_f64(seconds / 2.0);
 
-    let (points, secs) = measure(budget, || end_to_end(&path))?;
-    println!(
-        "end_to_end points={points} seconds={secs:.6} points_per_s={:.0}",
-        points as f64 / secs
-    );
+    report("end_to_end", measure(budget, || end_to_end(&path))?);
 
     let mut payloads = Vec::new();
     let mut source = PcapSource::open(&path)?;
@@ -105,10 +112,6 @@ fn main() -> Result<(), Box<dyn Error>> {
             payloads.push((buf[..meta.len].to_vec(), meta.recv_host_ns));
         }
     }
-    let (points, secs) = measure(budget, || decode_only(&payloads))?;
-    println!(
-        "decode_only points={points} seconds={secs:.6} points_per_s={:.0}",
-        points as f64 / secs
-    );
+    report("decode_only", measure(budget, || decode_only(&payloads))?);
     Ok(())
 }
