@@ -10,6 +10,7 @@
 //! | `esc-silent` | ESC 3 stops answering at cruise | fault latched within 10 ms naming ESC 3, zero currents on the bus |
 //! | `over-temperature` | ESC 2 reports 95 degC at cruise | fault named, zero currents, `ClearFaults` and `Drive` refused while hot |
 //! | `bus-off` | the firmware's CAN controller goes bus-off | reported and counted, zero currents after recovery, cleared and driving again |
+//! | `stuck-current` | ESC 1's current sticks at 18 A at cruise (a C620 fault the firmware cannot override) | over-current named within 5 ms, all-zero commands from then on; how far the stuck wheel still pushes the robot is reported |
 //! | `link-flood` | seeded garbage and malformed frames on the MCU link, idle then at cruise | nothing moves at idle, errors counted and rejections sent, cruise unaffected |
 //!
 //! All figures are measured on the simulation: true velocities from [`crate::robot`], commands as
@@ -187,13 +188,14 @@ impl fmt::Display for Outcome {
 }
 
 /// The scenario names, in table order.
-pub const NAMES: [&str; 6] = [
+pub const NAMES: [&str; 7] = [
     "cruise",
     "heartbeat-loss",
     "esc-silent",
     "over-temperature",
     "bus-off",
     "link-flood",
+    "stuck-current",
 ];
 
 /// Runs scenario `name` on a freshly built runner.
@@ -235,6 +237,12 @@ fn script(name: &str, seed: u64) -> Option<(&'static str, u64, Vec<Event>, Judge
         ),
         "bus-off" => ("bus-off", 7_000_000, bus_off_events(), judge_bus_off),
         "link-flood" => ("link-flood", 3_500_000, flood_events(seed), judge_flood),
+        "stuck-current" => (
+            "stuck-current",
+            4_500_000,
+            stuck_current_events(),
+            judge_stuck_current,
+        ),
         _ => return None,
     })
 }
@@ -345,6 +353,21 @@ fn over_temperature_events() -> Vec<Event> {
     ));
     e.push(send(3_500_000, ClearFaults {}));
     e.push(send(3_600_000, cruise_drive()));
+    e
+}
+
+/// The stuck current of `stuck-current`, A (above the firmware's 15 A over-current limit).
+const STUCK_A: f32 = 18.0;
+
+fn stuck_current_events() -> Vec<Event> {
+    let mut e = start();
+    e.push(at(
+        FAULT_AT_US,
+        Action::Fault {
+            esc_id: 1,
+            fault: EscFault::StuckCurrent(STUCK_A),
+        },
+    ));
     e
 }
 
@@ -623,6 +646,7 @@ fn judge_esc_fault(
     fault: EscFaults,
     interlock: Interlocks,
     max_latency_us: u64,
+    expect_rest: bool,
 ) {
     judge_cruise_phase(o, FAULT_AT_US);
     let wheel = wheel_of(&o.trace, esc_id);
@@ -666,6 +690,9 @@ fn judge_esc_fault(
         zero.zip(latched).is_some_and(|(z, (l, _))| z <= l),
         format!("zero from {:?} ms", zero.map(ms)),
     );
+    if !expect_rest {
+        return;
+    }
     let rest = at_rest_from(&o.trace, FAULT_AT_US);
     o.check(
         "robot comes to rest (coasting) and stays",
@@ -686,6 +713,42 @@ fn judge_esc_silent(o: &mut Outcome) {
         EscFaults::MISSING,
         Interlocks::ESC_FEEDBACK_MISSING,
         10_000,
+        true,
+    );
+}
+
+fn judge_stuck_current(o: &mut Outcome) {
+    // over_current_time_us (3 ms) after the current first reads above the limit, plus a step.
+    judge_esc_fault(
+        o,
+        1,
+        EscFaults::OVER_CURRENT,
+        Interlocks::ESC_OVER_CURRENT,
+        5_000,
+        false,
+    );
+    // The firmware can only command zero; the stuck ESC keeps driving its wheel. Report what that
+    // does to the robot in the 1.5 s after the fault (a motor power cut would be needed to stop it).
+    let (Some(a), Some(b)) = (
+        o.trace.truth.at(FAULT_AT_US),
+        o.trace.truth.at(FAULT_AT_US + 1_500_000),
+    ) else {
+        return;
+    };
+    o.figure_push(
+        "travel after the fault (stuck wheel pushing)",
+        (b.x_m - a.x_m).hypot(b.y_m - a.y_m),
+        "m",
+    );
+    o.figure_push(
+        "yaw turned after the fault",
+        (b.yaw_rad - a.yaw_rad).to_degrees(),
+        "deg",
+    );
+    o.figure_push(
+        "speed 1.5 s after the fault",
+        f64::from(b.vx_mps.hypot(b.vy_mps)),
+        "m/s",
     );
 }
 
@@ -696,6 +759,7 @@ fn judge_over_temperature(o: &mut Outcome) {
         EscFaults::OVER_TEMPERATURE,
         Interlocks::ESC_OVER_TEMPERATURE,
         2_000,
+        true,
     );
     let rejections: Vec<(u16, RejectReason)> = o
         .trace

@@ -49,6 +49,16 @@ fn bus_off_recovery() {
 }
 
 #[test]
+fn stuck_over_current() {
+    let o = run("stuck-current");
+    // The firmware zeroes its commands, but the stuck ESC keeps pushing: the robot does not stop.
+    assert!(
+        o.figure("travel after the fault (stuck wheel pushing)")
+            .is_some_and(|d| d > 0.05)
+    );
+}
+
+#[test]
 fn malformed_flood_on_the_mcu_link() {
     run("link-flood");
 }

@@ -73,6 +73,11 @@ fn vcan_bus_off() {
 }
 
 #[test]
+fn vcan_stuck_current() {
+    scenario("stuck-current");
+}
+
+#[test]
 fn vcan_link_flood() {
     scenario("link-flood");
 }
