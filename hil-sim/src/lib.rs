@@ -29,6 +29,7 @@ pub mod fil_scenarios;
 pub mod pty;
 pub mod robot;
 pub mod d435;
+pub mod demo;
 pub mod geometry;
 pub mod scenario;
 pub mod trajectory;

@@ -2,6 +2,7 @@
 
 use clap::{Parser, Subcommand};
 
+mod demo_cli;
 mod fil_cli;
 mod sensors_cli;
 
@@ -25,6 +26,9 @@ enum Command {
     Fil(fil_cli::FilArgs),
     /// Run the simulated robot and firmware in real time with the MCU link on a pty.
     Firmware(fil_cli::FirmwareArgs),
+    /// A whole measurement in software: handheld, radio, onboard service, firmware, simulated
+    /// robot and lidar; prints measured vs true angles.
+    Demo(demo_cli::DemoArgs),
 }
 
 fn main() -> anyhow::Result<()> {
@@ -35,5 +39,6 @@ fn main() -> anyhow::Result<()> {
         Command::Depth(args) => sensors_cli::depth(&args),
         Command::Fil(args) => fil_cli::fil(&args),
         Command::Firmware(args) => fil_cli::firmware(&args),
+        Command::Demo(args) => demo_cli::demo(&args),
     }
 }

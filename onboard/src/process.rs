@@ -18,6 +18,7 @@ use protocol::radio::{MeasurementResult, ResultWarnings, Zone as WireZone};
 use serde::Deserialize;
 
 use crate::angles::{self, AnglesConfig, AnglesResult, Zone, compute_angles, side_view_svg};
+use crate::cloud::Cloud;
 use crate::pipeline::{DepthFrame, LidarFrame, Pipeline, PipelineConfig, WheelOdometry};
 use crate::recorder::Recording;
 use crate::service::{ProcessInput, Processed, Processor};
@@ -100,13 +101,8 @@ impl Item {
     }
 }
 
-/// Reads a run directory and builds its cloud and angles. `Err` names what is missing or wrong.
-pub fn process_run(
-    dir: &Path,
-    config: &ProcessConfig,
-    zone: WireZone,
-    short_run: bool,
-) -> Result<(Processed, ReadCounts), String> {
+/// Reads a run directory and builds its fused cloud (vehicle-agnostic: no angles yet).
+pub fn build_cloud(dir: &Path, config: &ProcessConfig) -> Result<(Cloud, ReadCounts), String> {
     let rec = Recording::open(dir).map_err(|e| e.to_string())?;
     let mut counts = ReadCounts::default();
     let (frames, malformed) = read_lidar(&dir.join("lidar.pcap"))?;
@@ -155,6 +151,19 @@ pub fn process_run(
             config.min_cloud_points
         ));
     }
+    Ok((cloud, counts))
+}
+
+/// Reads a run directory and builds its cloud and angles. `Err` names what is missing or wrong.
+pub fn process_run(
+    dir: &Path,
+    config: &ProcessConfig,
+    zone: WireZone,
+    short_run: bool,
+) -> Result<(Processed, ReadCounts), String> {
+    let rec = Recording::open(dir).map_err(|e| e.to_string())?;
+    let (cloud, counts) = build_cloud(dir, config)?;
+    let malformed = counts.lidar_malformed;
     let angles_config = AnglesConfig {
         front_is_positive_x: !config.enter_at_front,
         zone: match zone {

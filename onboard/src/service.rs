@@ -313,6 +313,15 @@ impl Service {
         u64::try_from(self.epoch.elapsed().as_micros()).unwrap_or(u64::MAX)
     }
 
+    /// Sensor streams are recorded from the checks until the robot is at rest: processing needs
+    /// nothing after that, and a shorter recording processes faster.
+    fn recording_sensors(&self) -> bool {
+        matches!(
+            self.run.phase(),
+            Phase::Checks | Phase::Driving | Phase::Stopping
+        )
+    }
+
     fn wall_of(&self, mono_us: u64) -> u64 {
         self.wall_epoch_us.saturating_add(mono_us)
     }
@@ -533,7 +542,8 @@ impl Service {
             McuEvent::Odometry { rx_us, odometry } => {
                 self.odometry_xy_m = Some([odometry.x_m, odometry.y_m]);
                 let wall = self.wall_of(rx_us);
-                if let Some(r) = &mut self.recorder {
+                let record = self.recording_sensors();
+                if let Some(r) = self.recorder.as_mut().filter(|_| record) {
                     r.odometry(wall, &odometry);
                 }
             }
@@ -563,8 +573,9 @@ impl Service {
                 Ok(p) => p,
                 Err(TryRecvError::Empty | TryRecvError::Disconnected) => return,
             };
+            let record = self.recording_sensors();
             if p.position {
-                if let Some(r) = &mut self.recorder {
+                if let Some(r) = self.recorder.as_mut().filter(|_| record) {
                     r.lidar_packet(p.wall_ns, p.src, p.dst, &p.payload);
                 }
                 continue;
@@ -580,11 +591,11 @@ impl Service {
             self.stats.lidar_packets += 1;
             self.last_lidar_us = Some(now);
             let azimuth = view.azimuth_raw(0);
-            if self.last_azimuth.is_some_and(|a| azimuth < a) && self.run.is_active() {
+            if self.last_azimuth.is_some_and(|a| azimuth < a) && record {
                 self.stats.lidar_frames += 1;
             }
             self.last_azimuth = Some(azimuth);
-            if let Some(r) = &mut self.recorder {
+            if let Some(r) = self.recorder.as_mut().filter(|_| record) {
                 r.lidar_packet(p.wall_ns, p.src, p.dst, &p.payload);
             }
         }
@@ -604,10 +615,11 @@ impl Service {
             }
             self.last_depth_us = Some(now);
             self.depth_seen += 1;
+            let record = self.recording_sensors();
             if self
                 .depth_seen
                 .is_multiple_of(u64::from(self.config.camera.record_every))
-                && let Some(r) = &mut self.recorder
+                && let Some(r) = self.recorder.as_mut().filter(|_| record)
             {
                 r.depth_frame(
                     self.wall_epoch_us.saturating_add(now),

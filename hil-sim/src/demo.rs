@@ -1,0 +1,427 @@
+//! `passangle-sim demo`: a whole measurement in software, in real time, in one process.
+//!
+//! ```text
+//!  handheld Client --radio (57600 B/8, seeded loss)-- onboard service --MCU link (in-memory)-- firmware control
+//!                                                        ^   ^                                     | CAN (in-process)
+//!                                     VLP-16 packets ----+   +---- odometry                      ESCs + robot physics
+//!                       (ray cast at the robot's *simulated* pose, which the firmware drives)
+//! ```
+//!
+//! Every part is the product's code: the handheld client, the onboard service loop with its run
+//! state machine, recorder and processing (pipeline + angle calculator), and the firmware's
+//! `control::Controller` driving simulated C620 ESCs and the chassis. The lidar model casts its
+//! rays from the pose the simulated robot actually has (firmware in the loop), placed in the
+//! scenario's start pose under the vehicle. The depth camera is not simulated in the demo (the
+//! D435 renderer costs too much CPU to run in real time beside everything else on two cores):
+//! the service runs with `camera.source = "none"`, lidar and wheel odometry only.
+//!
+//! The result is compared with the vehicle's true angles (`crate::truth`, brute force on the
+//! vehicle geometry, independent of the onboard code).
+
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc::{SyncSender, sync_channel};
+use std::sync::{Arc, Mutex};
+use std::thread;
+use std::time::{Duration, Instant};
+
+use anyhow::Context;
+use onboard::client::{Client, Measured, Observer};
+use onboard::config::{CameraSource, FirmwareConfig, OnboardConfig};
+use onboard::link::sim::{LossyPortPair, PipeConfig};
+use onboard::process::PipelineProcessor;
+use onboard::service::{self, Io, LidarPacket, NoNotify, ServiceStats, SharedStats};
+use protocol::auth::{KEY_LEN, Key};
+use protocol::bounded::Text;
+use protocol::radio::{StartMeasurement, Zone};
+
+use crate::can_bus::InProcessBus;
+use crate::fil::{Fil, FilConfig, Pacing};
+use crate::geometry::{Pose, Vec3};
+use crate::pty::{ByteLink, MemPipe};
+use crate::scenario::Scenario;
+use crate::trajectory::Trajectory;
+use crate::truth::{TruthOptions, true_angles};
+use crate::vlp16::{PACKET_S, Vlp16Sim};
+
+/// Demo settings.
+#[derive(Debug, Clone)]
+pub struct DemoOptions {
+    /// The scenario file (vehicle, start pose, speed, distance, sensor settings).
+    pub scenario: PathBuf,
+    /// Where the robot records its runs.
+    pub run_root: PathBuf,
+    /// Radio frame loss probability (0..1).
+    pub radio_loss: f64,
+    /// Radio frame corruption probability (0..1).
+    pub radio_corrupt: f64,
+    /// Seed of the radio impairments.
+    pub seed: u64,
+}
+
+/// Angles in degrees.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct AnglesDeg {
+    /// Approach angle.
+    pub approach_deg: f64,
+    /// Departure angle.
+    pub departure_deg: f64,
+    /// Ramp breakover angle.
+    pub breakover_deg: f64,
+}
+
+/// What the demo measured.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct DemoReport {
+    /// The vehicle.
+    pub vehicle: String,
+    /// Measured by the robot, as the handheld received them.
+    pub measured: AnglesDeg,
+    /// From the vehicle's geometry.
+    pub truth: AnglesDeg,
+    /// The run directory on the (simulated) robot.
+    pub run_dir: PathBuf,
+    /// From the robot at rest (first `Processing` progress seen) to the result on the handheld, s.
+    pub stop_to_result_s: Option<f64>,
+    /// Whole run, wall clock, s.
+    pub run_s: f64,
+    /// Points in the robot's cloud.
+    pub cloud_points: u32,
+    /// Warnings the robot attached.
+    pub warnings: String,
+}
+
+/// (simulation time s, x m, y m, yaw rad) samples of the simulated robot, shared between threads.
+type PoseLog = Arc<Mutex<Vec<(f64, f64, f64, f64)>>>;
+
+/// Robot poses from the firmware-in-the-loop runner, as a [`Trajectory`] in the vehicle frame.
+#[derive(Clone)]
+struct LiveTrajectory {
+    start: Pose,
+    /// (simulation time s, x, y, yaw) in the robot's odometry frame (starts at 0).
+    samples: PoseLog,
+}
+
+impl LiveTrajectory {
+    fn latest_s(&self) -> f64 {
+        self.samples
+            .lock()
+            .map_or(0.0, |s| s.last().map_or(0.0, |x| x.0))
+    }
+}
+
+impl Trajectory for LiveTrajectory {
+    fn pose_at(&self, t_s: f64) -> Pose {
+        let (x, y, yaw) = self.samples.lock().map_or((0.0, 0.0, 0.0), |s| {
+            let i = s.partition_point(|p| p.0 <= t_s);
+            match (i.checked_sub(1).and_then(|j| s.get(j)), s.get(i)) {
+                (Some(a), Some(b)) if b.0 > a.0 => {
+                    let f = (t_s - a.0) / (b.0 - a.0);
+                    (
+                        a.1 + f * (b.1 - a.1),
+                        a.2 + f * (b.2 - a.2),
+                        a.3 + f * (b.3 - a.3),
+                    )
+                }
+                (Some(a), _) => (a.1, a.2, a.3),
+                (None, Some(b)) => (b.1, b.2, b.3),
+                (None, None) => (0.0, 0.0, 0.0),
+            }
+        });
+        let (s, c) = self.start.yaw_rad.sin_cos();
+        Pose {
+            position_m: Vec3::new(
+                self.start.position_m.x + c * x - s * y,
+                self.start.position_m.y + s * x + c * y,
+                self.start.position_m.z,
+            ),
+            roll_rad: 0.0,
+            pitch_rad: 0.0,
+            yaw_rad: self.start.yaw_rad + yaw,
+        }
+    }
+
+    fn wheel_distance_at(&self, _t_s: f64) -> f64 {
+        0.0
+    }
+}
+
+/// Adapts the in-memory pipe to `Read + Write` for the service.
+struct MemPort {
+    pipe: MemPipe,
+    buf: Vec<u8>,
+}
+
+impl std::io::Read for MemPort {
+    fn read(&mut self, out: &mut [u8]) -> std::io::Result<usize> {
+        if self.buf.is_empty() {
+            self.pipe.read_available(&mut self.buf)?;
+        }
+        let n = out.len().min(self.buf.len());
+        out[..n].copy_from_slice(&self.buf[..n]);
+        self.buf.drain(..n);
+        Ok(n)
+    }
+}
+
+impl std::io::Write for MemPort {
+    fn write(&mut self, b: &[u8]) -> std::io::Result<usize> {
+        self.pipe.write_all(b)?;
+        Ok(b.len())
+    }
+    fn flush(&mut self) -> std::io::Result<()> {
+        Ok(())
+    }
+}
+
+/// Prints progress lines to stderr.
+struct StderrObserver {
+    quiet: bool,
+}
+
+impl Observer for StderrObserver {
+    fn progress(&mut self, p: &protocol::radio::Progress) {
+        if !self.quiet {
+            eprintln!(
+                "run {} {:<10} {:3}%  {:.2} m  {} lidar frames",
+                p.run_id,
+                p.phase.name(),
+                p.percent,
+                p.travelled_m,
+                p.lidar_frames
+            );
+        }
+    }
+    fn log(&mut self, l: &protocol::common::LogLine) {
+        if !self.quiet {
+            eprintln!("robot: {}", l.text.as_str());
+        }
+    }
+    fn preview(&mut self, _: usize, _: usize) {}
+}
+
+fn lidar_thread(
+    scenario: &Scenario,
+    live: &LiveTrajectory,
+    tx: &SyncSender<LidarPacket>,
+    stop: &AtomicBool,
+) {
+    let scene = crate::world::Scene::from_vehicle(&scenario.vehicle);
+    let sim = Vlp16Sim::new(
+        &scene,
+        live,
+        scenario.file.lidar.clone(),
+        scenario.lidar_seed(),
+    );
+    let wall0 = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_nanos() as u64);
+    let src = "192.168.1.201:2368"
+        .parse()
+        .unwrap_or(std::net::SocketAddrV4::new([0; 4].into(), 0));
+    let dst = "192.168.1.100:2368".parse().unwrap_or(src);
+    let mut index = 0u64;
+    while !stop.load(Ordering::Relaxed) {
+        // Cast a packet once the robot's pose at its time is known (the runner reports every 10 ms).
+        let t = index as f64 * PACKET_S;
+        if live.latest_s() < t + 0.001 {
+            thread::sleep(Duration::from_millis(1));
+            continue;
+        }
+        let payload = sim.data_packet(index).to_bytes().to_vec();
+        let packet = LidarPacket {
+            wall_ns: wall0 + (t * 1e9) as u64,
+            src,
+            dst,
+            payload,
+            position: false,
+        };
+        if tx.try_send(packet).is_err() {
+            thread::sleep(Duration::from_millis(1));
+        }
+        index += 1;
+    }
+}
+
+/// Runs the demo; prints progress to stderr unless `quiet`.
+// The wiring reads top to bottom as the diagram in the module docs; `{:?}` quotes paths for TOML.
+#[allow(clippy::too_many_lines, clippy::unnecessary_debug_formatting)]
+pub fn run(options: &DemoOptions, quiet: bool) -> anyhow::Result<DemoReport> {
+    let scenario = Scenario::load(&options.scenario)
+        .with_context(|| format!("loading {}", options.scenario.display()))?;
+    let truth = true_angles(&scenario.vehicle, &TruthOptions::default());
+    let run_spec = &scenario.file.robot;
+    std::fs::create_dir_all(&options.run_root)?;
+    let etc = options.run_root.join("etc");
+    std::fs::create_dir_all(&etc)?;
+    let key_file = etc.join("pairing.key");
+    let key = Key([0x42; KEY_LEN]);
+    if !key_file.exists() {
+        onboard::config::write_key(&key_file, &key)?;
+    }
+    let key = onboard::config::read_key(&key_file)?;
+    let text = format!(
+        "[recording]\nroot = {:?}\n[radio]\nport = \"sim\"\nkey-file = {:?}\ncounter-file = {:?}\n[mcu]\nport = \"sim\"\n[camera]\nsource = \"none\"\n[processing]\nenter-at-front = {}\n",
+        options.run_root.join("runs"),
+        key_file,
+        etc.join("start-counter"),
+        run_spec.heading_deg.rem_euclid(360.0) > 90.0
+            && run_spec.heading_deg.rem_euclid(360.0) < 270.0,
+    );
+    let mut config = OnboardConfig::parse(&text, Path::new("demo.toml"))?;
+    let fw = control::Config::default();
+    config.mcu.firmware = FirmwareConfig::from_wire(&fw.to_mcu());
+    config.mcu.accel_mps2 =
+        (run_spec.accel_mps2 as f32).clamp(0.05, config.mcu.firmware.max_accel_mps2);
+    config.run.max_speed_mps = config.mcu.firmware.max_speed_mps;
+    debug_assert_eq!(config.camera.source, CameraSource::None);
+
+    let stop = Arc::new(AtomicBool::new(false));
+    let samples = Arc::new(Mutex::new(Vec::new()));
+    let start = Pose {
+        position_m: Vec3::new(run_spec.start_x_m, run_spec.lateral_offset_m, 0.0),
+        roll_rad: 0.0,
+        pitch_rad: 0.0,
+        yaw_rad: run_spec.heading_deg.to_radians(),
+    };
+    let live = LiveTrajectory {
+        start,
+        samples: Arc::clone(&samples),
+    };
+    let mut threads = Vec::new();
+
+    let (fw_uart, onboard_uart) = MemPipe::pair();
+    let (stand_in, _unused) = MemPipe::pair();
+    {
+        let (stop, samples) = (Arc::clone(&stop), Arc::clone(&samples));
+        threads.push(thread::spawn(move || -> anyhow::Result<()> {
+            let bus = InProcessBus::new();
+            let mut fil = Fil::new(
+                FilConfig {
+                    pacing: Pacing::RealTime,
+                    ..FilConfig::default()
+                },
+                Box::new(bus.node()),
+                Box::new(bus.node()),
+                Box::new(fw_uart),
+                Box::new(stand_in),
+            )?;
+            let mut t = 0;
+            while !stop.load(Ordering::Relaxed) {
+                t += 5_000;
+                fil.run_until(t)?;
+                let _ = fil.take_trace();
+                let p = fil.truth();
+                if let Ok(mut s) = samples.lock() {
+                    s.push((p.stamp_us as f64 * 1e-6, p.x_m, p.y_m, p.yaw_rad));
+                }
+            }
+            Ok(())
+        }));
+    }
+    let (lidar_tx, lidar_rx) = sync_channel(8_000);
+    {
+        let (stop, scenario, live) = (Arc::clone(&stop), scenario.clone(), live.clone());
+        threads.push(thread::spawn(move || {
+            lidar_thread(&scenario, &live, &lidar_tx, &stop);
+            Ok(())
+        }));
+    }
+    let radio = PipeConfig::radio_lossy(options.radio_loss, options.radio_corrupt);
+    let (_pair, handheld_port, onboard_port) = LossyPortPair::new(radio, options.seed);
+    let stats: SharedStats = Arc::new(Mutex::new(ServiceStats::default()));
+    {
+        let io = Io {
+            radio: Box::new(onboard_port),
+            mcu: Box::new(MemPort {
+                pipe: onboard_uart,
+                buf: Vec::new(),
+            }),
+            lidar: lidar_rx,
+            depth: None,
+            crash: None,
+        };
+        let processor = Arc::new(PipelineProcessor {
+            config: config.processing.clone(),
+        });
+        let (stop, stats) = (Arc::clone(&stop), Arc::clone(&stats));
+        threads.push(thread::spawn(move || {
+            service::run(config, text, io, processor, &stop, &mut NoNotify, stats)?;
+            Ok(())
+        }));
+    }
+
+    let t0 = Instant::now();
+    let outcome = (|| -> anyhow::Result<Measured> {
+        let mut client = Client::new(Box::new(handheld_port), key);
+        client.connect(Duration::from_secs(10))?;
+        // Let the service see the firmware and the lidar before the checks.
+        thread::sleep(Duration::from_millis(500));
+        let params = StartMeasurement {
+            vehicle_id: Text::truncated(&scenario.vehicle.name),
+            speed_mps: run_spec.speed_mps as f32,
+            distance_m: run_spec.distance_m as f32,
+            zone: Zone::Tyre,
+        };
+        let counter = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(1, |d| d.as_micros() as u64);
+        let time_limit = Duration::from_secs_f64(run_spec.distance_m / run_spec.speed_mps + 300.0);
+        Ok(client.measure(params, counter, time_limit, &mut StderrObserver { quiet })?)
+    })();
+    stop.store(true, Ordering::Relaxed);
+    for t in threads {
+        match t.join() {
+            Ok(r) => r?,
+            Err(_) => anyhow::bail!("a simulator thread panicked"),
+        }
+    }
+    let m = outcome?;
+    let r = &m.result;
+    let deg = |x: f32| f64::from(x).to_degrees();
+    Ok(DemoReport {
+        vehicle: scenario.vehicle.name.clone(),
+        measured: AnglesDeg {
+            approach_deg: deg(r.approach_rad),
+            departure_deg: deg(r.departure_rad),
+            breakover_deg: deg(r.breakover_rad),
+        },
+        truth: AnglesDeg {
+            approach_deg: truth.approach.angle_rad.to_degrees(),
+            departure_deg: truth.departure.angle_rad.to_degrees(),
+            breakover_deg: truth.breakover.angle_rad.to_degrees(),
+        },
+        run_dir: options
+            .run_root
+            .join("runs")
+            .join(onboard::recorder::run_dir_name(r.run_id)),
+        stop_to_result_s: m.stop_to_result.map(|d| d.as_secs_f64()),
+        run_s: t0.elapsed().as_secs_f64(),
+        cloud_points: r.cloud_points,
+        warnings: r.warnings.to_string(),
+    })
+}
+
+/// The scenario file of a built-in vehicle name: `scenarios/NAME-pass.toml`, else the first
+/// `scenarios/NAME-*.toml` (e.g. `suv` -> `suv-offset.toml`).
+pub fn scenario_for(vehicle: &str) -> PathBuf {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenarios");
+    let exact = dir.join(format!("{vehicle}-pass.toml"));
+    if exact.exists() {
+        return exact;
+    }
+    let mut others: Vec<PathBuf> = std::fs::read_dir(&dir)
+        .into_iter()
+        .flatten()
+        .flatten()
+        .map(|e| e.path())
+        .filter(|p| {
+            p.extension().is_some_and(|e| e == "toml")
+                && p.file_name()
+                    .and_then(|n| n.to_str())
+                    .is_some_and(|n| n.starts_with(&format!("{vehicle}-")))
+        })
+        .collect();
+    others.sort();
+    others.into_iter().next().unwrap_or(exact)
+}
