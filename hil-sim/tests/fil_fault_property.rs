@@ -22,44 +22,7 @@ fn any_single_fault_is_named_and_zeroes_the_bus() {
     let mut rng = ChaCha8Rng::seed_from_u64(2026);
     for case in 0..24 {
         let at_us = rng.random_range(1_200_000..2_500_000u64) / 1000 * 1000;
-        let esc_id = rng.random_range(1..=4u8);
-        let (action, expect, max_latency_us) = match rng.random_range(0..4) {
-            0 => (
-                Action::Fault {
-                    esc_id,
-                    fault: EscFault::Silent,
-                },
-                Expect::Esc(esc_id, EscFaults::MISSING),
-                10_000,
-            ),
-            1 => (
-                Action::Fault {
-                    esc_id,
-                    fault: EscFault::OverTemperature(rng.random_range(80.0..120.0)),
-                },
-                Expect::Esc(esc_id, EscFaults::OVER_TEMPERATURE),
-                2_000,
-            ),
-            2 => {
-                let amps = rng.random_range(16.0..20.0) * if rng.random() { 1.0 } else { -1.0 };
-                (
-                    Action::Fault {
-                        esc_id,
-                        fault: EscFault::StuckCurrent(amps),
-                    },
-                    Expect::Esc(esc_id, EscFaults::OVER_CURRENT),
-                    // over_current_time_us (3 ms) + the step it is seen in.
-                    5_000,
-                )
-            }
-            _ => (
-                Action::BusOff {
-                    duration_us: rng.random_range(1_000..50_000),
-                },
-                Expect::BusOff,
-                1_000,
-            ),
-        };
+        let (action, expect, max_latency_us) = random_fault(&mut rng);
         let (mut fil, _) = fil_scenarios::build(
             FilConfig {
                 seed: case,
@@ -124,5 +87,47 @@ fn any_single_fault_is_named_and_zeroes_the_bus() {
             nonzero_after.is_none(),
             "case {case}: {action:?}: non-zero command {nonzero_after:?} after the fault latched at {t_report}"
         );
+    }
+}
+
+/// A random single fault: the action, what the firmware must report, and its latency bound (us).
+fn random_fault(rng: &mut ChaCha8Rng) -> (Action, Expect, u64) {
+    let esc_id = rng.random_range(1..=4u8);
+    match rng.random_range(0..4) {
+        0 => (
+            Action::Fault {
+                esc_id,
+                fault: EscFault::Silent,
+            },
+            Expect::Esc(esc_id, EscFaults::MISSING),
+            10_000,
+        ),
+        1 => (
+            Action::Fault {
+                esc_id,
+                fault: EscFault::OverTemperature(rng.random_range(80.0..120.0)),
+            },
+            Expect::Esc(esc_id, EscFaults::OVER_TEMPERATURE),
+            2_000,
+        ),
+        2 => {
+            let amps = rng.random_range(16.0..20.0) * if rng.random() { 1.0 } else { -1.0 };
+            (
+                Action::Fault {
+                    esc_id,
+                    fault: EscFault::StuckCurrent(amps),
+                },
+                Expect::Esc(esc_id, EscFaults::OVER_CURRENT),
+                // over_current_time_us (3 ms) + the step it is seen in.
+                5_000,
+            )
+        }
+        _ => (
+            Action::BusOff {
+                duration_us: rng.random_range(1_000..50_000),
+            },
+            Expect::BusOff,
+            1_000,
+        ),
     }
 }
