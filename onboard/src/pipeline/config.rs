@@ -191,10 +191,10 @@ impl Default for LaserOdometryConfig {
     fn default() -> Self {
         Self {
             iterations: 8,
-            max_correspondence_m: 0.5,
+            max_correspondence_m: 0.2,
             huber_m: 0.05,
             lm_lambda: 1e-3,
-            degeneracy_eigen_min: 0.02,
+            degeneracy_eigen_min: 0.3,
         }
     }
 }
@@ -237,6 +237,8 @@ impl Default for VisualOdometryConfig {
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields, rename_all = "kebab-case", default)]
 pub struct FusionConfig {
+    /// Use laser odometry as a source (off only for baselines).
+    pub use_laser: bool,
     /// Use wheel odometry as a source.
     pub use_wheel: bool,
     /// Use visual odometry as a source.
@@ -255,11 +257,12 @@ pub struct FusionConfig {
 impl Default for FusionConfig {
     fn default() -> Self {
         Self {
+            use_laser: true,
             use_wheel: true,
             use_visual: true,
             reference_frames: 10,
-            rotation_tolerance_radps: [0.05, 0.05, 0.05],
-            translation_tolerance_mps: [0.05, 0.05, 0.05],
+            rotation_tolerance_radps: [0.01, 0.01, 0.01],
+            translation_tolerance_mps: [0.02, 0.02, 0.02],
         }
     }
 }
@@ -291,7 +294,7 @@ impl Default for MapConfig {
             feature_voxel_m: 0.5,
             points_per_voxel: 20,
             iterations: 6,
-            output_voxel_m: 0.01,
+            output_voxel_m: 0.02,
             output_max_range_m: 8.0,
             keep_ground: true,
         }

@@ -234,7 +234,7 @@ mod tests {
         let mut f = Fusion::new(FusionConfig::default());
         let cruise = [0.0, 0.0, 0.0, 0.3, 0.0, 0.0];
         warm(&mut f, cruise);
-        let laser = rate([0.0, 0.0, 0.01, 0.31, 0.0, 0.0]);
+        let laser = rate([0.0, 0.0, 0.005, 0.31, 0.0, 0.0]);
         let wheel = rate([0.0, 0.0, 0.0, 0.3, 0.0, 0.0]);
         let out = f.fuse(Some(&laser), None, Some(&wheel));
         assert_eq!(out.chosen, [Source::Laser; 6]);

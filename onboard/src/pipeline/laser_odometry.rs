@@ -417,7 +417,12 @@ pub(crate) mod tests {
         let target = target_of(&planes, &corners);
         let truth = Pose::from_xyz_rpy([0.04, 0.01, 0.005], [0.003, -0.004, 0.01]);
         let (sp, sc) = (moved(&planes, &truth), moved(&corners, &truth));
-        let config = LaserOdometryConfig::default();
+        // The synthetic tyres are a small share of the residuals: accept weaker directions than
+        // the default (which is tuned to hand x, y and yaw to wheel odometry under real cars).
+        let config = LaserOdometryConfig {
+            degeneracy_eigen_min: 0.01,
+            ..LaserOdometryConfig::default()
+        };
         for reg in [
             register_two_step(&target, &sp, &sp, &sc, Pose::IDENTITY, &config),
             register_joint(&target, &sp, &sc, Pose::IDENTITY, 10, &config),

@@ -591,9 +591,10 @@ impl Pipeline {
             rate: scale_twist(&laser.pose.to_increment(), 1.0 / dt),
             available: laser_degenerate.map(|d| !d),
         };
+        let laser_rate = Some(&laser_rate).filter(|_| self.config.fusion.use_laser);
         let fused = self
             .fusion
-            .fuse(Some(&laser_rate), visual.as_ref(), wheel.as_ref());
+            .fuse(laser_rate, visual.as_ref(), wheel.as_ref());
         for s in fused.chosen {
             self.stats.chosen[s as usize] += 1;
         }

@@ -1,0 +1,516 @@
+//! Evidence for the point-cloud pipeline (`onboard::pipeline`, issue 7) on simulator runs with
+//! ground truth: trajectory error, cloud error, angles against the geometry's truth, and time per
+//! lidar frame, for the configurations of the paper's Figure 14 ablation.
+//!
+//! Run: `cargo run --release -p hil-sim --example bench_pipeline -- [SEEDS] [--ablation]
+//! [--export DIR]` (defaults: 10 seeds, the full configuration only). `--ablation` adds laser only,
+//! laser + visual, laser + visual + wheel, without ground removal and without outlier removal, on
+//! the first seed of every scenario. `--export DIR` writes each run's lidar frames as KITTI-style
+//! `.bin` files (x y z intensity f32, sensor frame) plus the true poses, for the KISS-ICP peer run
+//! (`bench/pipeline_peer.sh`).
+//!
+//! Inputs per run (all from `hil_sim`, all seeded): the VLP-16 packets decoded by
+//! `onboard::vlp16::FrameAssembler`, the D435 depth frames (every 3rd, i.e. 10 Hz), and wheel
+//! odometry at 100 Hz from the scenario's wheel distance (which includes the scenario's slip: the
+//! wheels overestimate the distance exactly as a slipping robot's would). Stamps are simulation
+//! time (the sensor clocks of the shipped scenarios have zero offset).
+//!
+//! Figures:
+//! - ATE: RMS over frames of the translation error of `world_from_robot` against the truth (both
+//!   relative to the first frame), metres; drift: final translation error / distance travelled.
+//! - cloud error: distance of each built point to the nearest true surface (ground, tyres, body
+//!   prisms, parts): median and 95th percentile, metres.
+//! - angles: `onboard::angles::compute_angles` on the built cloud (moved into the vehicle frame by
+//!   the true start pose) against `hil_sim::truth::true_angles`, degrees.
+//! - time: wall time of `Pipeline` calls per lidar frame (decode and simulation excluded), ms.
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use hil_sim::d435::D435Sim;
+use hil_sim::geometry::{Isometry, Vec3};
+use hil_sim::scenario::Scenario;
+use hil_sim::trajectory::{StraightRun, Trajectory};
+use hil_sim::truth::{TruthOptions, true_angles};
+use hil_sim::vlp16::{Datagram, Vlp16Sim};
+use hil_sim::world::{Scene, SurfaceId, SurfaceKind};
+use onboard::angles::{AnglesConfig, compute_angles};
+use onboard::pipeline::geom::{Pose, rpy_of};
+use onboard::pipeline::{
+    BuiltCloud, DepthFrame, LidarFrame, Pipeline, PipelineConfig, WheelOdometry,
+};
+use onboard::vlp16::{DecoderConfig, FrameAssembler};
+
+/// One configuration of the ablation.
+struct Variant {
+    name: &'static str,
+    config: PipelineConfig,
+    depth: bool,
+}
+
+fn variants(ablation: bool) -> Vec<Variant> {
+    let full = PipelineConfig::default();
+    if !ablation {
+        let mut laser_wheel = full.clone();
+        laser_wheel.fusion.use_visual = false;
+        laser_wheel.visual.enabled = false;
+        return vec![
+            Variant {
+                name: "laser+wheel",
+                config: laser_wheel,
+                depth: false,
+            },
+            Variant {
+                name: "laser+visual+wheel",
+                config: full,
+                depth: true,
+            },
+        ];
+    }
+    let mut wheel_only = full.clone();
+    wheel_only.fusion.use_laser = false;
+    wheel_only.fusion.use_visual = false;
+    wheel_only.map.refine = false;
+    let mut laser = full.clone();
+    laser.fusion.use_wheel = false;
+    laser.fusion.use_visual = false;
+    laser.visual.enabled = false;
+    let mut laser_wheel = full.clone();
+    laser_wheel.fusion.use_visual = false;
+    laser_wheel.visual.enabled = false;
+    let mut laser_visual = full.clone();
+    laser_visual.fusion.use_wheel = false;
+    let mut no_ground = full.clone();
+    no_ground.ground.enabled = false;
+    let mut no_outliers = full.clone();
+    no_outliers.features.outlier_removal = false;
+    vec![
+        Variant {
+            name: "wheel only (baseline)",
+            config: wheel_only,
+            depth: false,
+        },
+        Variant {
+            name: "laser only",
+            config: laser,
+            depth: false,
+        },
+        Variant {
+            name: "laser+wheel",
+            config: laser_wheel,
+            depth: false,
+        },
+        Variant {
+            name: "laser+visual",
+            config: laser_visual,
+            depth: true,
+        },
+        Variant {
+            name: "laser+visual+wheel",
+            config: full,
+            depth: true,
+        },
+        Variant {
+            name: "no ground removal",
+            config: no_ground,
+            depth: true,
+        },
+        Variant {
+            name: "no outlier removal",
+            config: no_outliers,
+            depth: true,
+        },
+    ]
+}
+
+fn pose_of(iso: &Isometry) -> Pose {
+    Pose {
+        rotation: iso.rotation.0,
+        translation: [iso.translation.x, iso.translation.y, iso.translation.z],
+    }
+}
+
+/// The pipeline's mounts from the scenario's sensor configs.
+fn mounts_from(scenario: &Scenario, config: &mut PipelineConfig) {
+    let lidar = pose_of(&scenario.file.lidar.robot_from_lidar());
+    let camera = pose_of(&scenario.file.depth.robot_from_camera());
+    config.mounts.lidar_xyz_m = lidar.translation;
+    config.mounts.lidar_rpy_rad = rpy_of(&lidar.rotation);
+    config.mounts.camera_xyz_m = camera.translation;
+    config.mounts.camera_rpy_rad = rpy_of(&camera.rotation);
+}
+
+/// Lidar frames of a run, decoded from the simulated packets, stamped in simulation time.
+fn lidar_frames(scenario: &Scenario, scene: &Scene) -> Vec<LidarFrame> {
+    let sim = Vlp16Sim::new(
+        scene,
+        &scenario.run,
+        scenario.file.lidar.clone(),
+        scenario.lidar_seed(),
+    );
+    let mut assembler = FrameAssembler::new(DecoderConfig::default()).expect("default decoder");
+    let mut frames = Vec::new();
+    let offset_s = scenario.file.lidar.clock_offset_us as f64 * 1e-6;
+    let take = |a: &mut FrameAssembler, frames: &mut Vec<LidarFrame>| {
+        while let Some(f) = a.pop_frame() {
+            if f.is_complete() {
+                frames.push(LidarFrame::from_vlp16(
+                    &f,
+                    f.start_sensor_us * 1e-6 - offset_s,
+                ));
+            }
+        }
+    };
+    for d in sim.datagrams(scenario.duration_s) {
+        match d {
+            Datagram::Data { send_s, payload } => {
+                let _ = assembler.push_data(&payload[..], (send_s * 1e9) as u64);
+            }
+            Datagram::Position { payload, .. } => {
+                let _ = assembler.push_position(&payload[..]);
+            }
+        }
+        take(&mut assembler, &mut frames);
+    }
+    assembler.finish();
+    take(&mut assembler, &mut frames);
+    frames
+}
+
+/// Depth frames at 10 Hz (every 3rd of the 30 Hz stream).
+fn depth_frames(scenario: &Scenario, scene: &Scene) -> Vec<DepthFrame> {
+    let sim = D435Sim::new(
+        scene,
+        &scenario.run,
+        scenario.file.depth.clone(),
+        scenario.depth_seed(),
+    );
+    let k = scenario.file.depth.intrinsics();
+    (0..sim.frames_in(scenario.duration_s))
+        .step_by(3)
+        .map(|i| {
+            let f = sim.frame(i);
+            DepthFrame {
+                stamp_s: sim.frame_time_s(i),
+                width: f.width as usize,
+                height: f.height as usize,
+                intrinsics_px: [k.fx_px, k.fy_px, k.cx_px, k.cy_px],
+                depth_scale_m: 0.001,
+                depth: f.depth_mm,
+            }
+        })
+        .collect()
+}
+
+/// Wheel odometry at 100 Hz: the wheel distance along the body's direction of travel (a crabbing
+/// robot's body frame sees its travel at minus the yaw misalignment), yaw constant.
+fn wheel_odometry(run: &StraightRun, duration_s: f64) -> Vec<WheelOdometry> {
+    let (s, c) = (-run.yaw_misalignment_rad).sin_cos();
+    (0..=(duration_s * 100.0) as u32)
+        .map(|i| {
+            let t = f64::from(i) * 0.01;
+            let d = run.wheel_distance_at(t);
+            let v = (run.wheel_distance_at(t + 0.005) - run.wheel_distance_at(t - 0.005).max(0.0))
+                / 0.01;
+            WheelOdometry {
+                stamp_s: t,
+                x_m: d * c,
+                y_m: d * s,
+                yaw_rad: 0.0,
+                vx_mps: v * c,
+                vy_mps: v * s,
+                wz_radps: 0.0,
+            }
+        })
+        .collect()
+}
+
+/// Feed everything in time order; returns the result and the pipeline's wall time in seconds.
+fn run_pipeline(
+    config: PipelineConfig,
+    lidar: &[LidarFrame],
+    depth: &[DepthFrame],
+    wheel: &[WheelOdometry],
+) -> (BuiltCloud, f64) {
+    enum Ev<'a> {
+        L(&'a LidarFrame),
+        D(&'a DepthFrame),
+        W(&'a WheelOdometry),
+    }
+    let mut events: Vec<(f64, Ev)> = Vec::new();
+    // A message is available when it is complete: a lidar frame after its sweep (0.1 s).
+    events.extend(lidar.iter().map(|f| (f.stamp_s + 0.1, Ev::L(f))));
+    events.extend(depth.iter().map(|f| (f.stamp_s, Ev::D(f))));
+    events.extend(wheel.iter().map(|w| (w.stamp_s, Ev::W(w))));
+    events.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let start = Instant::now();
+    let mut pipeline = Pipeline::new(config).expect("valid config");
+    for (_, e) in events {
+        let r = match e {
+            Ev::L(f) => pipeline.push_lidar_frame(f.clone()),
+            Ev::D(f) => pipeline.push_depth_frame(f.clone()),
+            Ev::W(w) => pipeline.push_wheel_odometry(*w),
+        };
+        r.expect("simulated input is well-formed");
+    }
+    let built = pipeline.finish();
+    (built, start.elapsed().as_secs_f64())
+}
+
+/// Distance from `p` (vehicle frame) to the nearest true surface.
+fn surface_distance(scene: &Scene, p: [f64; 3]) -> f64 {
+    let v = Vec3::new(p[0], p[1], p[2]);
+    let mut best = scene.distance_to_surface(
+        SurfaceId {
+            kind: SurfaceKind::Ground,
+            index: 0,
+        },
+        v,
+    );
+    for kind in [SurfaceKind::Tyre, SurfaceKind::Body, SurfaceKind::Part] {
+        for index in 0..256 {
+            let d = scene.distance_to_surface(SurfaceId { kind, index }, v);
+            if d.is_infinite() {
+                break;
+            }
+            best = best.min(d);
+        }
+    }
+    best
+}
+
+fn percentile(sorted: &[f64], q: f64) -> f64 {
+    if sorted.is_empty() {
+        return f64::NAN;
+    }
+    sorted[((sorted.len() - 1) as f64 * q).round() as usize]
+}
+
+struct Figures {
+    ate_m: f64,
+    drift_per_m: f64,
+    cloud_median_m: f64,
+    cloud_p95_m: f64,
+    angle_error_deg: [f64; 3],
+    ms_per_frame: f64,
+    points: usize,
+}
+
+fn evaluate(scenario: &Scenario, scene: &Scene, built: &BuiltCloud, secs: f64) -> Figures {
+    let truth = |t: f64| pose_of(&scenario.run.pose_at(t).to_isometry());
+    let t0 = truth(built.trajectory[0].stamp_s);
+    let mut sq = 0.0;
+    let mut final_err = 0.0;
+    for tp in &built.trajectory {
+        let rel = t0.inverse().compose(&truth(tp.stamp_s));
+        let d: Vec<f64> = (0..3)
+            .map(|k| tp.world_from_robot.translation[k] - rel.translation[k])
+            .collect();
+        final_err = d.iter().map(|v| v * v).sum::<f64>().sqrt();
+        sq += final_err * final_err;
+    }
+    let n = built.trajectory.len() as f64;
+    let last = built.trajectory.last().map_or(0.0, |l| l.stamp_s);
+    let t_last = t0.inverse().compose(&truth(last)).translation;
+    let travelled = t_last.iter().map(|v| v * v).sum::<f64>().sqrt();
+    let in_vehicle: Vec<[f64; 3]> = built.points_in_world.iter().map(|&p| t0.apply(p)).collect();
+    let mut dist: Vec<f64> = in_vehicle
+        .iter()
+        .step_by(7)
+        .map(|&p| surface_distance(scene, p))
+        .collect();
+    dist.sort_by(f64::total_cmp);
+    let true_a = true_angles(&scenario.vehicle, &TruthOptions::default());
+    let t = [
+        true_a.approach.angle_rad,
+        true_a.breakover.angle_rad,
+        true_a.departure.angle_rad,
+    ];
+    let angle_error_deg = match compute_angles(&in_vehicle, &AnglesConfig::default()) {
+        Ok(r) => {
+            let m = [&r.approach, &r.breakover, &r.departure]
+                .map(|a| a.as_ref().map_or(f64::NAN, |a| a.angle_rad));
+            [0, 1, 2].map(|k| (m[k] - t[k]).to_degrees())
+        }
+        Err(e) => {
+            eprintln!("angle calculator failed: {e}");
+            [f64::NAN; 3]
+        }
+    };
+    Figures {
+        ate_m: (sq / n).sqrt(),
+        drift_per_m: final_err / travelled.max(1e-9),
+        cloud_median_m: percentile(&dist, 0.5),
+        cloud_p95_m: percentile(&dist, 0.95),
+        angle_error_deg,
+        ms_per_frame: secs * 1e3 / n,
+        points: built.points_in_world.len(),
+    }
+}
+
+/// KITTI-style export for the peer: `DIR/NAME/frames/NNNNNN.bin` (x y z intensity f32 in the
+/// lidar frame), `DIR/NAME/stamps.txt` and `DIR/NAME/truth.txt` (frame stamp, then the true
+/// `lidar0_from_lidar` translation).
+fn export(
+    dir: &Path,
+    name: &str,
+    scenario: &Scenario,
+    frames: &[LidarFrame],
+) -> anyhow::Result<()> {
+    let root = dir.join(name);
+    std::fs::create_dir_all(root.join("frames"))?;
+    let robot_from_lidar = pose_of(&scenario.file.lidar.robot_from_lidar());
+    let lidar_at =
+        |t: f64| pose_of(&scenario.run.pose_at(t).to_isometry()).compose(&robot_from_lidar);
+    let l0 = lidar_at(frames[0].stamp_s);
+    let mut truth = String::new();
+    for (i, f) in frames.iter().enumerate() {
+        let mut bytes = Vec::with_capacity(f.points.len() * 16);
+        for p in &f.points {
+            for v in p.xyz_in_lidar_m {
+                bytes.extend_from_slice(&v.to_le_bytes());
+            }
+            bytes.extend_from_slice(&0f32.to_le_bytes());
+        }
+        std::fs::write(root.join("frames").join(format!("{i:06}.bin")), bytes)?;
+        let t = l0.inverse().compose(&lidar_at(f.stamp_s)).translation;
+        writeln!(truth, "{} {} {} {}", f.stamp_s, t[0], t[1], t[2])?;
+    }
+    std::fs::write(root.join("truth.txt"), truth)?;
+    Ok(())
+}
+
+// The argument parsing and the two tables are one straight script.
+#[allow(clippy::too_many_lines)]
+fn main() -> anyhow::Result<()> {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let seeds: u64 = args
+        .first()
+        .filter(|a| !a.starts_with("--"))
+        .map_or(Ok(10), |s| s.parse())?;
+    let ablation = args.iter().any(|a| a == "--ablation");
+    let export_dir = args
+        .iter()
+        .position(|a| a == "--export")
+        .and_then(|i| args.get(i + 1))
+        .map(PathBuf::from);
+    let only = args
+        .iter()
+        .position(|a| a == "--only")
+        .and_then(|i| args.get(i + 1))
+        .cloned();
+    let duration_s: Option<f64> = args
+        .iter()
+        .position(|a| a == "--duration-s")
+        .and_then(|i| args.get(i + 1))
+        .map(|s| s.parse())
+        .transpose()?;
+    let no_depth = args.iter().any(|a| a == "--no-depth");
+    let eigen_min: Option<f64> = args
+        .iter()
+        .position(|a| a == "--eigen-min")
+        .and_then(|i| args.get(i + 1))
+        .map(|s| s.parse())
+        .transpose()?;
+    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("scenarios");
+    let mut paths: Vec<PathBuf> = std::fs::read_dir(&dir)?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|e| e == "toml"))
+        .filter(|p| {
+            only.as_ref()
+                .is_none_or(|o| p.to_string_lossy().contains(o.as_str()))
+        })
+        .collect();
+    paths.sort();
+    println!(
+        "| scenario | seed | variant | ATE m | drift %/m | cloud median mm | cloud p95 mm | approach err deg | breakover err deg | departure err deg | ms/frame | points |"
+    );
+    println!("|---|---|---|---|---|---|---|---|---|---|---|---|");
+    let mut per_vehicle: Vec<(String, Vec<[f64; 3]>)> = Vec::new();
+    for path in &paths {
+        let base = Scenario::load(path)?;
+        let name = path
+            .file_stem()
+            .map_or_else(String::new, |s| s.to_string_lossy().into_owned());
+        let mut errors = Vec::new();
+        for seed in 1..=seeds {
+            let mut file = base.file.clone();
+            file.seed = seed;
+            if let Some(d) = duration_s {
+                file.duration_s = Some(d);
+            }
+            let scenario = Scenario::from_parts(path, file, base.vehicle.clone())?;
+            let scene = Scene::from_vehicle(&scenario.vehicle);
+            let lidar = lidar_frames(&scenario, &scene);
+            if let Some(dir) = &export_dir {
+                export(dir, &format!("{name}-{seed}"), &scenario, &lidar)?;
+            }
+            let wheel = wheel_odometry(&scenario.run, scenario.duration_s + 0.2);
+            let mut vs = variants(ablation && seed == 1);
+            if no_depth {
+                vs.retain(|v| !v.depth);
+            }
+            let depth = if vs.iter().any(|v| v.depth) {
+                depth_frames(&scenario, &scene)
+            } else {
+                Vec::new()
+            };
+            for v in vs {
+                let mut config = v.config;
+                mounts_from(&scenario, &mut config);
+                if let Some(e) = eigen_min {
+                    config.laser.degeneracy_eigen_min = e;
+                }
+                let d: &[DepthFrame] = if v.depth { &depth } else { &[] };
+                let (built, secs) = run_pipeline(config, &lidar, d, &wheel);
+                let f = evaluate(&scenario, &scene, &built, secs);
+                // Angle statistics: the full configuration (laser+wheel when depth is off).
+                if v.name == "laser+visual+wheel" || (no_depth && v.name == "laser+wheel") {
+                    errors.push(f.angle_error_deg);
+                }
+                println!(
+                    "| {name} | {seed} | {} | {:.4} | {:.2} | {:.1} | {:.1} | {:+.2} | {:+.2} | {:+.2} | {:.1} | {} |",
+                    v.name,
+                    f.ate_m,
+                    f.drift_per_m * 100.0,
+                    f.cloud_median_m * 1e3,
+                    f.cloud_p95_m * 1e3,
+                    f.angle_error_deg[0],
+                    f.angle_error_deg[1],
+                    f.angle_error_deg[2],
+                    f.ms_per_frame,
+                    f.points
+                );
+            }
+        }
+        per_vehicle.push((name, errors));
+    }
+    println!();
+    println!(
+        "| scenario | runs | approach mean / sd deg | breakover mean / sd deg | departure mean / sd deg |"
+    );
+    println!("|---|---|---|---|---|");
+    for (name, errors) in &per_vehicle {
+        let stats = |k: usize| {
+            let v: Vec<f64> = errors
+                .iter()
+                .map(|e| e[k])
+                .filter(|x| x.is_finite())
+                .collect();
+            let n = v.len() as f64;
+            let mean = v.iter().sum::<f64>() / n;
+            let sd =
+                (v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1.0).max(1.0)).sqrt();
+            format!("{mean:+.2} / {sd:.2} ({} ok)", v.len())
+        };
+        println!(
+            "| {name} | {} | {} | {} | {} |",
+            errors.len(),
+            stats(0),
+            stats(1),
+            stats(2)
+        );
+    }
+    Ok(())
+}
