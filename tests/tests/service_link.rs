@@ -359,6 +359,17 @@ fn full_run_over_a_radio_with_20_percent_loss_and_corruption_delivers_the_exact_
     assert!(!rec.incomplete);
     assert_eq!(rec.meta.outcome, RecordedOutcome::Completed);
     assert!(rec.delivered, "the handheld's ack reached the robot");
+    // `passangle fetch`: the same result again, read back from the robot's disk.
+    let again = client
+        .fetch(m.result.run_id, Duration::from_secs(60), &mut Quiet)
+        .unwrap();
+    assert_eq!(again.result, m.result);
+    assert_eq!(again.preview_mm, m.preview_mm);
+    let status = client.status(Duration::from_secs(10)).unwrap();
+    assert!(
+        status.firmware_ok && status.lidar_ok && status.pending_results == 0,
+        "{status:?}"
+    );
     assert!(
         rec.odometry().unwrap().0.len() > 100,
         "wheel odometry recorded"

@@ -143,6 +143,8 @@ impl HandheldRadio {
 
     /// Asks for an earlier run's result and preview.
     pub fn fetch(&mut self, run_id: u32) -> Result<u16, SendError> {
+        // Forget what we had of it: the offer that answers is reassembled and reported again.
+        self.incoming.remove(&run_id);
         self.link
             .send(&FetchRun { run_id }, Delivery::Reliable, Priority::Control)
     }

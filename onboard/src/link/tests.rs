@@ -371,3 +371,60 @@ fn rejected_drive_becomes_stop() {
     assert!(matches!(&ev[0], McuEvent::Rejected(r) if r.field.as_str() == "vx_mps"));
     assert_eq!(s.intent(), MotionIntent::Stop);
 }
+
+// ---- never panics on arbitrary bytes (the fuzz target `link_sessions` does the same) ----
+
+fn all_sessions_eat(data: &[u8], chunk: usize) {
+    let mut onboard = OnboardRadio::new(LinkConfig::RADIO, key(3), 0, 0);
+    let mut handheld = HandheldRadio::new(HandheldConfig::default(), key(3), 100);
+    let mut mcu = McuSession::new(mcu_config(), 0);
+    let mut now = 0u64;
+    for c in data.chunks(chunk.max(1)) {
+        now += u64::from(c[0]) * 1_000;
+        onboard.receive(now, c);
+        handheld.receive(now, c);
+        mcu.receive(now, c);
+        onboard.poll(now);
+        handheld.poll(now);
+        mcu.poll(now);
+        onboard.transmit(now);
+        handheld.transmit(now);
+        mcu.transmit(now);
+    }
+    onboard.receive(now, &[0]);
+    // After the junk (and past the duplicate memory) a genuine start still gets through.
+    let mut sender = HandheldRadio::new(HandheldConfig::default(), key(3), 40_000);
+    sender.start(params(), u64::MAX - 1).unwrap();
+    let later = now + 120_000_000;
+    let bytes = sender.transmit(later);
+    assert_eq!(starts(&onboard.receive(later, &bytes)), 1);
+}
+
+proptest::proptest! {
+    #[test]
+    fn sessions_never_panic_on_arbitrary_bytes(
+        data in proptest::collection::vec(proptest::prelude::any::<u8>(), 0..2_000),
+        chunk in 1usize..300,
+    ) {
+        all_sessions_eat(&data, chunk);
+    }
+
+    #[test]
+    fn sessions_never_panic_on_mutated_frames(
+        flips in proptest::collection::vec((0usize..4_000, proptest::prelude::any::<u8>()), 0..40),
+    ) {
+        // Real traffic (a start, a result with its preview, status) with bytes overwritten.
+        let mut p = Pair::new(PipeConfig::CLEAN, 0, key(3), key(3));
+        p.hh.start(params(), 9).unwrap();
+        p.ob.deliver(result(2), &[[1, 2, 3]; 60]).unwrap();
+        let mut bytes = p.hh.transmit(0);
+        bytes.extend(p.ob.transmit(0));
+        for (i, v) in flips {
+            if !bytes.is_empty() {
+                let n = bytes.len();
+                bytes[i % n] = v;
+            }
+        }
+        all_sessions_eat(&bytes, 17);
+    }
+}

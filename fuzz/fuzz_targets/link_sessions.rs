@@ -1,0 +1,58 @@
+//! Any bytes from the radio or the UART, fed in arbitrary chunks at arbitrary times into the
+//! onboard radio session, the handheld session and the MCU session: nothing panics, and after the
+//! junk a genuine signed start is still accepted (the sessions resynchronise).
+#![no_main]
+
+use libfuzzer_sys::fuzz_target;
+use onboard::link::handheld::{HandheldConfig, HandheldRadio};
+use onboard::link::mcu::{McuSession, McuSessionConfig};
+use onboard::link::radio::{OnboardRadio, RadioRequest};
+use onboard::link::reliable::LinkConfig;
+use protocol::auth::{KEY_LEN, Key};
+use protocol::bounded::Text;
+use protocol::radio::{StartMeasurement, Zone};
+
+fuzz_target!(|data: &[u8]| {
+    let key = Key([3; KEY_LEN]);
+    let mut onboard = OnboardRadio::new(LinkConfig::RADIO, key.clone(), 0, 0);
+    let mut handheld = HandheldRadio::new(HandheldConfig::default(), key.clone(), 100);
+    let mcu_config = McuSessionConfig {
+        link: LinkConfig::MCU,
+        heartbeat_period_us: 20_000,
+        resend_us: 200_000,
+        firmware: onboard::config::FirmwareConfig::default().to_wire(),
+        accel_mps2: 0.3,
+        jerk_mps3: 1.0,
+        status_timeout_us: 500_000,
+    };
+    let mut mcu = McuSession::new(mcu_config, 0);
+    let mut now = 0u64;
+    for chunk in data.chunks(37) {
+        now += u64::from(chunk[0]) * 1_000;
+        let _ = onboard.receive(now, chunk);
+        let _ = handheld.receive(now, chunk);
+        let _ = mcu.receive(now, chunk);
+        onboard.poll(now);
+        let _ = handheld.poll(now);
+        mcu.poll(now);
+        let _ = onboard.transmit(now);
+        let _ = handheld.transmit(now);
+        let _ = mcu.transmit(now);
+    }
+    // A delimiter ends any partial frame; then a real start must get through.
+    let _ = onboard.receive(now, &[0]);
+    let mut sender = HandheldRadio::new(HandheldConfig::default(), key, 40_000);
+    let params = StartMeasurement {
+        vehicle_id: Text::truncated("F"),
+        speed_mps: 0.2,
+        distance_m: 1.0,
+        zone: Zone::Tyre,
+    };
+    sender.start(params, u64::MAX - 1).expect("a start encodes");
+    let bytes = sender.transmit(now + 120_000_000);
+    let requests = onboard.receive(now + 120_000_000, &bytes);
+    assert!(
+        requests.iter().any(|r| matches!(r, RadioRequest::Start { .. })),
+        "{requests:?}"
+    );
+});
