@@ -72,7 +72,11 @@ pub fn side_view_svg(result: &AnglesResult) -> String {
         v.x(x_max),
         v.y(0.0)
     );
-    // Envelope.
+    // Tyres first (translucent), then the envelope: in the band, the body lies between the tyres
+    // laterally, so parts under the axles (differentials) show through.
+    tyre_circles(&mut s, &v, fa);
+    tyre_circles(&mut s, &v, ra);
+    // Envelope of the body in the band.
     let pts: Vec<String> = env
         .iter()
         .map(|e| format!("{:.1},{:.1}", v.x(e.x_m), v.y(e.z_m)))
@@ -84,19 +88,19 @@ pub fn side_view_svg(result: &AnglesResult) -> String {
             chunk.join(" ")
         );
     }
-    tyre_circles(&mut s, &v, fa);
-    tyre_circles(&mut s, &v, ra);
     tangent_lines(&mut s, &v, result);
     scale_bar(&mut s, &v, height_px);
     let _ = writeln!(
         s,
-        r#"<text x="{:.1}" y="{:.1}">wheelbase {:.3} m, radii front {:.3} m / rear {:.3} m (static loaded), {} envelope samples</text>"#,
-        MARGIN_PX + 260.0,
-        height_px - 22.0,
+        r#"<text x="{x:.1}" y="{:.1}">wheelbase {:.3} m, {} envelope samples</text>
+<text x="{x:.1}" y="{:.1}">tyres: solid = fitted tread radius; dashed = static loaded radius (front {:.3} m, rear {:.3} m), the circle the tangents touch</text>"#,
+        height_px - 40.0,
         result.wheelbase_m,
+        env.len(),
+        height_px - 20.0,
         fa.loaded_radius_m,
         ra.loaded_radius_m,
-        env.len()
+        x = MARGIN_PX + v.px_per_m + 20.0,
     );
     s.push_str("</svg>\n");
     s
@@ -114,7 +118,7 @@ fn tyre_circles(s: &mut String, v: &View, a: Axle) {
     let (cx, cy) = (v.x(a.x_m), v.y(a.loaded_radius_m));
     let _ = writeln!(
         s,
-        r##"<circle cx="{cx:.1}" cy="{cy:.1}" r="{:.1}" fill="#e8e8e8" stroke="#111" stroke-width="2"/>
+        r##"<circle cx="{cx:.1}" cy="{cy:.1}" r="{:.1}" fill="#d0d0d0" fill-opacity="0.5" stroke="#111" stroke-width="2"/>
 <circle cx="{cx:.1}" cy="{cy:.1}" r="{:.1}" fill="none" stroke="#1565c0" stroke-width="1.5" stroke-dasharray="6 4"/>
 <circle cx="{cx:.1}" cy="{cy:.1}" r="3" fill="#111"/>"##,
         a.free_radius_m * v.px_per_m,
