@@ -1,7 +1,10 @@
 //! Accuracy sweep: every synthetic vehicle, several noise seeds, tilted + yawed + shifted; prints
 //! the error of each angle against the brute-force truth and a summary.
 //!
-//! `cargo run -p onboard --release --example accuracy_angles -- [NOISE_M] [SEEDS] [SPACING_M]`
+//! `cargo run -p onboard --release --example accuracy_angles -- [NOISE_M] [SEEDS] [SPACING_M] [jitter]`
+//!
+//! With `jitter`, the body is sampled along the profile from a seed-dependent offset, so the grid
+//! generally misses the profile's corners (a real scan does too).
 #![allow(clippy::unwrap_used, missing_docs)]
 
 #[path = "../tests/synth/mod.rs"]
@@ -14,6 +17,7 @@ fn main() {
     let noise_m: f64 = args.get(1).map_or(0.005, |s| s.parse().unwrap());
     let seeds: u64 = args.get(2).map_or(5, |s| s.parse().unwrap());
     let spacing_m: f64 = args.get(3).map_or(0.005, |s| s.parse().unwrap());
+    let jitter = args.get(4).is_some_and(|s| s == "jitter");
     let pose = synth::Pose {
         yaw_rad: 8f64.to_radians(),
         tilt_rad: 4f64.to_radians(),
@@ -28,6 +32,11 @@ fn main() {
             let scan = synth::Scan {
                 noise_m,
                 seed: 1000 + seed,
+                phase_m: if jitter {
+                    spacing_m * (0.137 + 0.618 * seed as f64).fract().max(0.05)
+                } else {
+                    0.0
+                },
                 ..synth::Scan::noiseless(spacing_m)
             };
             let cloud: Vec<[f64; 3]> = synth::sample(&v, scan)

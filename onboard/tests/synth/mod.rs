@@ -10,7 +10,12 @@
 //! tyre's static-loaded-radius circle is rotated about the circle (bisection on its slope) until it
 //! touches the densely subdivided profile; breakover does the same per crest point for both tyres.
 //! This deliberately shares nothing with the calculator (no envelope, no fits, no closed form).
-#![allow(dead_code, clippy::missing_panics_doc, clippy::struct_field_names, missing_docs)]
+#![allow(
+    dead_code,
+    clippy::missing_panics_doc,
+    clippy::struct_field_names,
+    missing_docs
+)]
 
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -279,6 +284,9 @@ pub struct Scan {
     /// Lone low outliers added under the body (each a single point 5-15 cm below the envelope).
     pub outliers: usize,
     pub seed: u64,
+    /// 0: the body grid contains every profile vertex. > 0: body samples every `spacing_m` along
+    /// the profile's arc length starting at this offset, so corners are generally missed.
+    pub phase_m: f64,
 }
 
 impl Scan {
@@ -289,6 +297,7 @@ impl Scan {
             noise_m: 0.0,
             outliers: 0,
             seed: 1,
+            phase_m: 0.0,
         }
     }
 }
@@ -364,12 +373,35 @@ fn tyre(v: &Vehicle, xc: f64, left: bool, s: f64, out: &mut Vec<[f64; 3]>) {
     }
 }
 
+/// Points every `s` along the polyline's arc length, the first at `phase` (vertices not included).
+fn polyline_phased(profile: &[(f64, f64)], s: f64, phase: f64) -> Vec<(f64, f64)> {
+    let mut out = Vec::new();
+    let mut next = phase;
+    let mut start = 0.0;
+    for w in profile.windows(2) {
+        let ((x0, z0), (x1, z1)) = (w[0], w[1]);
+        let len = (x1 - x0).hypot(z1 - z0);
+        while next <= start + len {
+            let t = if len > 0.0 { (next - start) / len } else { 0.0 };
+            out.push((x0 + (x1 - x0) * t, z0 + (z1 - z0) * t));
+            next += s;
+        }
+        start += len;
+    }
+    out
+}
+
 /// Sample the vehicle in its own frame.
 pub fn sample(v: &Vehicle, scan: Scan) -> Vec<[f64; 3]> {
     let s = scan.spacing_m;
     let mut out = Vec::new();
     let hw = v.body_half_width();
-    for (x, z) in polyline_samples(&v.profile, s) {
+    let profile = if scan.phase_m > 0.0 {
+        polyline_phased(&v.profile, s, scan.phase_m)
+    } else {
+        polyline_samples(&v.profile, s)
+    };
+    for (x, z) in profile {
         for y in steps(-hw, hw, s) {
             out.push([x, y, z]);
         }
