@@ -1,0 +1,144 @@
+//! `passangle angles` end to end: a crude box vehicle written as PLY, the binary run on it, the JSON
+//! checked for the fields the issue asks for and for the approach angle of its bumper corner.
+//! (The calculator's accuracy is tested in `onboard/tests/angles_synthetic.rs` against brute force.)
+
+use std::io::BufWriter;
+use std::process::Command;
+
+use onboard::cloud::{Cloud, PlyEncoding, write_ply};
+
+/// Ground, a flat floor at 0.2 m ending in a vertical bumper face at x = +-2 m, four rigid tyres
+/// (radius 0.3 m, centres at x = +-1.3 m, |y| = 0.75 m, width 0.2 m). 1 cm spacing.
+fn box_vehicle() -> Vec<[f64; 3]> {
+    let s = 0.01;
+    let mut pts = Vec::new();
+    let range = |a: f64, b: f64| {
+        let n = ((b - a) / s).round() as i32;
+        (0..=n).map(move |i| a + f64::from(i) * s)
+    };
+    for x in range(-2.0, 2.0) {
+        for y in range(-0.6, 0.6) {
+            pts.push([x, y, 0.2]);
+        }
+    }
+    for x in [-2.0, 2.0] {
+        for y in range(-0.6, 0.6) {
+            for z in range(0.2, 0.5) {
+                pts.push([x, y, z]);
+            }
+        }
+    }
+    for xc in [-1.3, 1.3] {
+        for side in [-1.0, 1.0] {
+            for k in 0..189 {
+                let t = f64::from(k) / 189.0 * std::f64::consts::TAU;
+                for y in range(0.65, 0.85) {
+                    pts.push([xc + 0.3 * t.cos(), side * y, 0.3 + 0.3 * t.sin()]);
+                }
+                for rho in range(0.15, 0.3) {
+                    pts.push([xc + rho * t.cos(), side * 0.65, 0.3 + rho * t.sin()]);
+                }
+            }
+        }
+    }
+    for x in range(-3.0, 3.0).step_by(2) {
+        for y in range(-1.3, 1.3).step_by(2) {
+            pts.push([x, y, 0.0]);
+        }
+    }
+    pts
+}
+
+#[test]
+fn angles_json_has_the_fields_and_the_right_approach() {
+    let dir = std::env::temp_dir().join(format!("passangle-angles-cli-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let ply = dir.join("box.ply");
+    let svg = dir.join("side.svg");
+    let cloud = Cloud {
+        points_m: box_vehicle(),
+    };
+    write_ply(
+        BufWriter::new(std::fs::File::create(&ply).unwrap()),
+        &cloud,
+        PlyEncoding::BinaryLittleEndian,
+    )
+    .unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_passangle"))
+        .args(["angles", "--json", "--report"])
+        .arg(&svg)
+        .arg(&ply)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    for key in [
+        "approach_deg",
+        "departure_deg",
+        "breakover_deg",
+        "ground_clearance_m",
+        "wheelbase_m",
+        "track_m",
+        "tyres",
+        "witness",
+        "points",
+        "warnings",
+    ] {
+        assert!(v.get(key).is_some(), "missing {key} in {v}");
+    }
+    for key in ["used", "ground", "tyre", "body", "dropped"] {
+        assert!(v["points"].get(key).is_some(), "missing points.{key}");
+    }
+    assert_eq!(v["tyres"].as_array().unwrap().len(), 4);
+    // Closed form for the bumper corner (d = 0.7 m, z = 0.2 m, r = 0.3 m): 16.974 degrees.
+    let expect = (0.3f64 / 0.7f64.hypot(0.1)).asin() - 0.1f64.atan2(0.7);
+    for key in ["approach_deg", "departure_deg"] {
+        let got = v[key].as_f64().unwrap();
+        assert!(
+            (got - expect.to_degrees()).abs() < 0.05,
+            "{key} {got} vs {}",
+            expect.to_degrees()
+        );
+    }
+    assert!((v["wheelbase_m"].as_f64().unwrap() - 2.6).abs() < 0.005);
+    assert!((v["ground_clearance_m"].as_f64().unwrap() - 0.2).abs() < 0.005);
+    let w = &v["witness"]["approach"]["in_vehicle_m"];
+    assert!((w[0].as_f64().unwrap() - 2.0).abs() < 0.01, "{w}");
+    let svg_text = std::fs::read_to_string(&svg).unwrap();
+    assert!(svg_text.starts_with("<svg") && svg_text.contains("approach"));
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn bad_input_is_a_clear_error() {
+    let dir = std::env::temp_dir().join(format!("passangle-angles-bad-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let ply = dir.join("bad.ply");
+    std::fs::write(
+        &ply,
+        "ply\nformat ascii 1.0\nelement vertex 2\nproperty float x\nend_header\n1\n2\n",
+    )
+    .unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_passangle"))
+        .arg("angles")
+        .arg(&ply)
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("bad.ply") && err.contains("no scalar property `y`"),
+        "{err}"
+    );
+    let out = Command::new(env!("CARGO_BIN_EXE_passangle"))
+        .args(["angles", "--exclude", "1,2,3"])
+        .arg(&ply)
+        .output()
+        .unwrap();
+    assert!(String::from_utf8_lossy(&out.stderr).contains("six numbers"));
+    std::fs::remove_dir_all(&dir).ok();
+}
