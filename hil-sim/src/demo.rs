@@ -3,7 +3,7 @@
 //! ```text
 //!  handheld Client --radio (57600 B/8, seeded loss)-- onboard service --MCU link (in-memory)-- firmware control
 //!                                                        ^   ^                                     | CAN (in-process)
-//!                                     VLP-16 packets ----+   +---- odometry                      ESCs + robot physics
+//!                VLP-16 packets (loopback UDP) ----+   +---- odometry                      ESCs + robot physics
 //!                       (ray cast at the robot's *simulated* pose, which the firmware drives)
 //! ```
 //!
@@ -20,7 +20,6 @@
 
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::mpsc::{SyncSender, sync_channel};
 use std::sync::{Arc, Mutex};
 use std::thread;
 use std::time::{Duration, Instant};
@@ -30,7 +29,7 @@ use onboard::client::{Client, Measured, Observer};
 use onboard::config::{CameraSource, FirmwareConfig, OnboardConfig};
 use onboard::link::sim::{LossyPortPair, PipeConfig};
 use onboard::process::PipelineProcessor;
-use onboard::service::{self, Io, LidarPacket, NoNotify, ServiceStats, SharedStats};
+use onboard::service::{self, Io, NoNotify, ServiceStats, SharedStats};
 use protocol::auth::{KEY_LEN, Key};
 use protocol::bounded::Text;
 use protocol::radio::{StartMeasurement, Zone};
@@ -203,9 +202,12 @@ impl Observer for StderrObserver {
 fn lidar_thread(
     scenario: &Scenario,
     live: &LiveTrajectory,
-    tx: &SyncSender<LidarPacket>,
+    to: std::net::SocketAddr,
     stop: &AtomicBool,
-) {
+) -> anyhow::Result<()> {
+    // The VLP-16 sends UDP datagrams; the service reads them with its production reader.
+    let socket =
+        std::net::UdpSocket::bind("127.0.0.1:0").context("binding the lidar's UDP socket")?;
     let scene = crate::world::Scene::from_vehicle(&scenario.vehicle);
     let sim = Vlp16Sim::new(
         &scene,
@@ -213,13 +215,6 @@ fn lidar_thread(
         scenario.file.lidar.clone(),
         scenario.lidar_seed(),
     );
-    let wall0 = std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map_or(0, |d| d.as_nanos() as u64);
-    let src = "192.168.1.201:2368"
-        .parse()
-        .unwrap_or(std::net::SocketAddrV4::new([0; 4].into(), 0));
-    let dst = "192.168.1.100:2368".parse().unwrap_or(src);
     let mut index = 0u64;
     while !stop.load(Ordering::Relaxed) {
         // Cast a packet once the robot's pose at its time is known (the runner reports every 10 ms).
@@ -228,19 +223,12 @@ fn lidar_thread(
             thread::sleep(Duration::from_millis(1));
             continue;
         }
-        let payload = sim.data_packet(index).to_bytes().to_vec();
-        let packet = LidarPacket {
-            wall_ns: wall0 + (t * 1e9) as u64,
-            src,
-            dst,
-            payload,
-            position: false,
-        };
-        if tx.try_send(packet).is_err() {
-            thread::sleep(Duration::from_millis(1));
-        }
+        socket
+            .send_to(&sim.data_packet(index).to_bytes(), to)
+            .context("sending a lidar packet")?;
         index += 1;
     }
+    Ok(())
 }
 
 /// Runs the demo; prints progress to stderr unless `quiet`.
@@ -319,12 +307,16 @@ pub fn run(options: &DemoOptions, quiet: bool) -> anyhow::Result<DemoReport> {
             Ok(())
         }));
     }
-    let (lidar_tx, lidar_rx) = sync_channel(8_000);
+    let lidar_config = onboard::config::LidarConfig {
+        data_addr: "127.0.0.1:0".parse()?,
+        position_addr: None,
+        alive_timeout_ms: 500,
+    };
+    let (lidar_rx, lidar_addr) = service::spawn_lidar_reader(&lidar_config, Arc::clone(&stop))?;
     {
         let (stop, scenario, live) = (Arc::clone(&stop), scenario.clone(), live.clone());
         threads.push(thread::spawn(move || {
-            lidar_thread(&scenario, &live, &lidar_tx, &stop);
-            Ok(())
+            lidar_thread(&scenario, &live, lidar_addr.into(), &stop)
         }));
     }
     let radio = PipeConfig::radio_lossy(options.radio_loss, options.radio_corrupt);

@@ -794,11 +794,12 @@ impl Service {
 }
 
 /// Starts a thread that reads the lidar socket(s) into a bounded channel (about 2 s of packets;
-/// when the loop falls behind, the newest packets are dropped and the reader logs it).
+/// when the loop falls behind, the newest packets are dropped and the reader logs it). Returns the
+/// channel and the bound data address (useful after binding port 0).
 pub fn spawn_lidar_reader(
     config: &config::LidarConfig,
     shutdown: Arc<AtomicBool>,
-) -> Result<Receiver<LidarPacket>, crate::vlp16::source::SourceError> {
+) -> Result<(Receiver<LidarPacket>, SocketAddrV4), crate::vlp16::source::SourceError> {
     use crate::vlp16::source::{PACKET_BUF_LEN, PacketKind, PacketSource, SourceError, UdpSource};
     let mut source = UdpSource::bind(
         config.data_addr,
@@ -850,5 +851,5 @@ pub fn spawn_lidar_reader(
             what: "starting the lidar thread".into(),
             source: e,
         })?;
-    Ok(rx)
+    Ok((rx, data_dst))
 }

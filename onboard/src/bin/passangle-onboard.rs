@@ -157,7 +157,7 @@ fn run(config_path: &Path) -> Result<(), (u8, anyhow::Error)> {
     let unavailable = |e: anyhow::Error| (exit::UNAVAILABLE, e);
     let radio = open_port(&config.radio.port, config.radio.baud).map_err(unavailable)?;
     let mcu = open_port(&config.mcu.port, config.mcu.baud).map_err(unavailable)?;
-    let lidar = service::spawn_lidar_reader(&config.lidar, Arc::clone(&shutdown))
+    let (lidar, _) = service::spawn_lidar_reader(&config.lidar, Arc::clone(&shutdown))
         .context("opening the lidar socket")
         .map_err(unavailable)?;
     let depth = match config.camera.source {
