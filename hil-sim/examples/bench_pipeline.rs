@@ -407,6 +407,7 @@ fn main() -> anyhow::Result<()> {
         .map(|s| s.parse())
         .transpose()?;
     let no_depth = args.iter().any(|a| a == "--no-depth");
+    let no_refine = args.iter().any(|a| a == "--no-refine");
     let eigen_min: Option<f64> = args
         .iter()
         .position(|a| a == "--eigen-min")
@@ -461,6 +462,9 @@ fn main() -> anyhow::Result<()> {
                 mounts_from(&scenario, &mut config);
                 if let Some(e) = eigen_min {
                     config.laser.degeneracy_eigen_min = e;
+                }
+                if no_refine {
+                    config.map.refine = false;
                 }
                 let d: &[DepthFrame] = if v.depth { &depth } else { &[] };
                 let (built, secs) = run_pipeline(config, &lidar, d, &wheel);

@@ -234,6 +234,8 @@ impl Default for VisualOdometryConfig {
 }
 
 /// Odometry fusion (Algorithm 1).
+// Independent on/off switches of a config file, not a state machine.
+#[allow(clippy::struct_excessive_bools)]
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields, rename_all = "kebab-case", default)]
 pub struct FusionConfig {
@@ -243,6 +245,8 @@ pub struct FusionConfig {
     pub use_wheel: bool,
     /// Use visual odometry as a source.
     pub use_visual: bool,
+    /// The laser must also agree with the wheel odometry (within the tolerances) to win a group.
+    pub gate_laser_by_wheel: bool,
     /// Frames averaged for the constant-velocity reference (eq. 6: ten).
     pub reference_frames: usize,
     /// Per-axis rotation deviation (rx, ry, rz) from the reference below which the laser is
@@ -260,6 +264,7 @@ impl Default for FusionConfig {
             use_laser: true,
             use_wheel: true,
             use_visual: true,
+            gate_laser_by_wheel: true,
             reference_frames: 10,
             rotation_tolerance_radps: [0.01, 0.01, 0.01],
             translation_tolerance_mps: [0.02, 0.02, 0.02],

@@ -15,6 +15,9 @@
 //!    if every laser deviation is below its tolerance, the laser wins; otherwise the source with the
 //!    smallest summed absolute deviation wins (`min{Sum(...)}`; the paper chooses between laser and
 //!    visual, the wheel is a third candidate here).
+//!    With `gate-laser-by-wheel`, the laser must also lie within tolerance of the wheel odometry
+//!    wherever the wheels determine a component (an addition to the paper: on simulator data a
+//!    slowly biased laser otherwise wins every frame).
 //! 4. **Gaps**: a component the winner does not determine is taken from the available source
 //!    closest to the reference, else from the reference itself (constant velocity), else zero.
 //!
@@ -130,7 +133,13 @@ impl Fusion {
         ] {
             let winner = match reference {
                 None => laser.map(|_| Source::Laser),
-                Some(r) => select(&candidates, &group, &tolerance, &r),
+                Some(r) => select(
+                    &candidates,
+                    &group,
+                    &tolerance,
+                    &r,
+                    self.config.gate_laser_by_wheel,
+                ),
             };
             for &k in &group {
                 let from_winner = candidates
@@ -161,18 +170,36 @@ fn select(
     group: &[usize; 3],
     tolerance: &[f64; 3],
     reference: &Twist6,
+    gate_by_wheel: bool,
 ) -> Option<Source> {
-    if let Some((_, Some(laser))) = candidates.first()
-        && group.iter().all(|&k| laser.available[k])
-        && group
-            .iter()
-            .zip(tolerance)
-            .all(|(&k, &tol)| (laser.rate[k] - reference[k]).abs() < tol)
-    {
-        return Some(Source::Laser);
+    // The wheel gate: where wheel odometry determines a component, the laser must also agree with
+    // it (a biased laser otherwise passes the reference test slowly, frame after frame).
+    let wheel = candidates
+        .iter()
+        .find(|(s, _)| *s == Source::Wheel)
+        .and_then(|(_, c)| *c)
+        .filter(|_| gate_by_wheel);
+    let mut laser_gated_out = false;
+    if let Some((_, Some(laser))) = candidates.first() {
+        laser_gated_out = wheel.is_some_and(|w| {
+            group
+                .iter()
+                .zip(tolerance)
+                .any(|(&k, &tol)| w.available[k] && (laser.rate[k] - w.rate[k]).abs() >= tol)
+        });
+        if !laser_gated_out
+            && group.iter().all(|&k| laser.available[k])
+            && group
+                .iter()
+                .zip(tolerance)
+                .all(|(&k, &tol)| (laser.rate[k] - reference[k]).abs() < tol)
+        {
+            return Some(Source::Laser);
+        }
     }
     candidates
         .iter()
+        .filter(|(s, _)| !(laser_gated_out && *s == Source::Laser))
         .filter_map(|(s, c)| c.map(|c| (*s, c)))
         .filter(|(_, c)| group.iter().any(|&k| c.available[k]))
         .map(|(s, c)| {
@@ -273,6 +300,26 @@ mod tests {
         let out = f.fuse(Some(&laser), None, None);
         assert_eq!(out.chosen[3], Source::Reference);
         assert!(out.rate[3] > 0.29);
+    }
+
+    #[test]
+    fn the_wheel_gate_rejects_a_laser_that_disagrees_with_the_wheels() {
+        let mut f = Fusion::new(FusionConfig::default());
+        warm(&mut f, [0.0, 0.0, 0.0, 0.3, 0.0, 0.0]);
+        let laser = rate([0.0, 0.0, 0.0, 0.315, 0.0, 0.0]);
+        let wheel = SourceRate {
+            rate: [0.0, 0.0, 0.0, 0.29, 0.0, 0.0],
+            available: [false, false, true, true, true, false],
+        };
+        let out = f.fuse(Some(&laser), None, Some(&wheel));
+        assert_eq!(out.chosen[3], Source::Wheel);
+        let mut ungated = Fusion::new(FusionConfig {
+            gate_laser_by_wheel: false,
+            ..FusionConfig::default()
+        });
+        warm(&mut ungated, [0.0, 0.0, 0.0, 0.3, 0.0, 0.0]);
+        let out = ungated.fuse(Some(&laser), None, Some(&wheel));
+        assert_eq!(out.chosen[3], Source::Laser);
     }
 
     #[test]
