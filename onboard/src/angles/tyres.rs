@@ -5,8 +5,8 @@
 //!    low is wide, a tyre's footprint is not). The four largest are the tyres.
 //! 2. Side-view circle per tyre: points in the tyre's lateral slab, projected onto the x-z plane.
 //!    The silhouette (outermost point per 3-degree sector, walking outward from the centre and
-//!    stopping at the first radial gap wider than `tyre_gap_m`, so the wheel arch and sills are not
-//!    taken) is fitted with a geometric least-squares circle, trimmed at 3 sigma, iterated from a
+//!    stopping at the first radial gap wider than `tyre_gap_m`, or 4 x the median radial step in
+//!    sparse clouds, so the wheel arch and sills are not taken) is fitted with a geometric least-squares circle, trimmed at 3 sigma, iterated from a
 //!    chord-based first guess. Silhouette points lower than 30 % of the centre height are not used:
 //!    a loaded tyre is flattened and bulges near the road.
 //! 3. The static loaded radius is the centre's height above the ground; the fitted radius is the
@@ -214,9 +214,22 @@ fn silhouette(cand: &[[f64; 2]], c: Circle, gap_m: f64) -> Vec<[f64; 2]> {
         let k = ((t * SECTORS as f64) as usize).min(SECTORS - 1);
         sectors[k].push((rho, i));
     }
-    let mut out = Vec::with_capacity(SECTORS);
-    for mut s in sectors {
+    for s in &mut sectors {
         s.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
+    }
+    // Sparse clouds have wide radial steps inside the tyre too: the gap that ends the tyre is at
+    // least 4 x the median step between consecutive points of a sector (inside 0.5 .. 1 radius).
+    let mut steps: Vec<f64> = sectors
+        .iter()
+        .flat_map(|s| {
+            s.windows(2)
+                .filter(|w| w[0].0 >= 0.5 * c.r && w[1].0 <= c.r)
+                .map(|w| w[1].0 - w[0].0)
+        })
+        .collect();
+    let gap_m = gap_m.max(4.0 * median(&mut steps).unwrap_or(0.0));
+    let mut out = Vec::with_capacity(SECTORS);
+    for s in sectors {
         let mut last: Option<(f64, usize)> = None;
         for &(rho, i) in &s {
             if let Some((prev, _)) = last
