@@ -302,14 +302,23 @@ fn evaluate(scenario: &Scenario, scene: &Scene, built: &BuiltCloud, secs: f64) -
     let t0 = truth(built.trajectory[0].stamp_s);
     let mut sq = 0.0;
     let mut final_err = 0.0;
+    let mut max_rpy_err = [0.0_f64; 3];
+    let mut max_xyz_err = [0.0_f64; 3];
     for tp in &built.trajectory {
         let rel = t0.inverse().compose(&truth(tp.stamp_s));
+        let r = rel.inverse().compose(&tp.world_from_robot).rpy();
+        for k in 0..3 {
+            max_rpy_err[k] = max_rpy_err[k].max(r[k].abs().to_degrees());
+            max_xyz_err[k] =
+                max_xyz_err[k].max((tp.world_from_robot.translation[k] - rel.translation[k]).abs());
+        }
         let d: Vec<f64> = (0..3)
             .map(|k| tp.world_from_robot.translation[k] - rel.translation[k])
             .collect();
         final_err = d.iter().map(|v| v * v).sum::<f64>().sqrt();
         sq += final_err * final_err;
     }
+    eprintln!("max |error| roll/pitch/yaw deg {max_rpy_err:.3?}, x/y/z m {max_xyz_err:.4?}");
     let n = built.trajectory.len() as f64;
     let last = built.trajectory.last().map_or(0.0, |l| l.stamp_s);
     let t_last = t0.inverse().compose(&truth(last)).translation;

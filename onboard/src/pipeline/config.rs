@@ -290,6 +290,9 @@ pub struct MapConfig {
     pub output_max_range_m: f64,
     /// Keep ground points in the output cloud (the angle calculator fits the ground plane).
     pub keep_ground: bool,
+    /// Set each frame's roll, pitch and height from its RANSAC ground plane against the first
+    /// frame's (a flat floor is an absolute reference; removes z, roll and pitch drift).
+    pub level_with_ground: bool,
 }
 
 impl Default for MapConfig {
@@ -302,6 +305,7 @@ impl Default for MapConfig {
             output_voxel_m: 0.02,
             output_max_range_m: 8.0,
             keep_ground: true,
+            level_with_ground: true,
         }
     }
 }

@@ -82,6 +82,9 @@ pub fn segment_ground(
         }
     }
     let (plane, _) = best?;
+    // Least-squares refit on the inliers: three points give the normal to about a degree, the
+    // thousands of inliers to a few hundredths.
+    let plane = refit(points_in_robot, plane, config.distance_threshold_m).unwrap_or(plane);
     let is_ground: Vec<bool> = points_in_robot
         .iter()
         .map(|&p| plane.distance(p).abs() <= config.distance_threshold_m)
@@ -92,6 +95,23 @@ pub fn segment_ground(
         is_ground,
         inliers,
         iterations,
+    })
+}
+
+fn refit(points: &[V3], plane: Plane, threshold_m: f64) -> Option<Plane> {
+    let inliers = points
+        .iter()
+        .copied()
+        .filter(move |&p| plane.distance(p).abs() <= threshold_m);
+    let (c, cov) = super::geom::centroid_covariance(inliers)?;
+    let (_, vectors) = super::geom::symmetric_eigen(&cov);
+    let mut normal = [vectors[0][0], vectors[1][0], vectors[2][0]];
+    if normal[2] < 0.0 {
+        normal = scale(normal, -1.0);
+    }
+    Some(Plane {
+        normal,
+        offset_m: -dot(normal, c),
     })
 }
 

@@ -296,6 +296,8 @@ pub struct Pipeline {
     cloud: CloudAccumulator,
     trajectory: Vec<TrajectoryPoint>,
     stats: PipelineStats,
+    /// The ground plane of the first frame, world frame: `(normal, offset)`.
+    world_ground: Option<(V3, f64)>,
 }
 
 impl Pipeline {
@@ -324,6 +326,7 @@ impl Pipeline {
             cloud: CloudAccumulator::new(config.map.output_voxel_m),
             trajectory: Vec::new(),
             stats: PipelineStats::default(),
+            world_ground: None,
             config,
         })
     }
@@ -516,8 +519,15 @@ impl Pipeline {
             .into_iter()
             .map(|(p, _)| p)
             .collect();
-        let (world_from_robot, chosen, laser_degenerate) =
+        let (mut world_from_robot, chosen, laser_degenerate) =
             self.estimate_pose(frame.stamp_s, &feats, &ground_sample);
+        if let Some(s) = &split
+            && cfg.map.level_with_ground
+        {
+            let plane = (s.plane.normal, s.plane.offset_m);
+            let world_ground = *self.world_ground.get_or_insert(plane);
+            world_from_robot = level_with_ground(&world_from_robot, plane, world_ground);
+        }
         // Scan-line tags: frame index * 16 + ring, unique over the run.
         let tagged = |v: &[(V3, u8)]| -> Vec<(V3, u32)> {
             v.iter()
@@ -686,6 +696,36 @@ impl Pipeline {
             }
         }
     }
+}
+
+/// Correct roll, pitch and height of `world_from_robot` so that the frame's ground plane
+/// (`normal . p + offset = 0`, robot frame) lands on the world's ground plane: the smallest
+/// rotation taking the rotated normal onto the world normal (yaw untouched to first order), then a
+/// shift along the world normal. On a flat floor this removes z, roll and pitch drift entirely.
+fn level_with_ground(world_from_robot: &Pose, plane: (V3, f64), world: (V3, f64)) -> Pose {
+    let (n_r, d_r) = plane;
+    let (n_w, d_w) = world;
+    let n_now = world_from_robot.apply_vector(n_r);
+    let axis = geom::cross(n_now, n_w);
+    let angle = axis_angle(norm(axis), geom::dot(n_now, n_w));
+    let fix = if norm(axis) > 1e-12 {
+        geom::scale(axis, angle / norm(axis))
+    } else {
+        [0.0; 3]
+    };
+    let rotation = geom::mat_mul(&geom::exp_so3(fix), &world_from_robot.rotation);
+    let mut translation = world_from_robot.translation;
+    // Ground points p satisfy n_r . p = -d_r; in the world n_w . (R p + t) = -d_w.
+    let shift = (d_r - d_w) - geom::dot(n_w, translation);
+    translation = geom::add(translation, geom::scale(n_w, shift));
+    Pose {
+        rotation,
+        translation,
+    }
+}
+
+fn axis_angle(sin: f64, cos: f64) -> f64 {
+    sin.atan2(cos)
 }
 
 fn scale_twist(t: &Twist6, s: f64) -> Twist6 {
