@@ -197,3 +197,18 @@ fn bad_input_is_refused_with_names() {
     let e = pipeline.push_lidar_frame(f).unwrap_err().to_string();
     assert!(e.contains("lidar frame stamp 1"), "{e}");
 }
+
+#[test]
+fn levelling_restores_roll_pitch_and_height_and_keeps_yaw() {
+    // True world_from_robot: yaw 0.3, level, on the ground. The frame sees the world ground
+    // (z = 0) from there; the estimate has 1 degree of pitch and 2 cm of height error.
+    let truth = Pose::from_xyz_rpy([1.0, 0.5, 0.0], [0.0, 0.0, 0.3]);
+    let n_r = truth.inverse().apply_vector([0.0, 0.0, 1.0]);
+    let d_r = -geom::dot(n_r, truth.inverse().apply([0.0, 0.0, 0.0]));
+    let estimate = Pose::from_xyz_rpy([1.0, 0.5, 0.02], [0.0, 0.0175, 0.3]);
+    let fixed = level_with_ground(&estimate, (n_r, d_r), ([0.0, 0.0, 1.0], 0.0));
+    let rpy = fixed.rpy();
+    assert!(rpy[0].abs() < 1e-9 && rpy[1].abs() < 1e-9, "{rpy:?}");
+    assert!((rpy[2] - 0.3).abs() < 1e-3, "{rpy:?}");
+    assert!(fixed.translation[2].abs() < 1e-9, "{:?}", fixed.translation);
+}
