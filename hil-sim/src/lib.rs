@@ -23,14 +23,14 @@
 //! the only part that touches files, sockets and clocks.
 
 pub mod can_bus;
+pub mod d435;
+pub mod demo;
 pub mod esc_model;
 pub mod fil;
 pub mod fil_scenarios;
+pub mod geometry;
 pub mod pty;
 pub mod robot;
-pub mod d435;
-pub mod demo;
-pub mod geometry;
 pub mod scenario;
 pub mod trajectory;
 pub mod truth;
