@@ -12,7 +12,7 @@
 //! - [`vlp16`]: the VLP-16 sensor model (firing timing, noise, dropouts) producing packets.
 //! - [`d435`]: the D435 depth camera model producing Z16 frames.
 //!
-//! Firmware in the loop (docs/sil.md): [`esc_model`] (C620 + M3508 with injectable faults),
+//! Firmware in the loop (README, "Firmware in the loop"): [`esc_model`] (C620 + M3508 with injectable faults),
 //! [`robot`] (mecanum chassis dynamics with slip; its [`robot::PoseHistory`] is the odometry
 //! truth), [`can_bus`] (the bus trait: in-process, SocketCAN), [`pty`] (the MCU link's byte pipe:
 //! in memory, pseudo-terminal), [`fil`] (the runner stepping `control::Controller` on a 1 ms
