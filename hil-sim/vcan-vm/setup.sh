@@ -7,7 +7,7 @@
 #   canutils/  can-utils (candump, cansend) from Debian, run inside the guest
 #   initramfs.cpio.gz  busybox-static + the CAN/9p/virtio modules + init (hil-sim/vcan-vm/init)
 # Idempotent: each step is skipped when its output exists. Prints what it does; exits non-zero with
-# a message naming the step that failed. See docs/sil.md and /work/shared/notes/vcan-vm.md.
+# a message naming the step that failed. See the README section "Firmware in the loop".
 set -euo pipefail
 
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"

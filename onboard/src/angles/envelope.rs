@@ -13,7 +13,7 @@
 //! toward the mean x (noise spreads points outward; with no noise the extremes are exact), heights
 //! clamped to the mode's height range. On noiseless piecewise-flat surfaces both samples lie exactly on the surface, so
 //! corners are kept to the point spacing; on noisy ones each sample averages the whole mode.
-//! Known bias (measured in the tests and docs/angles.md): at a convex corner the mode mixes both
+//! Known bias (measured in the tests and the README section "Passing angles"): at a convex corner the mode mixes both
 //! faces within `w`, which lifts the envelope there by up to about `w / 2`.
 
 /// One envelope sample in the side view (vehicle frame x forward, z up).
