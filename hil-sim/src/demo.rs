@@ -231,6 +231,16 @@ fn lidar_thread(
     Ok(())
 }
 
+/// The demo's `[processing.pipeline]` overrides. Measured on a sedan demo recording (7.1 m pass,
+/// 766 lidar frames, no depth camera): with these, 15.95 / 12.87 / 17.92 degrees against the true
+/// 15.98 / 12.89 / 15.25 (approach / breakover / departure); with the pipeline's defaults (laser
+/// odometry fused, scan-to-map refinement, 2 cm output voxels, bilateral filter) the cloud is too
+/// sparse for the tyre fits, and at 5 mm voxels the laser-fused cloud is yawed by 2 degrees and
+/// gives a departure angle of 0.2 degrees. So the demo builds its cloud from wheel odometry (the
+/// firmware's encoders, which the simulated robot's straight constant-speed run makes reliable)
+/// with dense 5 mm output voxels and no filter. Revisit when laser odometry stops drifting here.
+const DEMO_PIPELINE: &str = "[processing.pipeline.fusion]\nuse-laser = false\nuse-visual = false\n[processing.pipeline.map]\nrefine = false\noutput-voxel-m = 0.005\n[processing.pipeline.filter]\nenabled = false\n";
+
 /// Runs the demo; prints progress to stderr unless `quiet`.
 // The wiring reads top to bottom as the diagram in the module docs; `{:?}` quotes paths for TOML.
 #[allow(clippy::too_many_lines, clippy::unnecessary_debug_formatting)]
@@ -249,7 +259,7 @@ pub fn run(options: &DemoOptions, quiet: bool) -> anyhow::Result<DemoReport> {
     }
     let key = onboard::config::read_key(&key_file)?;
     let text = format!(
-        "[recording]\nroot = {:?}\n[radio]\nport = \"sim\"\nkey-file = {:?}\ncounter-file = {:?}\n[mcu]\nport = \"sim\"\n[camera]\nsource = \"none\"\n[processing]\nenter-at-front = {}\n",
+        "[recording]\nroot = {:?}\n[radio]\nport = \"sim\"\nkey-file = {:?}\ncounter-file = {:?}\n[mcu]\nport = \"sim\"\n[camera]\nsource = \"none\"\n[processing]\nenter-at-front = {}\n{DEMO_PIPELINE}",
         options.run_root.join("runs"),
         key_file,
         etc.join("start-counter"),

@@ -810,8 +810,15 @@ pub fn spawn_lidar_reader(
         Some(std::net::SocketAddr::V4(v4)) => v4,
         _ => SocketAddrV4::new([0, 0, 0, 0].into(), 0),
     };
-    let data_dst = to_v4(source.data_addr().ok());
-    let position_dst = to_v4(source.position_addr());
+    let data_bound = to_v4(source.data_addr().ok());
+    // The recording shows the packets as the VLP-16 addressed them: to its standard ports 2368 and
+    // 8308, whatever port this service listens on (a test or the demo binds an ephemeral one), so
+    // `passangle replay`, VeloView and Wireshark read every recording the same way.
+    let data_dst = SocketAddrV4::new(*data_bound.ip(), crate::vlp16::packet::DATA_PORT);
+    let position_dst = SocketAddrV4::new(
+        *to_v4(source.position_addr()).ip(),
+        crate::vlp16::position::POSITION_PORT,
+    );
     let (tx, rx) = sync_channel(4_000);
     thread::Builder::new()
         .name("lidar".into())
@@ -851,5 +858,5 @@ pub fn spawn_lidar_reader(
             what: "starting the lidar thread".into(),
             source: e,
         })?;
-    Ok((rx, data_dst))
+    Ok((rx, data_bound))
 }
