@@ -37,7 +37,7 @@ use protocol::radio::{StartMeasurement, Zone};
 use crate::can_bus::InProcessBus;
 use crate::fil::{Fil, FilConfig, Pacing};
 use crate::geometry::{Pose, Vec3};
-use crate::pty::{ByteLink, MemPipe};
+use crate::pty::MemPipe;
 use crate::scenario::Scenario;
 use crate::trajectory::Trajectory;
 use crate::truth::{TruthOptions, true_angles};
@@ -142,34 +142,6 @@ impl Trajectory for LiveTrajectory {
 
     fn wheel_distance_at(&self, _t_s: f64) -> f64 {
         0.0
-    }
-}
-
-/// Adapts the in-memory pipe to `Read + Write` for the service.
-struct MemPort {
-    pipe: MemPipe,
-    buf: Vec<u8>,
-}
-
-impl std::io::Read for MemPort {
-    fn read(&mut self, out: &mut [u8]) -> std::io::Result<usize> {
-        if self.buf.is_empty() {
-            self.pipe.read_available(&mut self.buf)?;
-        }
-        let n = out.len().min(self.buf.len());
-        out[..n].copy_from_slice(&self.buf[..n]);
-        self.buf.drain(..n);
-        Ok(n)
-    }
-}
-
-impl std::io::Write for MemPort {
-    fn write(&mut self, b: &[u8]) -> std::io::Result<usize> {
-        self.pipe.write_all(b)?;
-        Ok(b.len())
-    }
-    fn flush(&mut self) -> std::io::Result<()> {
-        Ok(())
     }
 }
 
@@ -335,10 +307,7 @@ pub fn run(options: &DemoOptions, quiet: bool) -> anyhow::Result<DemoReport> {
     {
         let io = Io {
             radio: Box::new(onboard_port),
-            mcu: Box::new(MemPort {
-                pipe: onboard_uart,
-                buf: Vec::new(),
-            }),
+            mcu: Box::new(onboard_uart),
             lidar: lidar_rx,
             depth: None,
             crash: None,

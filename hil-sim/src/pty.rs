@@ -46,6 +46,30 @@ impl MemPipe {
     }
 }
 
+/// `Read + Write` over the pipe (what the onboard service takes for its serial ports): a read
+/// takes what has arrived (possibly nothing), a write queues everything.
+impl std::io::Read for MemPipe {
+    fn read(&mut self, out: &mut [u8]) -> std::io::Result<usize> {
+        let mut rx = self.rx.lock().unwrap_or_else(PoisonError::into_inner);
+        let n = out.len().min(rx.len());
+        for (dst, src) in out.iter_mut().zip(rx.drain(..n)) {
+            *dst = src;
+        }
+        Ok(n)
+    }
+}
+
+impl std::io::Write for MemPipe {
+    fn write(&mut self, bytes: &[u8]) -> std::io::Result<usize> {
+        ByteLink::write_all(self, bytes)?;
+        Ok(bytes.len())
+    }
+
+    fn flush(&mut self) -> std::io::Result<()> {
+        Ok(())
+    }
+}
+
 impl ByteLink for MemPipe {
     fn write_all(&mut self, bytes: &[u8]) -> std::io::Result<()> {
         self.tx
@@ -138,8 +162,8 @@ mod tests {
     #[test]
     fn mem_pipe_is_full_duplex() {
         let (mut a, mut b) = MemPipe::pair();
-        a.write_all(b"ping").unwrap();
-        b.write_all(b"pong").unwrap();
+        ByteLink::write_all(&mut a, b"ping").unwrap();
+        ByteLink::write_all(&mut b, b"pong").unwrap();
         let mut got = Vec::new();
         b.read_available(&mut got).unwrap();
         assert_eq!(got, b"ping");

@@ -25,7 +25,7 @@ use std::time::{Duration, Instant};
 
 use hil_sim::can_bus::InProcessBus;
 use hil_sim::fil::{Fil, FilConfig, Pacing};
-use hil_sim::pty::{ByteLink, MemPipe};
+use hil_sim::pty::MemPipe;
 use hil_sim::robot::PoseSample;
 use onboard::client::{Client, ClientError, Quiet};
 use onboard::cloud::Cloud;
@@ -38,34 +38,6 @@ use onboard::service::{
 use protocol::auth::{KEY_LEN, Key};
 use protocol::bounded::Text;
 use protocol::radio::{MeasurementResult, ResultWarnings, StartMeasurement, Zone};
-
-/// Adapts hil-sim's in-memory byte pipe to `Read + Write`.
-struct MemPort {
-    pipe: MemPipe,
-    buf: Vec<u8>,
-}
-
-impl std::io::Read for MemPort {
-    fn read(&mut self, out: &mut [u8]) -> std::io::Result<usize> {
-        if self.buf.is_empty() {
-            self.pipe.read_available(&mut self.buf)?;
-        }
-        let n = out.len().min(self.buf.len());
-        out[..n].copy_from_slice(&self.buf[..n]);
-        self.buf.drain(..n);
-        Ok(n)
-    }
-}
-
-impl std::io::Write for MemPort {
-    fn write(&mut self, b: &[u8]) -> std::io::Result<usize> {
-        self.pipe.write_all(b)?;
-        Ok(b.len())
-    }
-    fn flush(&mut self) -> std::io::Result<()> {
-        Ok(())
-    }
-}
 
 /// A processing double: its "angles" encode what the recording holds.
 struct CountingProcessor {
@@ -255,10 +227,7 @@ impl Rig {
         {
             let io = Io {
                 radio: Box::new(onboard_port),
-                mcu: Box::new(MemPort {
-                    pipe: onboard_uart,
-                    buf: Vec::new(),
-                }),
+                mcu: Box::new(onboard_uart),
                 lidar: lidar_rx,
                 depth: None,
                 crash: Some(Arc::clone(&crash)),
