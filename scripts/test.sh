@@ -49,6 +49,21 @@ step "no_std: protocol and control for thumbv7em-none-eabihf"
 cargo build -p protocol --target thumbv7em-none-eabihf --no-default-features
 cargo build -p control --target thumbv7em-none-eabihf
 
+step "V4L2 depth capture (the onboard's \`v4l2\` feature; its bindings need libclang)"
+if ! ldconfig -p 2>/dev/null | grep -q libclang; then
+    if [[ $(id -u) == 0 ]] && command -v apt-get >/dev/null; then
+        echo "installing libclang-dev (Debian) for the v4l crate's bindgen"
+        (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq libclang-dev) >/dev/null \
+            || echo "NOTE: could not install libclang-dev" >&2
+    fi
+fi
+if ldconfig -p 2>/dev/null | grep -q libclang; then
+    cargo clippy -p onboard --features v4l2 --all-targets -- -D warnings
+    cargo test -p onboard --features v4l2 --lib camera
+else
+    echo "NOTE: libclang is missing (apt-get install libclang-dev): the v4l2 build is SKIPPED." >&2
+fi
+
 if [[ -f firmware/ci.sh ]]; then
     step "STM32 firmware release build and size report"
     bash firmware/ci.sh

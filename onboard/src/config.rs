@@ -285,7 +285,7 @@ impl Default for LidarConfig {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum CameraSource {
-    /// The D435's UVC depth node through V4L2 (not implemented in this build: refused at start).
+    /// The D435's UVC depth node through V4L2 (builds with the `v4l2` feature; refused at start otherwise).
     V4l2,
     /// Frames pushed in by the embedding program (the simulator).
     Simulated,
@@ -297,7 +297,7 @@ pub enum CameraSource {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case", deny_unknown_fields, default)]
 pub struct CameraConfig {
-    /// Source (default `none` while V4L2 capture is not in the build).
+    /// Source (default `none`: V4L2 capture needs a build with the `v4l2` feature).
     pub source: CameraSource,
     /// V4L2 device of the depth stream (default `/dev/video0`; the D435 exposes several nodes).
     pub device: PathBuf,

@@ -3,6 +3,7 @@
 //! function of its inputs: no clocks, no IO in the pipeline or the angle calculator.
 
 pub mod angles;
+pub mod camera;
 pub mod client;
 pub mod cloud;
 pub mod config;

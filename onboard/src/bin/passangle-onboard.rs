@@ -215,16 +215,30 @@ fn install_signals(flag: Arc<AtomicBool>) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// V4L2 capture of the D435 depth node is not in this build yet (it needs the `v4l` crate and
-/// libclang for its bindings); until then a robot runs with `camera.source = "none"` (lidar and
-/// wheel odometry only) and the simulator feeds simulated depth frames.
+/// The D435's depth node through V4L2 (`onboard::camera`), in builds with the `v4l2` feature.
+#[cfg(feature = "v4l2")]
+fn open_v4l2(
+    config: &OnboardConfig,
+    shutdown: Arc<AtomicBool>,
+) -> anyhow::Result<std::sync::mpsc::Receiver<service::DepthFrame>> {
+    onboard::camera::spawn_v4l2_depth(&config.camera, shutdown).with_context(|| {
+        format!(
+            "camera.source = \"v4l2\" ({})",
+            config.camera.device.display()
+        )
+    })
+}
+
+/// Without the `v4l2` feature there is no V4L2 capture: say how to get it.
+#[cfg(not(feature = "v4l2"))]
 fn open_v4l2(
     config: &OnboardConfig,
     _shutdown: Arc<AtomicBool>,
 ) -> anyhow::Result<std::sync::mpsc::Receiver<service::DepthFrame>> {
     anyhow::bail!(
-        "camera.source = \"v4l2\" ({}): V4L2 depth capture is not implemented in this build; \
-         set camera.source = \"none\" to run on lidar and wheel odometry",
+        "camera.source = \"v4l2\" ({}): this passangle-onboard was built without the `v4l2` \
+         feature (rebuild with `cargo build --release -p onboard --features v4l2`, which needs \
+         libclang-dev), or set camera.source = \"none\" to run on lidar and wheel odometry",
         config.camera.device.display()
     )
 }
