@@ -187,27 +187,10 @@ pub struct FirmwareConfig {
 }
 
 impl Default for FirmwareConfig {
-    /// The 295 x 384 mm robot with 76 mm mecanum wheels on M3508 motors.
+    /// The firmware's own built-in defaults (`control::Config::default`), so the configuration the
+    /// service sends after `Hello` is the one the firmware was tuned and tested with, not a copy.
     fn default() -> Self {
-        Self {
-            wheel_radius_m: 0.038,
-            half_length_m: 0.12,
-            half_width_m: 0.11,
-            esc_ids: [1, 2, 3, 4],
-            wheel_signs: [1, -1, 1, -1],
-            current_limit_a: 10.0,
-            speed_kp: 0.6,
-            speed_ki: 8.0,
-            speed_kd: 0.0,
-            max_speed_mps: 0.8,
-            max_accel_mps2: 1.0,
-            heartbeat_timeout_ms: 100,
-            feedback_timeout_ms: 10,
-            odometry_period_ms: 10,
-            over_temperature_c: 80,
-            over_current_a: 18.0,
-            stall_timeout_ms: 500,
-        }
+        Self::from_wire(&control::Config::default().to_mcu())
     }
 }
 
