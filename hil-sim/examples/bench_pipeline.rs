@@ -2,12 +2,14 @@
 //! ground truth: trajectory error, cloud error, angles against the geometry's truth, and time per
 //! lidar frame, for the configurations of the paper's Figure 14 ablation.
 //!
-//! Run: `cargo run --release -p hil-sim --example bench_pipeline -- [SEEDS] [--ablation]
-//! [--export DIR]` (defaults: 10 seeds, the full configuration only). `--ablation` adds laser only,
-//! laser + visual, laser + visual + wheel, without ground removal and without outlier removal, on
-//! the first seed of every scenario. `--export DIR` writes each run's lidar frames as KITTI-style
-//! `.bin` files (x y z intensity f32, sensor frame) plus the true poses, for the KISS-ICP peer run
-//! (`bench/pipeline_peer.sh`).
+//! Run: `cargo run --release -p hil-sim --example bench_pipeline -- [SEEDS] [--ablation | --peer]
+//! [--no-depth] [--only NAME] [--duration-s S] [--no-refine] [--eigen-min E] [--export DIR]`
+//! (defaults: 10 seeds, laser + wheel and the full configuration). `--ablation` adds wheel only,
+//! laser only, laser + visual, without ground removal and without outlier removal, on the first
+//! seed of every scenario. `--peer` runs exactly the two configurations of the KISS-ICP
+//! comparison, laser only and laser + wheel (no depth). `--export DIR` writes each run's lidar
+//! frames, the true poses and our estimated trajectories for the peer run
+//! (`bench/pipeline_peer.sh`; layout at [`export_frames`]).
 //!
 //! Inputs per run (all from `hil_sim`, all seeded): the VLP-16 packets decoded by
 //! `onboard::vlp16::FrameAssembler`, the D435 depth frames (every 3rd, i.e. 10 Hz), and wheel
@@ -49,25 +51,21 @@ struct Variant {
     depth: bool,
 }
 
-fn variants(ablation: bool) -> Vec<Variant> {
+/// Which configurations a seed runs.
+#[derive(Clone, Copy, PartialEq)]
+enum Mode {
+    /// Laser + wheel and laser + visual + wheel.
+    Default,
+    /// All of the Figure 14 ablation.
+    Ablation,
+    /// Laser only and laser + wheel: the KISS-ICP comparison.
+    Peer,
+}
+
+/// The configurations of `mode`. Without `depth`, the two "no ..." rows of the ablation leave
+/// their stage out of laser + wheel instead of the full configuration (and say so in the name).
+fn variants(mode: Mode, depth: bool) -> Vec<Variant> {
     let full = PipelineConfig::default();
-    if !ablation {
-        let mut laser_wheel = full.clone();
-        laser_wheel.fusion.use_visual = false;
-        laser_wheel.visual.enabled = false;
-        return vec![
-            Variant {
-                name: "laser+wheel",
-                config: laser_wheel,
-                depth: false,
-            },
-            Variant {
-                name: "laser+visual+wheel",
-                config: full,
-                depth: true,
-            },
-        ];
-    }
     let mut wheel_only = full.clone();
     wheel_only.fusion.use_laser = false;
     wheel_only.fusion.use_visual = false;
@@ -81,47 +79,51 @@ fn variants(ablation: bool) -> Vec<Variant> {
     laser_wheel.visual.enabled = false;
     let mut laser_visual = full.clone();
     laser_visual.fusion.use_wheel = false;
-    let mut no_ground = full.clone();
+    let base = if depth { &full } else { &laser_wheel };
+    let mut no_ground = base.clone();
     no_ground.ground.enabled = false;
-    let mut no_outliers = full.clone();
+    let mut no_outliers = base.clone();
     no_outliers.features.outlier_removal = false;
-    vec![
-        Variant {
-            name: "wheel only (baseline)",
-            config: wheel_only,
-            depth: false,
-        },
-        Variant {
-            name: "laser only",
-            config: laser,
-            depth: false,
-        },
-        Variant {
-            name: "laser+wheel",
-            config: laser_wheel,
-            depth: false,
-        },
-        Variant {
-            name: "laser+visual",
-            config: laser_visual,
-            depth: true,
-        },
-        Variant {
-            name: "laser+visual+wheel",
-            config: full,
-            depth: true,
-        },
-        Variant {
-            name: "no ground removal",
-            config: no_ground,
-            depth: true,
-        },
-        Variant {
-            name: "no outlier removal",
-            config: no_outliers,
-            depth: true,
-        },
-    ]
+    let v = |name, config, depth| Variant {
+        name,
+        config,
+        depth,
+    };
+    match mode {
+        Mode::Default => vec![
+            v("laser+wheel", laser_wheel, false),
+            v("laser+visual+wheel", full, true),
+        ],
+        Mode::Peer => vec![
+            v("laser only", laser, false),
+            v("laser+wheel", laser_wheel, false),
+        ],
+        Mode::Ablation => vec![
+            v("wheel only (baseline)", wheel_only, false),
+            v("laser only", laser, false),
+            v("laser+wheel", laser_wheel, false),
+            v("laser+visual", laser_visual, true),
+            v("laser+visual+wheel", full, true),
+            v(
+                if depth {
+                    "no ground removal"
+                } else {
+                    "no ground removal (laser+wheel)"
+                },
+                no_ground,
+                depth,
+            ),
+            v(
+                if depth {
+                    "no outlier removal"
+                } else {
+                    "no outlier removal (laser+wheel)"
+                },
+                no_outliers,
+                depth,
+            ),
+        ],
+    }
 }
 
 fn pose_of(iso: &Isometry) -> Pose {
@@ -358,35 +360,140 @@ fn evaluate(scenario: &Scenario, scene: &Scene, built: &BuiltCloud, secs: f64) -
     }
 }
 
-/// KITTI-style export for the peer: `DIR/NAME/frames/NNNNNN.bin` (x y z intensity f32 in the
-/// lidar frame), `DIR/NAME/stamps.txt` and `DIR/NAME/truth.txt` (frame stamp, then the true
-/// `lidar0_from_lidar` translation).
-fn export(
+/// A pose as one line of 12 numbers, KITTI style: the rotation's rows, each followed by that
+/// row's translation (`r00 r01 r02 tx r10 r11 r12 ty r20 r21 r22 tz`).
+fn kitti_row(p: &Pose) -> String {
+    let (r, t) = (&p.rotation, &p.translation);
+    (0..3)
+        .map(|i| format!("{} {} {} {}", r[i][0], r[i][1], r[i][2], t[i]))
+        .collect::<Vec<_>>()
+        .join(" ")
+}
+
+/// Export of one run for the peer (`bench/pipeline_peer.py`), under `DIR/NAME/`:
+/// - `frames/NNNNNN.bin`: per point `x y z t` as little-endian f32, x y z in the VLP-16's own
+///   sensor frame (manual convention: x right, y forward at azimuth 0, z up), metres, exactly as
+///   decoded (not deskewed); t = firing time after the frame's first firing, seconds. KITTI's
+///   `.bin` layout with the time in the intensity column.
+/// - `robot_from_lidar.txt`: the mount, one KITTI row.
+/// - `truth.txt`: per frame `start_s end_s` (first and last firing, simulation time) then the
+///   true `vehicle_from_robot` at `start_s` and at `end_s` (two KITTI rows, 24 numbers).
+/// - `check.txt`: the convention check. Every 97th point of the first, middle and last frame,
+///   moved into the vehicle frame by the exact true pose at its firing time and the mount:
+///   `frame point x y z`. Its header gives the median distance of these points to the true
+///   surfaces: range noise (millimetres) only if the frames, the mount and the truth agree. The
+///   peer script maps the same points from the files and must land on them.
+///
+/// The peer needs both instants: our poses are for the frame start, KISS-ICP deskews each frame
+/// to its last point and so reports the sensor pose at the frame end.
+fn export_frames(
     dir: &Path,
     name: &str,
     scenario: &Scenario,
+    scene: &Scene,
     frames: &[LidarFrame],
 ) -> anyhow::Result<()> {
     let root = dir.join(name);
     std::fs::create_dir_all(root.join("frames"))?;
-    let robot_from_lidar = pose_of(&scenario.file.lidar.robot_from_lidar());
-    let lidar_at =
-        |t: f64| pose_of(&scenario.run.pose_at(t).to_isometry()).compose(&robot_from_lidar);
-    let l0 = lidar_at(frames[0].stamp_s);
-    let mut truth = String::new();
+    let robot_at = |t: f64| pose_of(&scenario.run.pose_at(t).to_isometry());
+    let mut truth = String::from(
+        "# start_s end_s vehicle_from_robot(start_s) vehicle_from_robot(end_s), KITTI rows\n",
+    );
     for (i, f) in frames.iter().enumerate() {
         let mut bytes = Vec::with_capacity(f.points.len() * 16);
+        let mut last_s = 0.0_f64;
         for p in &f.points {
             for v in p.xyz_in_lidar_m {
                 bytes.extend_from_slice(&v.to_le_bytes());
             }
-            bytes.extend_from_slice(&0f32.to_le_bytes());
+            bytes.extend_from_slice(&p.time_offset_s.to_le_bytes());
+            last_s = last_s.max(f64::from(p.time_offset_s));
         }
         std::fs::write(root.join("frames").join(format!("{i:06}.bin")), bytes)?;
-        let t = l0.inverse().compose(&lidar_at(f.stamp_s)).translation;
-        writeln!(truth, "{} {} {} {}", f.stamp_s, t[0], t[1], t[2])?;
+        let end_s = f.stamp_s + last_s;
+        writeln!(
+            truth,
+            "{} {} {} {}",
+            f.stamp_s,
+            end_s,
+            kitti_row(&robot_at(f.stamp_s)),
+            kitti_row(&robot_at(end_s))
+        )?;
     }
     std::fs::write(root.join("truth.txt"), truth)?;
+    let mount = pose_of(&scenario.file.lidar.robot_from_lidar());
+    std::fs::write(
+        root.join("robot_from_lidar.txt"),
+        format!("{}\n", kitti_row(&mount)),
+    )?;
+    let mut samples = Vec::new();
+    for i in [0, frames.len() / 2, frames.len() - 1] {
+        let f = &frames[i];
+        for (j, p) in f.points.iter().enumerate().step_by(97) {
+            let world_from_lidar = robot_at(f.stamp_s + f64::from(p.time_offset_s)).compose(&mount);
+            samples.push((
+                i,
+                j,
+                world_from_lidar.apply(p.xyz_in_lidar_m.map(f64::from)),
+            ));
+        }
+    }
+    let mut distances: Vec<f64> = samples
+        .iter()
+        .map(|&(_, _, v)| surface_distance(scene, v))
+        .collect();
+    distances.sort_by(f64::total_cmp);
+    let median_mm = percentile(&distances, 0.5) * 1e3;
+    eprintln!(
+        "{name}: export check: median distance of true-posed points to the surfaces {median_mm:.1} mm"
+    );
+    let mut check = format!(
+        "# frame point x y z (vehicle frame, exact truth); median distance to the true surfaces {median_mm:.2} mm\n"
+    );
+    for (i, j, v) in samples {
+        writeln!(check, "{i} {j} {} {} {}", v[0], v[1], v[2])?;
+    }
+    std::fs::write(root.join("check.txt"), check)?;
+    // Our variants append their lines to it; a re-export starts it afresh.
+    std::fs::write(
+        root.join("ours.tsv"),
+        "# variant slug ate_m drift_per_m ms_per_frame frames\n",
+    )?;
+    Ok(())
+}
+
+/// Our estimate of one variant beside the export: `DIR/NAME/ours-SLUG.txt` (per frame the stamp,
+/// then `world_from_robot` as a KITTI row) and a line in `DIR/NAME/ours.tsv` (variant, the bench's
+/// own ATE m, drift per metre, ms per frame, frames) so the peer script can check that it
+/// recomputes our figures exactly from the files.
+fn export_trajectory(
+    dir: &Path,
+    name: &str,
+    variant: &str,
+    built: &BuiltCloud,
+    figures: &Figures,
+) -> anyhow::Result<()> {
+    let root = dir.join(name);
+    let slug: String = variant
+        .chars()
+        .map(|c| if c.is_ascii_alphanumeric() { c } else { '_' })
+        .collect();
+    let mut text = String::new();
+    for tp in &built.trajectory {
+        writeln!(text, "{} {}", tp.stamp_s, kitti_row(&tp.world_from_robot))?;
+    }
+    std::fs::write(root.join(format!("ours-{slug}.txt")), text)?;
+    let line = format!(
+        "{variant}\t{slug}\t{}\t{}\t{}\t{}\n",
+        figures.ate_m,
+        figures.drift_per_m,
+        figures.ms_per_frame,
+        built.trajectory.len()
+    );
+    let tsv = root.join("ours.tsv");
+    let mut all = std::fs::read_to_string(&tsv)?;
+    all.push_str(&line);
+    std::fs::write(tsv, all)?;
     Ok(())
 }
 
@@ -398,7 +505,15 @@ fn main() -> anyhow::Result<()> {
         .first()
         .filter(|a| !a.starts_with("--"))
         .map_or(Ok(10), |s| s.parse())?;
-    let ablation = args.iter().any(|a| a == "--ablation");
+    let mode = match (
+        args.iter().any(|a| a == "--ablation"),
+        args.iter().any(|a| a == "--peer"),
+    ) {
+        (false, false) => Mode::Default,
+        (true, false) => Mode::Ablation,
+        (false, true) => Mode::Peer,
+        (true, true) => anyhow::bail!("--ablation and --peer exclude each other"),
+    };
     let export_dir = args
         .iter()
         .position(|a| a == "--export")
@@ -454,10 +569,15 @@ fn main() -> anyhow::Result<()> {
             let scene = Scene::from_vehicle(&scenario.vehicle);
             let lidar = lidar_frames(&scenario, &scene);
             if let Some(dir) = &export_dir {
-                export(dir, &format!("{name}-{seed}"), &scenario, &lidar)?;
+                export_frames(dir, &format!("{name}-{seed}"), &scenario, &scene, &lidar)?;
             }
             let wheel = wheel_odometry(&scenario.run, scenario.duration_s + 0.2);
-            let mut vs = variants(ablation && seed == 1);
+            let mode = if mode == Mode::Ablation && seed > 1 {
+                Mode::Default
+            } else {
+                mode
+            };
+            let mut vs = variants(mode, !no_depth);
             if no_depth {
                 vs.retain(|v| !v.depth);
             }
@@ -465,6 +585,12 @@ fn main() -> anyhow::Result<()> {
                 depth_frames(&scenario, &scene)
             } else {
                 Vec::new()
+            };
+            // Angle statistics: the full configuration, else laser + wheel.
+            let stats_of = if vs.iter().any(|v| v.name == "laser+visual+wheel") {
+                "laser+visual+wheel"
+            } else {
+                "laser+wheel"
             };
             for v in vs {
                 let mut config = v.config;
@@ -478,8 +604,10 @@ fn main() -> anyhow::Result<()> {
                 let d: &[DepthFrame] = if v.depth { &depth } else { &[] };
                 let (built, secs) = run_pipeline(config, &lidar, d, &wheel);
                 let f = evaluate(&scenario, &scene, &built, secs);
-                // Angle statistics: the full configuration (laser+wheel when depth is off).
-                if v.name == "laser+visual+wheel" || (no_depth && v.name == "laser+wheel") {
+                if let Some(dir) = &export_dir {
+                    export_trajectory(dir, &format!("{name}-{seed}"), v.name, &built, &f)?;
+                }
+                if v.name == stats_of {
                     errors.push(f.angle_error_deg);
                 }
                 println!(
@@ -513,9 +641,13 @@ fn main() -> anyhow::Result<()> {
                 .collect();
             let n = v.len() as f64;
             let mean = v.iter().sum::<f64>() / n;
-            let sd =
-                (v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1.0).max(1.0)).sqrt();
-            format!("{mean:+.2} / {sd:.2} ({} ok)", v.len())
+            // Sample standard deviation: needs two values.
+            let sd = (v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt();
+            match v.len() {
+                0 => "no angle (0 ok)".to_owned(),
+                1 => format!("{mean:+.2} / - (1 ok)"),
+                k => format!("{mean:+.2} / {sd:.2} ({k} ok)"),
+            }
         };
         println!(
             "| {name} | {} | {} | {} | {} |",
