@@ -1,27 +1,33 @@
-//! Processing a recorded run: recording in, cloud and angles out. This is what the service runs
-//! after the robot stops, and what `passangle replay` can run on any run directory (complete or
-//! marked `INCOMPLETE`).
+//! Processing a run: sensor streams in, cloud and angles out.
 //!
-//! 1. Read `lidar.pcap` through the VLP-16 frame assembler (malformed packets are counted and
+//! [`RunBuilder`] is the one path from recorded data to the fused cloud. The service feeds it
+//! during the drive, item by item as the recorder writes them ([`Processor::start_live`]), so
+//! that when the robot stops only the last [`REORDER_WINDOW_S`], the filter and the angles are
+//! left; [`build_cloud`] feeds it a run directory (complete or marked `INCOMPLETE`), which is
+//! what `passangle replay` and the service's fallback (live processing fell behind) run:
+//! 1. `lidar.pcap` through the VLP-16 frame assembler (malformed packets are counted and
 //!    skipped), `odometry.csv` and the depth frames of `depth/`.
-//! 2. Put every stamp on one clock: seconds since the first lidar frame's host stamp (all streams
-//!    are stamped on the host's wall clock by the recorder).
-//! 3. Push everything, in time order, into [`Pipeline`]; `finish` gives the fused cloud in the
-//!    robot frame of the first lidar frame (x forward, z up, ground at z = 0 below the robot).
+//! 2. Every stamp on one clock: seconds since the first complete lidar frame's host stamp (all
+//!    streams are stamped on the host's wall clock by the recorder).
+//! 3. Everything, in time order, into [`Pipeline`]; `finish` gives the fused cloud in the robot
+//!    frame of the first lidar frame (x forward, z up, ground at z = 0 below the robot).
 //! 4. [`compute_angles`] on the cloud, with the zone of the start command; the side-view SVG.
+//!
+//! The two feeds give the same cloud (tests/tests/live_processing.rs).
 
 use std::fs;
 use std::path::Path;
 
 use protocol::bounded::Text;
+use protocol::mcu::Odometry;
 use protocol::radio::{MeasurementResult, ResultWarnings, Zone as WireZone};
 use serde::Deserialize;
 
 use crate::angles::{self, AnglesConfig, AnglesResult, Zone, compute_angles, side_view_svg};
 use crate::cloud::Cloud;
 use crate::pipeline::{DepthFrame, LidarFrame, Pipeline, PipelineConfig, WheelOdometry};
-use crate::recorder::Recording;
-use crate::service::{ProcessInput, Processed, Processor};
+use crate::recorder::{Intrinsics, Recording};
+use crate::service::{LiveRun, ProcessInput, Processed, Processor, SensorItem};
 use crate::vlp16::source::{PACKET_BUF_LEN, PacketKind, PacketSource, PcapSource};
 use crate::vlp16::{DecoderConfig, FrameAssembler};
 
@@ -35,6 +41,11 @@ pub struct ProcessConfig {
     pub enter_at_front: bool,
     /// Points of the fused cloud a result needs (fewer: the run failed).
     pub min_cloud_points: usize,
+    /// `true` (default): build the cloud during the drive, from the same data the recorder
+    /// writes, so only the last moments, the filter and the angles are left when the robot stops.
+    /// If the processing falls behind the sensors, the run is processed from its recording after
+    /// the stop instead (with a warning in the log). `false`: always from the recording.
+    pub live: bool,
     /// The point-cloud pipeline's settings (its own documented defaults).
     pub pipeline: PipelineConfig,
 }
@@ -44,6 +55,7 @@ impl Default for ProcessConfig {
         Self {
             enter_at_front: true,
             min_cloud_points: 1_000,
+            live: true,
             pipeline: PipelineConfig::default(),
         }
     }
@@ -70,6 +82,67 @@ impl Processor for PipelineProcessor {
             p
         })
     }
+
+    fn start_live(&self) -> Option<Box<dyn LiveRun>> {
+        if !self.config.live {
+            return None;
+        }
+        match RunBuilder::new(&self.config) {
+            Ok(builder) => Some(Box::new(LivePipeline {
+                builder,
+                config: self.config.clone(),
+            })),
+            Err(e) => {
+                tracing::error!("live processing not started: {e}");
+                None
+            }
+        }
+    }
+}
+
+/// [`PipelineProcessor`]'s live run: a [`RunBuilder`] fed as the data arrives.
+struct LivePipeline {
+    builder: RunBuilder,
+    config: ProcessConfig,
+}
+
+impl LiveRun for LivePipeline {
+    fn push(&mut self, item: SensorItem) {
+        match item {
+            SensorItem::Lidar {
+                wall_ns,
+                payload,
+                position,
+            } => self.builder.push_lidar_packet(wall_ns, &payload, position),
+            SensorItem::Odometry { wall_us, odometry } => {
+                self.builder.push_odometry(wall_us, &odometry);
+            }
+            SensorItem::Depth {
+                wall_us,
+                width,
+                height,
+                depth,
+                intrinsics,
+            } => self
+                .builder
+                .push_depth(wall_us, width, height, depth, &intrinsics),
+        }
+        self.builder.release(REORDER_WINDOW_S);
+    }
+
+    fn finish(self: Box<Self>, input: &ProcessInput) -> Result<Processed, String> {
+        let (cloud, counts) = self.builder.finish()?;
+        let mut p = angles_of(
+            cloud,
+            counts,
+            &self.config,
+            input.params.zone,
+            input.short_run,
+        )?;
+        p.result.run_id = input.run_id;
+        p.result.vehicle_id = input.params.vehicle_id.clone();
+        Ok(p)
+    }
 }
 
 /// Counts of what was read, for logs and `replay`.
@@ -85,10 +158,51 @@ pub struct ReadCounts {
     pub depth_frames: usize,
 }
 
+/// How long (in stamp time) [`RunBuilder::release`] holds items back before handing them to the
+/// pipeline in stamp order. The streams reach the service slightly out of order (a lidar frame is
+/// stamped at its first firing but complete one revolution later: 0.1 s at 10 Hz, 0.2 s at 5 Hz,
+/// plus the loop's latency); a replay sorts the whole recording. Holding items this long makes the
+/// live order the replay order, so live processing and `passangle replay` give the same cloud.
+pub const REORDER_WINDOW_S: f64 = 0.5;
+
 enum Item {
     Wheel(WheelOdometry),
     Depth(DepthFrame),
     Lidar(LidarFrame),
+}
+
+/// An item on the host's wall clock, before the run's time origin is known.
+enum Timed {
+    Wheel(u64, Odometry),
+    Depth(u64, DepthFrame),
+    Lidar(u64, crate::vlp16::Frame),
+}
+
+impl Timed {
+    /// Position among items of equal stamp (a replay's stable sort keeps wheel, depth, lidar).
+    fn rank(&self) -> u8 {
+        match self {
+            Timed::Wheel(..) => 0,
+            Timed::Depth(..) => 1,
+            Timed::Lidar(..) => 2,
+        }
+    }
+
+    /// On the pipeline's clock: seconds since `t0_ns`, the first complete lidar frame's stamp.
+    fn on_clock(self, t0_ns: u64) -> Item {
+        let secs = |wall_us: u64| (wall_us as f64 - t0_ns as f64 / 1e3) * 1e-6;
+        match self {
+            Timed::Wheel(wall_us, o) => Item::Wheel(WheelOdometry::from_mcu(&o, secs(wall_us))),
+            Timed::Depth(wall_us, mut d) => {
+                d.stamp_s = secs(wall_us);
+                Item::Depth(d)
+            }
+            Timed::Lidar(ns, f) => Item::Lidar(LidarFrame::from_vlp16(
+                &f,
+                (ns as f64 - t0_ns as f64) * 1e-9,
+            )),
+        }
+    }
 }
 
 impl Item {
@@ -101,69 +215,243 @@ impl Item {
     }
 }
 
+/// An item waiting in the reorder heap; the heap's top is the earliest.
+struct Held {
+    stamp_s: f64,
+    rank: u8,
+    seq: u64,
+    item: Item,
+}
+
+impl Held {
+    fn key(&self) -> (f64, u8, u64) {
+        (self.stamp_s, self.rank, self.seq)
+    }
+}
+
+impl PartialEq for Held {
+    fn eq(&self, other: &Self) -> bool {
+        self.cmp(other).is_eq()
+    }
+}
+impl Eq for Held {}
+impl PartialOrd for Held {
+    fn partial_cmp(&self, other: &Self) -> Option<std::cmp::Ordering> {
+        Some(self.cmp(other))
+    }
+}
+impl Ord for Held {
+    fn cmp(&self, other: &Self) -> std::cmp::Ordering {
+        let (a, b) = (self.key(), other.key());
+        // Reversed: `BinaryHeap` is a max-heap.
+        b.0.total_cmp(&a.0).then(b.1.cmp(&a.1)).then(b.2.cmp(&a.2))
+    }
+}
+
+/// Builds a run's cloud from its sensor streams, pushed as the recorder stores them (host wall
+/// clock stamps, the lidar's raw UDP payloads). The same code serves a recording read back
+/// ([`build_cloud`]: everything pushed, then [`RunBuilder::finish`]) and the live run in the
+/// service (items pushed as they arrive, [`RunBuilder::release`] after each, so the pipeline works
+/// during the drive and only the last [`REORDER_WINDOW_S`] and the filter are left at the stop).
+///
+/// Time: every stamp becomes seconds since the first complete lidar frame's host stamp; until
+/// that frame is seen, items wait with their wall stamps. Items reach the pipeline in stamp order
+/// (ties: wheel, depth, lidar, then arrival), exactly the order of a sorted replay.
+pub struct RunBuilder {
+    pipeline: Pipeline,
+    min_cloud_points: usize,
+    assembler: FrameAssembler,
+    t0_ns: Option<u64>,
+    waiting: Vec<(Timed, u64)>,
+    held: std::collections::BinaryHeap<Held>,
+    newest_s: f64,
+    released_s: f64,
+    seq: u64,
+    counts: ReadCounts,
+}
+
+impl std::fmt::Debug for RunBuilder {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("RunBuilder")
+            .field("t0_ns", &self.t0_ns)
+            .field("held", &self.held.len())
+            .field("counts", &self.counts)
+            .finish_non_exhaustive()
+    }
+}
+
+impl RunBuilder {
+    /// A builder with the run's processing settings; `Err` names a bad pipeline setting.
+    pub fn new(config: &ProcessConfig) -> Result<Self, String> {
+        Ok(Self {
+            pipeline: Pipeline::new(config.pipeline.clone())
+                .map_err(|e| format!("pipeline config: {e}"))?,
+            min_cloud_points: config.min_cloud_points,
+            assembler: FrameAssembler::new(DecoderConfig::default()).map_err(|e| e.to_string())?,
+            t0_ns: None,
+            waiting: Vec::new(),
+            held: std::collections::BinaryHeap::new(),
+            newest_s: f64::NEG_INFINITY,
+            released_s: f64::NEG_INFINITY,
+            seq: 0,
+            counts: ReadCounts::default(),
+        })
+    }
+
+    /// What has been read so far.
+    pub fn counts(&self) -> ReadCounts {
+        ReadCounts {
+            lidar_malformed: self.assembler.stats().malformed_data_total(),
+            ..self.counts
+        }
+    }
+
+    /// Lidar frames the pipeline has processed so far.
+    pub fn frames_processed(&self) -> usize {
+        self.pipeline.trajectory().len()
+    }
+
+    /// A lidar UDP payload (data or position port) with its host stamp, ns since the Unix epoch.
+    /// Use the recording's resolution (whole microseconds) for results equal to a replay's.
+    /// Malformed packets are counted and skipped.
+    pub fn push_lidar_packet(&mut self, wall_ns: u64, payload: &[u8], position: bool) {
+        if position {
+            let _ = self.assembler.push_position(payload);
+            return;
+        }
+        let _ = self.assembler.push_data(payload, wall_ns);
+        while let Some(f) = self.assembler.pop_frame() {
+            if f.is_complete() {
+                self.counts.lidar_frames += 1;
+                if self.t0_ns.is_none() {
+                    self.t0_ns = Some(f.start_host_ns);
+                }
+                self.hold(Timed::Lidar(f.start_host_ns, f));
+            }
+        }
+    }
+
+    /// A wheel odometry report with its host arrival time, us since the Unix epoch.
+    pub fn push_odometry(&mut self, wall_us: u64, odometry: &Odometry) {
+        self.counts.odometry += 1;
+        self.hold(Timed::Wheel(wall_us, *odometry));
+    }
+
+    /// A depth frame (Z16, row-major) with its host stamp, us since the Unix epoch.
+    pub fn push_depth(
+        &mut self,
+        wall_us: u64,
+        width: u16,
+        height: u16,
+        depth: Vec<u16>,
+        k: &Intrinsics,
+    ) {
+        self.counts.depth_frames += 1;
+        self.hold(Timed::Depth(
+            wall_us,
+            DepthFrame {
+                stamp_s: 0.0,
+                width: usize::from(width),
+                height: usize::from(height),
+                intrinsics_px: [k.fx, k.fy, k.cx, k.cy].map(f64::from),
+                depth_scale_m: f64::from(k.depth_scale_m),
+                depth,
+            },
+        ));
+    }
+
+    fn hold(&mut self, item: Timed) {
+        self.seq += 1;
+        self.waiting.push((item, self.seq));
+        let Some(t0_ns) = self.t0_ns else { return };
+        for (item, seq) in self.waiting.drain(..) {
+            let rank = item.rank();
+            let item = item.on_clock(t0_ns);
+            let stamp_s = item.stamp_s();
+            self.newest_s = self.newest_s.max(stamp_s);
+            self.held.push(Held {
+                stamp_s,
+                rank,
+                seq,
+                item,
+            });
+        }
+    }
+
+    /// Hands the pipeline every held item older than the newest stamp minus `window_s`.
+    pub fn release(&mut self, window_s: f64) {
+        let until_s = self.newest_s - window_s;
+        while self.held.peek().is_some_and(|h| h.stamp_s < until_s) {
+            let Some(h) = self.held.pop() else { break };
+            self.released_s = self.released_s.max(h.stamp_s);
+            // Items that break a source's ordering (duplicated stamps) are skipped, not fatal.
+            let _ = match h.item {
+                Item::Wheel(w) => self.pipeline.push_wheel_odometry(w),
+                Item::Depth(d) => self.pipeline.push_depth_frame(d),
+                Item::Lidar(l) => self.pipeline.push_lidar_frame(l),
+            };
+        }
+    }
+
+    /// Everything left through the pipeline; the fused, filtered cloud. `Err` if there was no
+    /// complete lidar frame or the cloud is too small.
+    pub fn finish(mut self) -> Result<(Cloud, ReadCounts), String> {
+        if self.t0_ns.is_none() {
+            return Err("no complete lidar frame".into());
+        }
+        self.release(f64::NEG_INFINITY);
+        let counts = self.counts();
+        let cloud = self.pipeline.finish().to_cloud();
+        if cloud.points_m.len() < self.min_cloud_points {
+            return Err(format!(
+                "the fused cloud has {} points, fewer than {}",
+                cloud.points_m.len(),
+                self.min_cloud_points
+            ));
+        }
+        Ok((cloud, counts))
+    }
+}
+
 /// Reads a run directory and builds its fused cloud (vehicle-agnostic: no angles yet).
 pub fn build_cloud(dir: &Path, config: &ProcessConfig) -> Result<(Cloud, ReadCounts), String> {
     let rec = Recording::open(dir).map_err(|e| e.to_string())?;
-    let mut counts = ReadCounts::default();
-    let (frames, malformed) = read_lidar(&dir.join("lidar.pcap"))?;
-    counts.lidar_malformed = malformed;
-    counts.lidar_frames = frames.len();
-    let Some(t0_ns) = frames.first().map(|(ns, _)| *ns) else {
-        return Err(format!(
-            "{}: no complete lidar frame",
-            dir.join("lidar.pcap").display()
-        ));
-    };
-    let secs = |wall_us: u64| (wall_us as f64 - t0_ns as f64 / 1e3) * 1e-6;
-    let mut items: Vec<Item> = Vec::new();
+    let mut builder = RunBuilder::new(config)?;
+    let pcap = dir.join("lidar.pcap");
+    let mut source = PcapSource::open(&pcap).map_err(|e| e.to_string())?;
+    let mut buf = [0u8; PACKET_BUF_LEN];
+    // Ends at the end of the file, or at a cut-short last record after a crash (keeping what
+    // came before it).
+    while let Ok(Some(meta)) = source.next_packet(&mut buf) {
+        builder.push_lidar_packet(
+            meta.recv_host_ns,
+            &buf[..meta.len],
+            meta.kind == PacketKind::Position,
+        );
+    }
     let (odometry, _) = rec.odometry().map_err(|e| e.to_string())?;
-    counts.odometry = odometry.len();
-    items.extend(
-        odometry
-            .iter()
-            .map(|(wall_us, o)| Item::Wheel(WheelOdometry::from_mcu(o, secs(*wall_us)))),
-    );
-    let depth = read_depth(dir, &secs)?;
-    counts.depth_frames = depth.len();
-    items.extend(depth.into_iter().map(Item::Depth));
-    items.extend(frames.into_iter().map(|(ns, f)| {
-        Item::Lidar(LidarFrame::from_vlp16(
-            &f,
-            (ns as f64 - t0_ns as f64) * 1e-9,
-        ))
-    }));
-    items.sort_by(|a, b| a.stamp_s().total_cmp(&b.stamp_s()));
-    let mut pipeline =
-        Pipeline::new(config.pipeline.clone()).map_err(|e| format!("pipeline config: {e}"))?;
-    for item in items {
-        // Items that break a source's ordering (duplicated stamps) are skipped, not fatal.
-        let _ = match item {
-            Item::Wheel(w) => pipeline.push_wheel_odometry(w),
-            Item::Depth(d) => pipeline.push_depth_frame(d),
-            Item::Lidar(l) => pipeline.push_lidar_frame(l),
-        };
+    for (wall_us, o) in &odometry {
+        builder.push_odometry(*wall_us, o);
     }
-    let cloud = pipeline.finish().to_cloud();
-    if cloud.points_m.len() < config.min_cloud_points {
-        return Err(format!(
-            "the fused cloud has {} points, fewer than {}",
-            cloud.points_m.len(),
-            config.min_cloud_points
-        ));
-    }
-    Ok((cloud, counts))
+    read_depth(dir, &mut builder)?;
+    builder.finish().map_err(|e| {
+        if e.starts_with("no complete") {
+            format!("{}: {e}", pcap.display())
+        } else {
+            e
+        }
+    })
 }
 
-/// Reads a run directory and builds its cloud and angles. `Err` names what is missing or wrong.
-pub fn process_run(
-    dir: &Path,
+/// The angles of a built cloud as the service reports them (`run_id` and `vehicle_id` left for
+/// the caller).
+fn angles_of(
+    cloud: Cloud,
+    counts: ReadCounts,
     config: &ProcessConfig,
     zone: WireZone,
     short_run: bool,
-) -> Result<(Processed, ReadCounts), String> {
-    let rec = Recording::open(dir).map_err(|e| e.to_string())?;
-    let (cloud, counts) = build_cloud(dir, config)?;
-    let malformed = counts.lidar_malformed;
+) -> Result<Processed, String> {
     let angles_config = AnglesConfig {
         front_is_positive_x: !config.enter_at_front,
         zone: match zone {
@@ -178,13 +466,26 @@ pub fn process_run(
     if short_run {
         result.warnings.insert(ResultWarnings::SHORT_RUN);
     }
-    if malformed > 0 {
+    if counts.lidar_malformed > 0 {
         result.warnings.insert(ResultWarnings::LIDAR_LOSS);
     }
-    result.vehicle_id = Text::truncated(&rec.meta.vehicle_id);
-    result.run_id = rec.meta.run_id;
     let svg = side_view_svg(&found);
-    Ok((Processed { result, cloud, svg }, counts))
+    Ok(Processed { result, cloud, svg })
+}
+
+/// Reads a run directory and builds its cloud and angles. `Err` names what is missing or wrong.
+pub fn process_run(
+    dir: &Path,
+    config: &ProcessConfig,
+    zone: WireZone,
+    short_run: bool,
+) -> Result<(Processed, ReadCounts), String> {
+    let rec = Recording::open(dir).map_err(|e| e.to_string())?;
+    let (cloud, counts) = build_cloud(dir, config)?;
+    let mut processed = angles_of(cloud, counts, config, zone, short_run)?;
+    processed.result.vehicle_id = Text::truncated(&rec.meta.vehicle_id);
+    processed.result.run_id = rec.meta.run_id;
+    Ok((processed, counts))
 }
 
 /// The wire result of an angle computation (a missing angle is NaN, and flagged LOW_SUPPORT).
@@ -237,51 +538,28 @@ pub fn wire_result(a: &AnglesResult, cloud_points: usize) -> MeasurementResult {
     }
 }
 
-/// Complete lidar frames of a capture with their host stamps (ns), and the malformed count.
-fn read_lidar(path: &Path) -> Result<(Vec<(u64, crate::vlp16::Frame)>, u64), String> {
-    let mut source = PcapSource::open(path).map_err(|e| e.to_string())?;
-    let mut assembler = FrameAssembler::new(DecoderConfig::default()).map_err(|e| e.to_string())?;
-    let mut buf = [0u8; PACKET_BUF_LEN];
-    let mut frames = Vec::new();
-    // Ends at the end of the file, or at a cut-short last record after a crash (keeping what
-    // came before it). Malformed packets are counted by the assembler and skipped.
-    while let Ok(Some(meta)) = source.next_packet(&mut buf) {
-        match meta.kind {
-            PacketKind::Data => {
-                let _ = assembler.push_data(&buf[..meta.len], meta.recv_host_ns);
-            }
-            PacketKind::Position => {
-                let _ = assembler.push_position(&buf[..meta.len]);
-            }
-        }
-        while let Some(f) = assembler.pop_frame() {
-            if f.is_complete() {
-                frames.push((f.start_host_ns, f));
-            }
-        }
-    }
-    Ok((frames, assembler.stats().malformed_data_total()))
-}
-
-/// Depth frames of `depth/index.csv` (a cut-short last line or a missing frame file ends it).
-fn read_depth(dir: &Path, secs: &dyn Fn(u64) -> f64) -> Result<Vec<DepthFrame>, String> {
+/// Pushes the depth frames of `depth/index.csv` (a cut-short last line or a missing frame file
+/// ends them: a crash's leftovers). The intrinsics are read as the `f32` they were written from.
+fn read_depth(dir: &Path, builder: &mut RunBuilder) -> Result<(), String> {
     let index = dir.join("depth/index.csv");
     let Ok(text) = fs::read_to_string(&index) else {
-        return Ok(Vec::new());
+        return Ok(());
     };
-    let mut out = Vec::new();
     for line in text.lines().skip(1) {
         let f: Vec<&str> = line.split(',').collect();
         if f.len() != 9 {
             break;
         }
-        let num = |i: usize| f[i].parse::<f64>().ok();
-        let (Ok(n), Ok(wall_us), Some(w), Some(h)) =
-            (f[0].parse::<u32>(), f[1].parse::<u64>(), num(2), num(3))
-        else {
+        let num = |i: usize| f[i].parse::<f32>().ok();
+        let (Ok(n), Ok(wall_us), Ok(width), Ok(height)) = (
+            f[0].parse::<u32>(),
+            f[1].parse::<u64>(),
+            f[2].parse::<u16>(),
+            f[3].parse::<u16>(),
+        ) else {
             break;
         };
-        let (Some(fx), Some(fy), Some(cx), Some(cy), Some(scale)) =
+        let (Some(fx), Some(fy), Some(cx), Some(cy), Some(depth_scale_m)) =
             (num(4), num(5), num(6), num(7), num(8))
         else {
             break;
@@ -289,26 +567,26 @@ fn read_depth(dir: &Path, secs: &dyn Fn(u64) -> f64) -> Result<Vec<DepthFrame>, 
         let Ok(bytes) = fs::read(dir.join(format!("depth/{n:06}.z16"))) else {
             break;
         };
-        let (width, height) = (w as usize, h as usize);
-        if bytes.len() != 2 * width * height {
+        let expected = 2 * usize::from(width) * usize::from(height);
+        if bytes.len() != expected {
             return Err(format!(
-                "{}: frame {n} has {} bytes, expected {}",
+                "{}: frame {n} has {} bytes, expected {expected}",
                 index.display(),
                 bytes.len(),
-                2 * width * height
             ));
         }
-        out.push(DepthFrame {
-            stamp_s: secs(wall_us),
-            width,
-            height,
-            intrinsics_px: [fx, fy, cx, cy],
-            depth_scale_m: scale,
-            depth: bytes
-                .chunks_exact(2)
-                .map(|c| u16::from_le_bytes([c[0], c[1]]))
-                .collect(),
-        });
+        let depth = bytes
+            .chunks_exact(2)
+            .map(|c| u16::from_le_bytes([c[0], c[1]]))
+            .collect();
+        let k = Intrinsics {
+            fx,
+            fy,
+            cx,
+            cy,
+            depth_scale_m,
+        };
+        builder.push_depth(wall_us, width, height, depth, &k);
     }
-    Ok(out)
+    Ok(())
 }

@@ -16,7 +16,7 @@ use std::net::SocketAddrV4;
 use std::path::PathBuf;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::mpsc::{Receiver, SyncSender, TryRecvError, sync_channel};
+use std::sync::mpsc::{Receiver, SyncSender, TryRecvError, TrySendError, sync_channel};
 use std::thread;
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
@@ -95,8 +95,100 @@ pub struct Processed {
 
 /// Builds the cloud and computes the angles of a recorded run (see `crate::process`).
 pub trait Processor: Send + Sync {
-    /// Processes one run; `Err` says why it failed, for the operator.
+    /// Processes one run from its recording; `Err` says why it failed, for the operator.
     fn process(&self, input: &ProcessInput) -> Result<Processed, String>;
+
+    /// Starts processing a run while it is recorded (`None`: this processor works on recordings
+    /// only). The service feeds it on a worker thread with exactly what the recorder writes.
+    fn start_live(&self) -> Option<Box<dyn LiveRun>> {
+        None
+    }
+}
+
+/// One sensor item of a run, as the recorder writes it (the same values and stamps, so a live
+/// run and the replay of its recording see the same data).
+#[derive(Debug, Clone, PartialEq)]
+pub enum SensorItem {
+    /// A lidar UDP payload; `wall_ns` is rounded down to the recording's whole microseconds.
+    Lidar {
+        /// Host wall clock, ns since the Unix epoch.
+        wall_ns: u64,
+        /// The payload.
+        payload: Vec<u8>,
+        /// From the position port.
+        position: bool,
+    },
+    /// A wheel odometry report.
+    Odometry {
+        /// Host wall clock at reception, us since the Unix epoch.
+        wall_us: u64,
+        /// The report.
+        odometry: protocol::mcu::Odometry,
+    },
+    /// A depth frame (only those the recorder keeps: every `camera.record-every`-th).
+    Depth {
+        /// Host wall clock, us since the Unix epoch.
+        wall_us: u64,
+        /// Width, pixels.
+        width: u16,
+        /// Height, pixels.
+        height: u16,
+        /// Row-major Z16.
+        depth: Vec<u16>,
+        /// The camera's intrinsics from the config.
+        intrinsics: recorder::Intrinsics,
+    },
+}
+
+/// A run processed while it is recorded (see [`Processor::start_live`]).
+pub trait LiveRun: Send {
+    /// The next item, in arrival order.
+    fn push(&mut self, item: SensorItem);
+    /// The robot is at rest and the recording closed: the result.
+    fn finish(self: Box<Self>, input: &ProcessInput) -> Result<Processed, String>;
+}
+
+/// Items waiting for the live worker: about 4 s of lidar packets, beyond which the worker has
+/// fallen behind for good and the run is processed from its recording instead.
+const LIVE_QUEUE: usize = 4_096;
+
+/// The live processing of the current run, on its own thread.
+struct LiveWorker {
+    data: SyncSender<SensorItem>,
+    finish: SyncSender<ProcessInput>,
+    result: Receiver<Result<Processed, String>>,
+}
+
+impl LiveWorker {
+    /// Starts `live` on a thread; `None` (logged) if the thread cannot start.
+    fn spawn(run_id: u32, mut live: Box<dyn LiveRun>) -> Option<Self> {
+        let (data, data_rx) = sync_channel::<SensorItem>(LIVE_QUEUE);
+        let (finish, finish_rx) = sync_channel::<ProcessInput>(1);
+        let (result_tx, result) = sync_channel(1);
+        let spawned = thread::Builder::new()
+            .name(format!("live-run-{run_id}"))
+            .spawn(move || {
+                // Ends when the service drops the data sender: at the stop (then the finish
+                // input is waiting) or when the run is cancelled or falls behind (then not).
+                while let Ok(item) = data_rx.recv() {
+                    live.push(item);
+                }
+                if let Ok(input) = finish_rx.recv() {
+                    let _ = result_tx.send(live.finish(&input));
+                }
+            });
+        match spawned {
+            Ok(_) => Some(Self {
+                data,
+                finish,
+                result,
+            }),
+            Err(e) => {
+                tracing::warn!(run_id, "live processing not started: {e}");
+                None
+            }
+        }
+    }
 }
 
 /// systemd notifications (the binary sends them with `sd_notify`; tests ignore them).
@@ -210,6 +302,7 @@ struct Service {
     recorder: Option<RunRecorder>,
     params: Option<StartMeasurement>,
     worker: Option<Worker>,
+    live: Option<LiveWorker>,
     processor: Arc<dyn Processor>,
     stats: ServiceStats,
     shared: SharedStats,
@@ -272,6 +365,7 @@ pub fn run(
         recorder: None,
         params: None,
         worker: None,
+        live: None,
         processor,
         stats: ServiceStats::default(),
         shared,
@@ -546,6 +640,12 @@ impl Service {
                 if let Some(r) = self.recorder.as_mut().filter(|_| record) {
                     r.odometry(wall, &odometry);
                 }
+                if record {
+                    self.feed_live(SensorItem::Odometry {
+                        wall_us: wall,
+                        odometry,
+                    });
+                }
             }
             McuEvent::Status(_) => {}
             McuEvent::Rejected(r) => {
@@ -578,6 +678,13 @@ impl Service {
                 if let Some(r) = self.recorder.as_mut().filter(|_| record) {
                     r.lidar_packet(p.wall_ns, p.src, p.dst, &p.payload);
                 }
+                if record {
+                    self.feed_live(SensorItem::Lidar {
+                        wall_ns: p.wall_ns / 1_000 * 1_000,
+                        payload: p.payload,
+                        position: true,
+                    });
+                }
                 continue;
             }
             let Ok(view) = Vlp16Packet::new_checked(&p.payload[..]) else {
@@ -598,7 +705,32 @@ impl Service {
             if let Some(r) = self.recorder.as_mut().filter(|_| record) {
                 r.lidar_packet(p.wall_ns, p.src, p.dst, &p.payload);
             }
+            if record {
+                self.feed_live(SensorItem::Lidar {
+                    wall_ns: p.wall_ns / 1_000 * 1_000,
+                    payload: p.payload,
+                    position: false,
+                });
+            }
         }
+    }
+
+    /// Hands an item to the live processing, if it runs; a full queue or a dead worker ends it
+    /// (the run is then processed from its recording after the stop).
+    fn feed_live(&mut self, item: SensorItem) {
+        let Some(live) = &self.live else { return };
+        let why = match live.data.try_send(item) {
+            Ok(()) => return,
+            Err(TrySendError::Full(_)) => "it fell behind the sensors",
+            Err(TrySendError::Disconnected(_)) => "its thread ended",
+        };
+        let text = format!(
+            "run {}: live processing stopped ({why}); the run is processed from its recording after the stop",
+            self.run.run_id()
+        );
+        tracing::warn!("{text}");
+        self.radio.send_log(LogLevel::Warn, &text);
+        self.live = None;
     }
 
     fn drain_depth(&mut self, now: u64, rx: &Receiver<DepthFrame>) {
@@ -615,20 +747,25 @@ impl Service {
             }
             self.last_depth_us = Some(now);
             self.depth_seen += 1;
-            let record = self.recording_sensors();
-            if self
-                .depth_seen
-                .is_multiple_of(u64::from(self.config.camera.record_every))
-                && let Some(r) = self.recorder.as_mut().filter(|_| record)
-            {
-                r.depth_frame(
-                    self.wall_epoch_us.saturating_add(now),
-                    f.width,
-                    f.height,
-                    &f.depth,
-                    &self.config.camera.intrinsics,
-                );
+            let record = self.recording_sensors()
+                && self
+                    .depth_seen
+                    .is_multiple_of(u64::from(self.config.camera.record_every));
+            if !record {
+                continue;
             }
+            let wall_us = self.wall_epoch_us.saturating_add(now);
+            let intrinsics = self.config.camera.intrinsics;
+            if let Some(r) = self.recorder.as_mut() {
+                r.depth_frame(wall_us, f.width, f.height, &f.depth, &intrinsics);
+            }
+            self.feed_live(SensorItem::Depth {
+                wall_us,
+                width: f.width,
+                height: f.height,
+                depth: f.depth,
+                intrinsics,
+            });
         }
     }
 
@@ -687,6 +824,10 @@ impl Service {
                 }
                 Action::BeginRecording { run_id, params } => {
                     self.stats.lidar_frames = 0;
+                    self.live = self
+                        .processor
+                        .start_live()
+                        .and_then(|live| LiveWorker::spawn(run_id, live));
                     match RunRecorder::begin(
                         &self.config.recording.root,
                         run_id,
@@ -714,8 +855,14 @@ impl Service {
                 } => {
                     self.start_worker(run_id, travelled_m, short_run);
                 }
-                Action::CancelProcessing { .. } => self.worker = None,
+                Action::CancelProcessing { .. } => {
+                    self.worker = None;
+                    self.live = None;
+                }
                 Action::FinishRecording { run_id, outcome } => {
+                    if !matches!(outcome, Outcome::Completed) {
+                        self.live = None;
+                    }
                     if let Some(r) = self.recorder.take() {
                         let recorded = match outcome {
                             Outcome::Completed => RecordedOutcome::Completed,
@@ -762,6 +909,17 @@ impl Service {
             travelled_m,
             short_run,
         };
+        if let Some(live) = self.live.take() {
+            // The worker has everything up to the stop: it finishes as soon as its queue is empty.
+            if live.finish.try_send(input.clone()).is_ok() {
+                tracing::info!(run_id, "finishing the live processing");
+                self.worker = Some(Worker {
+                    run_id,
+                    rx: live.result,
+                });
+                return;
+            }
+        }
         let (tx, rx): (SyncSender<_>, _) = sync_channel(1);
         let processor = Arc::clone(&self.processor);
         let spawned = thread::Builder::new()
