@@ -11,41 +11,109 @@
 
 use super::config::FilterConfig;
 use super::geom::{
-    V3, VoxelMap, add, centroid_covariance, dist2, dot, scale, sub, symmetric_eigen, voxel_of,
+    V3, add, centroid_covariance, dist2, dot, scale, sub, symmetric_eigen, voxel_of,
 };
 
 /// Filter `points`; returns the filtered cloud (same order and length).
+///
+/// The cloud is large (hundreds of thousands of points), so the neighbour search is built for
+/// memory locality rather than hash lookups: points are sorted by their voxel (of the radius)
+/// into one array, and the voxels are swept in ascending `(x, y, z)` order. The neighbours of a
+/// voxel lie in the 9 columns `(x + dx, y + dy)` at heights `z - 1 ..= z + 1`, which are runs of
+/// consecutive voxels in that order; one cursor per column only ever moves forward, so the sweep
+/// reads memory nearly sequentially. Each voxel's candidates are gathered once and shared by its
+/// points. Neighbours come in ascending voxel order and input order within a voxel, so every
+/// point's sums run in a fixed order.
 pub fn bilateral(points: &[V3], config: &FilterConfig) -> Vec<V3> {
     if !config.enabled || points.is_empty() {
         return points.to_vec();
     }
     let r = config.radius_m;
-    let mut cells: VoxelMap<Vec<u32>> = VoxelMap::default();
-    for (i, &p) in points.iter().enumerate() {
-        cells.entry(voxel_of(p, r)).or_default().push(i as u32);
-    }
-    let mut neighbours = Vec::new();
-    points
-        .iter()
-        .map(|&p| {
-            neighbours.clear();
-            let c = voxel_of(p, r);
-            for dx in -1..=1 {
-                for dy in -1..=1 {
-                    for dz in -1..=1 {
-                        if let Some(cell) = cells.get(&[c[0] + dx, c[1] + dy, c[2] + dz]) {
-                            neighbours.extend(
-                                cell.iter()
-                                    .map(|&j| points[j as usize])
-                                    .filter(|&q| dist2(p, q) <= r * r),
-                            );
-                        }
-                    }
-                }
+    let grid = SortedGrid::new(points, r);
+    let mut out = points.to_vec();
+    let mut cursors = [0usize; 9];
+    let mut candidates: Vec<V3> = Vec::new();
+    let mut neighbours: Vec<V3> = Vec::new();
+    for cell in &grid.cells {
+        candidates.clear();
+        for (column, cursor) in COLUMNS.iter().zip(&mut cursors) {
+            let lo = [
+                cell.key[0] + column[0],
+                cell.key[1] + column[1],
+                cell.key[2] - 1,
+            ];
+            let hi = [lo[0], lo[1], cell.key[2] + 1];
+            while grid.cells.get(*cursor).is_some_and(|c| c.key < lo) {
+                *cursor += 1;
             }
-            filter_one(p, &neighbours, config)
-        })
-        .collect()
+            for c in grid.cells[*cursor..].iter().take_while(|c| c.key <= hi) {
+                candidates.extend_from_slice(&grid.points[c.start..c.end]);
+            }
+        }
+        for k in cell.start..cell.end {
+            let p = grid.points[k];
+            neighbours.clear();
+            neighbours.extend(candidates.iter().copied().filter(|&q| dist2(p, q) <= r * r));
+            out[grid.input_index[k]] = filter_one(p, &neighbours, config);
+        }
+    }
+    out
+}
+
+/// The `(dx, dy)` offsets of the 9 neighbouring columns, in ascending order.
+const COLUMNS: [[i64; 2]; 9] = [
+    [-1, -1],
+    [-1, 0],
+    [-1, 1],
+    [0, -1],
+    [0, 0],
+    [0, 1],
+    [1, -1],
+    [1, 0],
+    [1, 1],
+];
+
+/// One occupied voxel: its key and its points' range in [`SortedGrid::points`].
+struct GridCell {
+    key: [i64; 3],
+    start: usize,
+    end: usize,
+}
+
+/// Points sorted by voxel (keys ascending, input order within a voxel).
+struct SortedGrid {
+    points: Vec<V3>,
+    /// Input index of each sorted point.
+    input_index: Vec<usize>,
+    cells: Vec<GridCell>,
+}
+
+impl SortedGrid {
+    fn new(points: &[V3], voxel_m: f64) -> Self {
+        // i64 keys: the neighbour offsets cannot overflow even at the ends of voxel_of's range.
+        let mut keyed: Vec<([i64; 3], usize)> = points
+            .iter()
+            .enumerate()
+            .map(|(i, &p)| (voxel_of(p, voxel_m).map(i64::from), i))
+            .collect();
+        keyed.sort_unstable();
+        let mut cells: Vec<GridCell> = Vec::new();
+        for (k, &(key, _)) in keyed.iter().enumerate() {
+            match cells.last_mut() {
+                Some(last) if last.key == key => last.end = k + 1,
+                _ => cells.push(GridCell {
+                    key,
+                    start: k,
+                    end: k + 1,
+                }),
+            }
+        }
+        Self {
+            points: keyed.iter().map(|&(_, i)| points[i]).collect(),
+            input_index: keyed.iter().map(|&(_, i)| i).collect(),
+            cells,
+        }
+    }
 }
 
 fn filter_one(p: V3, neighbours: &[V3], config: &FilterConfig) -> V3 {
@@ -107,6 +175,43 @@ mod tests {
             .sum::<f64>()
             / pts.len() as f64)
             .sqrt()
+    }
+
+    /// The filter with neighbours found by a linear scan, in the order the sweep promises
+    /// (ascending voxel, then input order).
+    fn bilateral_brute(points: &[V3], config: &FilterConfig) -> Vec<V3> {
+        let r = config.radius_m;
+        points
+            .iter()
+            .map(|&p| {
+                let mut near: Vec<([i32; 3], usize)> = points
+                    .iter()
+                    .enumerate()
+                    .filter(|&(_, &q)| dist2(p, q) <= r * r)
+                    .map(|(i, &q)| (voxel_of(q, r), i))
+                    .collect();
+                near.sort_unstable();
+                let neighbours: Vec<V3> = near.iter().map(|&(_, i)| points[i]).collect();
+                filter_one(p, &neighbours, config)
+            })
+            .collect()
+    }
+
+    #[test]
+    fn sweep_finds_the_same_neighbours_as_a_linear_scan() {
+        let (mut pts, _) = step(2);
+        // Negative coordinates and a second, tilted surface crossing voxel rows.
+        pts.extend((0..400).map(|i| {
+            let (x, y) = (
+                f64::from(i % 20) * 0.013 - 0.2,
+                f64::from(i / 20) * 0.017 - 0.3,
+            );
+            [x, y, 0.5 * x + 0.05]
+        }));
+        assert_eq!(
+            bilateral(&pts, &FilterConfig::default()),
+            bilateral_brute(&pts, &FilterConfig::default())
+        );
     }
 
     #[test]

@@ -18,22 +18,27 @@ pub type M3 = [[f64; 3]; 3];
 pub type Twist6 = [f64; 6];
 
 /// `a + b`.
+#[inline]
 pub fn add(a: V3, b: V3) -> V3 {
     [a[0] + b[0], a[1] + b[1], a[2] + b[2]]
 }
 /// `a - b`.
+#[inline]
 pub fn sub(a: V3, b: V3) -> V3 {
     [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
 }
 /// `s * a`.
+#[inline]
 pub fn scale(a: V3, s: f64) -> V3 {
     [a[0] * s, a[1] * s, a[2] * s]
 }
 /// Dot product.
+#[inline]
 pub fn dot(a: V3, b: V3) -> f64 {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }
 /// Cross product.
+#[inline]
 pub fn cross(a: V3, b: V3) -> V3 {
     [
         a[1] * b[2] - a[2] * b[1],
@@ -42,10 +47,12 @@ pub fn cross(a: V3, b: V3) -> V3 {
     ]
 }
 /// Euclidean norm.
+#[inline]
 pub fn norm(a: V3) -> f64 {
     dot(a, a).sqrt()
 }
 /// Squared distance.
+#[inline]
 pub fn dist2(a: V3, b: V3) -> f64 {
     let d = sub(a, b);
     dot(d, d)
@@ -55,6 +62,7 @@ pub fn dist2(a: V3, b: V3) -> f64 {
 pub const IDENTITY: M3 = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
 
 /// `m v`.
+#[inline]
 pub fn mat_vec(m: &M3, v: V3) -> V3 {
     [dot(m[0], v), dot(m[1], v), dot(m[2], v)]
 }
@@ -247,8 +255,155 @@ pub fn solve_spd<const N: usize>(a: &[[f64; N]; N], b: &[f64; N]) -> Option<[f64
 }
 
 /// Eigenvalues (ascending) and eigenvectors (as columns: `vectors[k][i]` is component k of vector
-/// i) of a symmetric matrix, by cyclic Jacobi rotations.
+/// i) of a symmetric matrix. 3x3 matrices (every covariance in the pipeline) take the closed form
+/// of [`symmetric_eigen3`]; other sizes, and 3x3 input with non-finite entries, take cyclic Jacobi
+/// rotations ([`symmetric_eigen_jacobi`]).
 pub fn symmetric_eigen<const N: usize>(m: &[[f64; N]; N]) -> ([f64; N], [[f64; N]; N]) {
+    if N == 3 {
+        let m3: M3 = std::array::from_fn(|i| std::array::from_fn(|j| m[i][j]));
+        if let Some((values, vectors)) = symmetric_eigen3(&m3) {
+            return (
+                std::array::from_fn(|i| values[i]),
+                std::array::from_fn(|i| std::array::from_fn(|j| vectors[i][j])),
+            );
+        }
+    }
+    symmetric_eigen_jacobi(m)
+}
+
+/// [`symmetric_eigen`] of a 3x3 symmetric matrix without iteration (D. Eberly, "A Robust
+/// Eigensolver for 3x3 Symmetric Matrices", Geometric Tools, 2014): the eigenvalues from the
+/// trigonometric solution of the characteristic cubic of the shifted, scaled matrix; the
+/// eigenvector of the eigenvalue farther from the other two from the largest cross product of
+/// two rows of `A - lambda I`; the other two from the 2x2 problem in the plane orthogonal to it
+/// (see `refine3`). Eigenvalues carry an absolute error of a few ulps of the largest entry
+/// (Jacobi is more accurate for eigenvalues far below that, which nothing here needs);
+/// eigenvectors an angle error of about that over the eigenvalue gap. `None` when an entry is not
+/// finite.
+pub fn symmetric_eigen3(m: &M3) -> Option<(V3, M3)> {
+    if m.iter().flatten().any(|v| !v.is_finite()) {
+        return None;
+    }
+    let max = m.iter().flatten().fold(0.0_f64, |a, &v| a.max(v.abs()));
+    if max == 0.0 {
+        return Some(([0.0; 3], IDENTITY));
+    }
+    // Scale to entries in [-1, 1] so the cubic's terms neither overflow nor underflow.
+    let a = m.map(|row| row.map(|v| v / max));
+    let off = a[0][1] * a[0][1] + a[0][2] * a[0][2] + a[1][2] * a[1][2];
+    let (values, columns) = if off > 0.0 {
+        refine3(&a, eigenvalues3(&a))
+    } else {
+        diagonal3(&a)
+    };
+    let vectors = std::array::from_fn(|k| std::array::from_fn(|i| columns[i][k]));
+    Some((scale(values, max), vectors))
+}
+
+/// Ascending eigenvalues of a scaled symmetric 3x3 matrix with a non-zero off-diagonal part.
+fn eigenvalues3(a: &M3) -> V3 {
+    let q = (a[0][0] + a[1][1] + a[2][2]) / 3.0;
+    let (b00, b11, b22) = (a[0][0] - q, a[1][1] - q, a[2][2] - q);
+    let (a01, a02, a12) = (a[0][1], a[0][2], a[1][2]);
+    let p = ((b00 * b00 + b11 * b11 + b22 * b22 + 2.0 * (a01 * a01 + a02 * a02 + a12 * a12)) / 6.0)
+        .sqrt();
+    let c00 = b11 * b22 - a12 * a12;
+    let c01 = a01 * b22 - a12 * a02;
+    let c02 = a01 * a12 - b11 * a02;
+    let det = (b00 * c00 - a01 * c01 + a02 * c02) / (p * p * p);
+    let half_det = (0.5 * det).clamp(-1.0, 1.0);
+    let (sin, cos) = (half_det.acos() / 3.0).sin_cos();
+    let beta2 = 2.0 * cos;
+    // 2 cos(angle + 2 pi / 3).
+    let beta0 = -cos - 1.732_050_807_568_877_2 * sin;
+    let beta1 = -(beta0 + beta2);
+    [q + p * beta0, q + p * beta1, q + p * beta2]
+}
+
+/// Refined eigenvalues and unit eigenvectors (one per row, ascending) of a scaled symmetric 3x3
+/// matrix from its approximate eigenvalues `values`.
+///
+/// The trigonometric eigenvalues lose accuracy where two of them nearly coincide (the arc cosine
+/// is steep next to +-1: a relative error up to about 1e-8). So only the eigenvalue farther from
+/// the middle one is trusted to pick its eigenvector `w` (well conditioned: its gap is large); its
+/// value becomes the Rayleigh quotient `w^T A w`, and the other two come from the closed-form 2x2
+/// eigenproblem of `A` restricted to the plane orthogonal to `w`, which is accurate however close
+/// they are.
+fn refine3(a: &M3, values: V3) -> (V3, [V3; 3]) {
+    let isolated = if values[2] - values[1] >= values[1] - values[0] {
+        values[2]
+    } else {
+        values[0]
+    };
+    let w = eigenvector_isolated(a, isolated);
+    let w_value = dot(w, mat_vec(a, w));
+    let (u, v) = orthogonal_complement(w);
+    let (au, av) = (mat_vec(a, u), mat_vec(a, v));
+    let (m00, m01, m11) = (dot(u, au), dot(u, av), dot(v, av));
+    let mean = 0.5 * (m00 + m11);
+    let half_diff = 0.5 * (m00 - m11);
+    let radius = (half_diff * half_diff + m01 * m01).sqrt();
+    // Eigenvector of the larger 2x2 eigenvalue, in the (u, v) basis, without cancellation.
+    let (x, y) = if radius == 0.0 {
+        (1.0, 0.0)
+    } else if half_diff >= 0.0 {
+        (half_diff + radius, m01)
+    } else {
+        (m01, radius - half_diff)
+    };
+    let len = (x * x + y * y).sqrt();
+    let (x, y) = (x / len, y / len);
+    let high = add(scale(u, x), scale(v, y));
+    let low = add(scale(u, -y), scale(v, x));
+    let mut pairs = [(w_value, w), (mean - radius, low), (mean + radius, high)];
+    pairs.sort_by(|p, q| p.0.total_cmp(&q.0));
+    (pairs.map(|p| p.0), pairs.map(|p| p.1))
+}
+
+/// The eigenvector of a simple eigenvalue: the longest cross product of two rows of
+/// `A - value I` (the rows span the plane orthogonal to it).
+fn eigenvector_isolated(a: &M3, value: f64) -> V3 {
+    let r0 = [a[0][0] - value, a[0][1], a[0][2]];
+    let r1 = [a[0][1], a[1][1] - value, a[1][2]];
+    let r2 = [a[0][2], a[1][2], a[2][2] - value];
+    let candidates = [cross(r0, r1), cross(r0, r2), cross(r1, r2)];
+    let (best, len2) =
+        candidates
+            .iter()
+            .map(|&c| (c, dot(c, c)))
+            .fold(
+                ([1.0, 0.0, 0.0], 0.0),
+                |acc, c| if c.1 > acc.1 { c } else { acc },
+            );
+    if len2 > 0.0 {
+        scale(best, 1.0 / len2.sqrt())
+    } else {
+        best
+    }
+}
+
+/// Two unit vectors completing the unit vector `w` to an orthonormal basis.
+fn orthogonal_complement(w: V3) -> (V3, V3) {
+    let u = if w[0].abs() > w[1].abs() {
+        scale([-w[2], 0.0, w[0]], 1.0 / (w[0] * w[0] + w[2] * w[2]).sqrt())
+    } else {
+        scale([0.0, w[2], -w[1]], 1.0 / (w[1] * w[1] + w[2] * w[2]).sqrt())
+    };
+    (u, cross(w, u))
+}
+
+/// Eigen-decomposition of a diagonal matrix: its entries, ascending, with the axes.
+fn diagonal3(a: &M3) -> (V3, [V3; 3]) {
+    let mut order = [0, 1, 2];
+    order.sort_by(|&i, &j| a[i][i].total_cmp(&a[j][j]));
+    let values = order.map(|i| a[i][i]);
+    let vectors = order.map(|i| IDENTITY[i]);
+    (values, vectors)
+}
+
+/// Eigenvalues (ascending) and eigenvectors (as columns) of a symmetric matrix by cyclic Jacobi
+/// rotations, to an off-diagonal sum of squares below 1e-24 (at most 50 sweeps).
+pub fn symmetric_eigen_jacobi<const N: usize>(m: &[[f64; N]; N]) -> ([f64; N], [[f64; N]; N]) {
     let mut a = *m;
     let mut v = [[0.0; N]; N];
     for (i, row) in v.iter_mut().enumerate() {
@@ -321,64 +476,153 @@ pub fn centroid_covariance(points: impl Iterator<Item = V3> + Clone) -> Option<(
         return None;
     }
     c = scale(c, 1.0 / n);
-    let mut cov = [[0.0; 3]; 3];
+    // The six distinct products, summed, then one division each (the matrix is symmetric).
+    let mut s = [0.0; 6];
     for p in points {
         let d = sub(p, c);
-        for i in 0..3 {
-            for j in 0..3 {
-                cov[i][j] += d[i] * d[j] / n;
-            }
-        }
+        s[0] += d[0] * d[0];
+        s[1] += d[0] * d[1];
+        s[2] += d[0] * d[2];
+        s[3] += d[1] * d[1];
+        s[4] += d[1] * d[2];
+        s[5] += d[2] * d[2];
     }
-    Some((c, cov))
+    let s = s.map(|v| v / n);
+    Some((
+        c,
+        [[s[0], s[1], s[2]], [s[1], s[3], s[4]], [s[2], s[4], s[5]]],
+    ))
 }
 
 /// A fast, non-cryptographic hasher for voxel keys (FxHash's multiply-rotate).
+///
+/// Byte strings are consumed eight bytes at a time, so a `[i32; 3]` key (which `Hash` feeds as
+/// its length and then one 12-byte write) costs three multiply rounds instead of thirteen.
 #[derive(Default, Clone, Copy)]
 pub struct FxHasher(u64);
 
 impl Hasher for FxHasher {
+    #[inline]
     fn finish(&self) -> u64 {
         self.0
     }
+    #[inline]
     fn write(&mut self, bytes: &[u8]) {
-        for &b in bytes {
-            self.write_u64(u64::from(b));
+        let mut chunks = bytes.chunks_exact(8);
+        for chunk in &mut chunks {
+            let mut word = [0u8; 8];
+            word.copy_from_slice(chunk);
+            self.write_u64(u64::from_le_bytes(word));
+        }
+        let rest = chunks.remainder();
+        if !rest.is_empty() {
+            let mut word = [0u8; 8];
+            word[..rest.len()].copy_from_slice(rest);
+            // The length keeps "ab" and "ab\0" apart.
+            self.write_u64(u64::from_le_bytes(word) ^ ((rest.len() as u64) << 59));
         }
     }
+    #[inline]
     fn write_i32(&mut self, i: i32) {
         self.write_u64(u64::from(i.cast_unsigned()));
     }
+    #[inline]
     fn write_u64(&mut self, i: u64) {
         self.0 = (self.0.rotate_left(5) ^ i).wrapping_mul(0x51_7c_c1_b7_27_22_0a_95);
+    }
+    #[inline]
+    fn write_usize(&mut self, i: usize) {
+        self.write_u64(i as u64);
     }
 }
 
 /// A hash map keyed by voxel, with [`FxHasher`].
 pub type VoxelMap<T> = HashMap<[i32; 3], T, BuildHasherDefault<FxHasher>>;
 
-/// The voxel holding `p` for voxels of `size_m`.
+/// The voxel holding `p` for voxels of `size_m`: `floor(p / size_m)` per axis, saturating at the
+/// ends of `i32` (NaN gives 0).
+#[inline]
 pub fn voxel_of(p: V3, size_m: f64) -> [i32; 3] {
-    [
-        (p[0] / size_m).floor() as i32,
-        (p[1] / size_m).floor() as i32,
-        (p[2] / size_m).floor() as i32,
-    ]
+    p.map(|c| floor_i32(c / size_m))
 }
 
-/// A static nearest-neighbour index over a point set: points bucketed by voxel; queries scan the
-/// 27 voxels around the query, so results are exact for radii up to the voxel size.
+/// `x.floor() as i32` without the libm call that `floor` becomes on targets without SSE4.1:
+/// truncate (saturating, NaN to 0), then step down for negative non-integers.
+#[inline]
+fn floor_i32(x: f64) -> i32 {
+    let t = x as i32;
+    if f64::from(t) > x {
+        t.saturating_sub(1)
+    } else {
+        t
+    }
+}
+
+/// One indexed point, stored inline in its voxel's cell so a query reads each cell's points
+/// from one contiguous block: the position and the point's index in insertion order.
+#[derive(Debug, Clone, Copy)]
+struct Entry {
+    p: V3,
+    index: u32,
+}
+
+/// A nearest-neighbour index over a point set: points bucketed by voxel, each voxel's points
+/// stored contiguously in insertion order.
+///
+/// Queries are exact for any radius. A query visits only the voxels that intersect the box of
+/// side `2 radius` around it: the query's own voxel first, then the others, each skipped without a
+/// hash lookup when its nearest face is farther than the current search bound (the radius, or the
+/// K-th best distance once K points were found). With the pipeline's scan-to-map settings (0.5 m
+/// voxels, 0.2 m radius) that is one to eight voxels instead of 27. Ties in distance are broken by
+/// the smaller index, so the result does not depend on the order in which voxels are visited.
 #[derive(Debug, Clone)]
 pub struct VoxelIndex {
     voxel_m: f64,
-    cells: VoxelMap<Vec<u32>>,
+    cells: VoxelMap<Vec<Entry>>,
     points: Vec<V3>,
     /// A caller-defined tag per point (the pipeline's scan-line id).
     tags: Vec<u32>,
 }
 
+/// The 26 neighbours of a voxel: the 6 sharing a face, the 12 sharing an edge, the 8 sharing a
+/// corner.
+const SHELL: [[i32; 3]; 26] = [
+    [-1, 0, 0],
+    [1, 0, 0],
+    [0, -1, 0],
+    [0, 1, 0],
+    [0, 0, -1],
+    [0, 0, 1],
+    [-1, -1, 0],
+    [-1, 1, 0],
+    [1, -1, 0],
+    [1, 1, 0],
+    [-1, 0, -1],
+    [-1, 0, 1],
+    [1, 0, -1],
+    [1, 0, 1],
+    [0, -1, -1],
+    [0, -1, 1],
+    [0, 1, -1],
+    [0, 1, 1],
+    [-1, -1, -1],
+    [-1, -1, 1],
+    [-1, 1, -1],
+    [-1, 1, 1],
+    [1, -1, -1],
+    [1, -1, 1],
+    [1, 1, -1],
+    [1, 1, 1],
+];
+
+/// Slack on voxel bounds, metres: `voxel_of` divides and floors, so a point can sit a rounding
+/// error outside the box its voxel number implies. Widening every bound by far more than that keeps
+/// the voxel selection and the pruning conservative (they never skip a point within the radius).
+const BOUND_SLACK_M: f64 = 1e-9;
+
 impl VoxelIndex {
-    /// Index `points` with voxels of `voxel_m` (the largest query radius you will use).
+    /// Index `points` with voxels of `voxel_m`. Any query radius works; radii up to the voxel size
+    /// visit at most the 27 voxels around the query.
     pub fn new(points: Vec<V3>, voxel_m: f64) -> Self {
         let tags = vec![0; points.len()];
         Self::new_tagged(points, tags, voxel_m)
@@ -387,12 +631,12 @@ impl VoxelIndex {
     /// Like [`VoxelIndex::new`] with a tag per point (`tags` shorter than `points` pads with 0).
     pub fn new_tagged(points: Vec<V3>, mut tags: Vec<u32>, voxel_m: f64) -> Self {
         tags.resize(points.len(), 0);
-        let mut cells: VoxelMap<Vec<u32>> = VoxelMap::default();
+        let mut cells: VoxelMap<Vec<Entry>> = VoxelMap::default();
         for (i, &p) in points.iter().enumerate() {
             cells
                 .entry(voxel_of(p, voxel_m))
                 .or_default()
-                .push(i as u32);
+                .push(Entry { p, index: i as u32 });
         }
         Self {
             voxel_m,
@@ -413,7 +657,10 @@ impl VoxelIndex {
         if cell.len() >= cap {
             return false;
         }
-        cell.push(self.points.len() as u32);
+        cell.push(Entry {
+            p,
+            index: self.points.len() as u32,
+        });
         self.points.push(p);
         self.tags.push(tag);
         true
@@ -424,45 +671,203 @@ impl VoxelIndex {
         &self.points
     }
 
-    /// Up to `K` nearest points within `radius_m` (<= the voxel size) of `q`, nearest first, as
-    /// `(squared distance, index)`; returns how many were found.
+    /// The voxel size, metres.
+    pub fn voxel_m(&self) -> f64 {
+        self.voxel_m
+    }
+
+    /// Up to `K` nearest points within `radius_m` of `q`, nearest first (equal distances: smaller
+    /// index first), as `(squared distance, index)`; returns how many were found.
     pub fn nearest<const K: usize>(
         &self,
         q: V3,
         radius_m: f64,
         out: &mut [(f64, u32); K],
     ) -> usize {
-        let r2 = radius_m * radius_m;
-        let mut n = 0;
-        let c = voxel_of(q, self.voxel_m);
-        for dx in -1..=1 {
-            for dy in -1..=1 {
-                for dz in -1..=1 {
-                    let Some(cell) = self.cells.get(&[c[0] + dx, c[1] + dy, c[2] + dz]) else {
+        if K == 0 || !(radius_m >= 0.0) {
+            return 0;
+        }
+        let mut best = Best {
+            out,
+            n: 0,
+            r2: radius_m * radius_m,
+        };
+        let centre = voxel_of(q, self.voxel_m);
+        if radius_m <= self.voxel_m {
+            self.nearest_in_shell(q, centre, &mut best);
+            return best.n;
+        }
+        let Some((lo, hi)) = self.voxel_range(q, radius_m) else {
+            // The box around the query spans more voxels than are occupied: scan them all.
+            for cell in self.cells.values() {
+                best.scan(cell, q);
+            }
+            return best.n;
+        };
+        if let Some(cell) = self.cells.get(&centre) {
+            best.scan(cell, q);
+        }
+        for x in lo[0]..=hi[0] {
+            let gx = self.gap2(q[0], x, centre[0]);
+            for y in lo[1]..=hi[1] {
+                let gxy = gx + self.gap2(q[1], y, centre[1]);
+                if gxy > best.bound() {
+                    continue;
+                }
+                for z in lo[2]..=hi[2] {
+                    let key = [x, y, z];
+                    if key == centre || gxy + self.gap2(q[2], z, centre[2]) > best.bound() {
                         continue;
-                    };
-                    for &i in cell {
-                        let d2 = dist2(self.points[i as usize], q);
-                        if d2 > r2 || (n == K && d2 >= out[K - 1].0) {
-                            continue;
-                        }
-                        let mut j = if n < K {
-                            n += 1;
-                            n - 1
-                        } else {
-                            K - 1
-                        };
-                        while j > 0 && out[j - 1].0 > d2 {
-                            out[j] = out[j - 1];
-                            j -= 1;
-                        }
-                        out[j] = (d2, i);
+                    }
+                    if let Some(cell) = self.cells.get(&key) {
+                        best.scan(cell, q);
                     }
                 }
             }
         }
-        n
+        best.n
     }
+
+    /// [`VoxelIndex::nearest`] for radii up to the voxel size: the query's voxel, then its 26
+    /// neighbours nearest-first by kind (6 sharing a face, 12 an edge, 8 a corner), so the
+    /// K-th best distance shrinks early and prunes most of the rest before their hash lookup.
+    fn nearest_in_shell<const K: usize>(&self, q: V3, centre: [i32; 3], best: &mut Best<'_, K>) {
+        if let Some(cell) = self.cells.get(&centre) {
+            best.scan(cell, q);
+        }
+        // Squared gap to the neighbour below, 0 (same voxel), and above, per axis.
+        let gaps: [[f64; 3]; 3] = std::array::from_fn(|k| {
+            [
+                self.gap2(q[k], centre[k].wrapping_sub(1), centre[k]),
+                0.0,
+                self.gap2(q[k], centre[k].wrapping_add(1), centre[k]),
+            ]
+        });
+        for offset in SHELL {
+            let gap: f64 = (0..3).map(|k| gaps[k][(offset[k] + 1) as usize]).sum();
+            if gap > best.bound() {
+                continue;
+            }
+            let key = std::array::from_fn(|k| centre[k].wrapping_add(offset[k]));
+            if let Some(cell) = self.cells.get(&key) {
+                best.scan(cell, q);
+            }
+        }
+    }
+
+    /// Call `f(index, point)` for every point within `radius_m` of `q`, voxel by voxel in
+    /// ascending `(x, y, z)` voxel order and in insertion order within a voxel (a fixed order, so
+    /// sums over the neighbours are reproducible).
+    pub fn for_each_within(&self, q: V3, radius_m: f64, mut f: impl FnMut(u32, V3)) {
+        if !(radius_m >= 0.0) {
+            return;
+        }
+        let r2 = radius_m * radius_m;
+        let mut visit = |cell: &[Entry]| {
+            for e in cell {
+                if dist2(e.p, q) <= r2 {
+                    f(e.index, e.p);
+                }
+            }
+        };
+        let Some((lo, hi)) = self.voxel_range(q, radius_m) else {
+            let mut keys: Vec<&[i32; 3]> = self.cells.keys().collect();
+            keys.sort_unstable();
+            for key in keys {
+                visit(&self.cells[key]);
+            }
+            return;
+        };
+        let centre = voxel_of(q, self.voxel_m);
+        for x in lo[0]..=hi[0] {
+            let gx = self.gap2(q[0], x, centre[0]);
+            for y in lo[1]..=hi[1] {
+                let gxy = gx + self.gap2(q[1], y, centre[1]);
+                if gxy > r2 {
+                    continue;
+                }
+                for z in lo[2]..=hi[2] {
+                    if gxy + self.gap2(q[2], z, centre[2]) > r2 {
+                        continue;
+                    }
+                    if let Some(cell) = self.cells.get(&[x, y, z]) {
+                        visit(cell);
+                    }
+                }
+            }
+        }
+    }
+
+    /// The voxels (inclusive corners) that the box `q +- radius_m` touches; `None` when they
+    /// outnumber the occupied voxels (then a scan of every cell is cheaper and always terminates).
+    fn voxel_range(&self, q: V3, radius_m: f64) -> Option<([i32; 3], [i32; 3])> {
+        let reach = radius_m + BOUND_SLACK_M;
+        let lo = voxel_of(sub(q, [reach; 3]), self.voxel_m);
+        let hi = voxel_of(add(q, [reach; 3]), self.voxel_m);
+        let count: f64 = (0..3)
+            .map(|k| f64::from(hi[k]) - f64::from(lo[k]) + 1.0)
+            .product();
+        (count <= 27.0 || count <= self.cells.len() as f64).then_some((lo, hi))
+    }
+
+    /// Squared distance from coordinate `qc` (in voxel `c`) to the nearest face of voxel `v`
+    /// along one axis, shrunk by [`BOUND_SLACK_M`] so it never overestimates.
+    fn gap2(&self, qc: f64, v: i32, c: i32) -> f64 {
+        let gap = match v.cmp(&c) {
+            std::cmp::Ordering::Less => qc - (f64::from(v) + 1.0) * self.voxel_m,
+            std::cmp::Ordering::Greater => f64::from(v) * self.voxel_m - qc,
+            std::cmp::Ordering::Equal => return 0.0,
+        };
+        let gap = (gap - BOUND_SLACK_M).max(0.0);
+        gap * gap
+    }
+}
+
+/// The K best `(squared distance, index)` pairs so far, sorted.
+struct Best<'a, const K: usize> {
+    out: &'a mut [(f64, u32); K],
+    n: usize,
+    r2: f64,
+}
+
+impl<const K: usize> Best<'_, K> {
+    /// Squared distance a point must not exceed to enter.
+    fn bound(&self) -> f64 {
+        if self.n == K {
+            self.out[K - 1].0
+        } else {
+            self.r2
+        }
+    }
+
+    fn scan(&mut self, cell: &[Entry], q: V3) {
+        for e in cell {
+            let d2 = dist2(e.p, q);
+            if !(d2 <= self.bound()) {
+                continue;
+            }
+            let candidate = (d2, e.index);
+            if self.n == K && !before(candidate, self.out[K - 1]) {
+                continue;
+            }
+            let mut j = if self.n < K {
+                self.n += 1;
+                self.n - 1
+            } else {
+                K - 1
+            };
+            while j > 0 && before(candidate, self.out[j - 1]) {
+                self.out[j] = self.out[j - 1];
+                j -= 1;
+            }
+            self.out[j] = candidate;
+        }
+    }
+}
+
+/// Order of neighbours: by squared distance, then by index.
+fn before(a: (f64, u32), b: (f64, u32)) -> bool {
+    a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)).is_lt()
 }
 
 #[cfg(test)]
@@ -543,5 +948,238 @@ mod tests {
         brute.sort_by(|a, b| a.0.total_cmp(&b.0));
         brute.truncate(5);
         assert_eq!(&out[..n], &brute[..]);
+    }
+
+    /// A seeded random symmetric matrix: `R diag(values) R^T` with a random rotation.
+    fn random_symmetric(rng: &mut rand_chacha::ChaCha8Rng, values: V3) -> M3 {
+        use rand::Rng;
+        let r = exp_so3([
+            rng.random_range(-3.0..3.0),
+            rng.random_range(-3.0..3.0),
+            rng.random_range(-3.0..3.0),
+        ]);
+        let d = [
+            [values[0], 0.0, 0.0],
+            [0.0, values[1], 0.0],
+            [0.0, 0.0, values[2]],
+        ];
+        let m = mat_mul(&r, &mat_mul(&d, &transpose(&r)));
+        // Exactly symmetric, as a covariance is.
+        std::array::from_fn(|i| std::array::from_fn(|j| 0.5 * (m[i][j] + m[j][i])))
+    }
+
+    #[test]
+    fn closed_form_eigen_matches_jacobi_and_is_an_eigen_decomposition() {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
+        for case in 0..2000 {
+            // Spectra like the pipeline's covariances: planes (one tiny value), lines (one large),
+            // blobs, repeated values and sign changes.
+            let s = 10f64.powf(rng.random_range(-6.0..1.0));
+            let values = match case % 5 {
+                0 => [s * 1e-5, s * 0.3, s],
+                1 => [s * 0.01, s * 0.02, s],
+                2 => [s, s, s * 0.5],
+                3 => [-s, 0.0, s * 1e-3],
+                _ => [
+                    s * rng.random_range(0.0..1.0),
+                    s * rng.random_range(0.0..1.0),
+                    s * rng.random_range(0.0..1.0),
+                ],
+            };
+            let m = random_symmetric(&mut rng, values);
+            let (fast, fast_vectors) = symmetric_eigen3(&m).unwrap();
+            let scale_m = m.iter().flatten().fold(0.0_f64, |a, v| a.max(v.abs()));
+            // Jacobi stops on an absolute off-diagonal size: give it entries of order one.
+            let (slow, slow_vectors) = symmetric_eigen_jacobi(&m.map(|r| r.map(|v| v / scale_m)));
+            let slow = scale(slow, scale_m);
+            for i in 0..3 {
+                assert!(
+                    close(fast[i], slow[i], 1e-13 * scale_m),
+                    "{m:?}: {fast:?} {slow:?}"
+                );
+                let v = [fast_vectors[0][i], fast_vectors[1][i], fast_vectors[2][i]];
+                assert!(close(norm(v), 1.0, 1e-12), "{m:?}: |v{i}| = {}", norm(v));
+                let residual = sub(mat_vec(&m, v), scale(v, fast[i]));
+                assert!(norm(residual) <= 1e-12 * scale_m, "{m:?}: {residual:?}");
+                // Where the eigenvalue is simple, the vector is Jacobi's up to sign.
+                let gap = (0..3)
+                    .filter(|&j| j != i)
+                    .map(|j| (slow[j] - slow[i]).abs())
+                    .fold(f64::INFINITY, f64::min);
+                if gap > 1e-3 * scale_m {
+                    let w = [slow_vectors[0][i], slow_vectors[1][i], slow_vectors[2][i]];
+                    assert!(close(dot(v, w).abs(), 1.0, 1e-9), "{m:?}: {v:?} vs {w:?}");
+                }
+            }
+            let (v0, v1) = (
+                [fast_vectors[0][0], fast_vectors[1][0], fast_vectors[2][0]],
+                [fast_vectors[0][1], fast_vectors[1][1], fast_vectors[2][1]],
+            );
+            assert!(dot(v0, v1).abs() < 1e-12, "{m:?}");
+        }
+    }
+
+    #[test]
+    #[allow(clippy::float_cmp)] // Exact by construction: diagonal entries, copied points.
+    fn eigen_of_diagonal_zero_and_non_finite_input() {
+        let (values, vectors) =
+            symmetric_eigen(&[[3.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, 2.0]]);
+        assert_eq!(values, [-1.0, 2.0, 3.0]);
+        assert_eq!(vectors, [[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]);
+        assert_eq!(symmetric_eigen(&[[0.0; 3]; 3]), ([0.0; 3], IDENTITY));
+        assert!(symmetric_eigen3(&[[f64::NAN, 0.0, 0.0], [0.0; 3], [0.0; 3]]).is_none());
+        // The generic entry point still answers (by Jacobi) without panicking.
+        let _ = symmetric_eigen(&[[f64::INFINITY, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0; 3]]);
+        // Other sizes take Jacobi.
+        let (values, _) = symmetric_eigen(&[[2.0, 1.0], [1.0, 2.0]]);
+        assert!(close(values[0], 1.0, 1e-12) && close(values[1], 3.0, 1e-12));
+    }
+
+    /// The K nearest within `r` by brute force, ordered by distance then index.
+    fn brute_nearest(points: &[V3], q: V3, r: f64, k: usize) -> Vec<(f64, u32)> {
+        let mut all: Vec<(f64, u32)> = points
+            .iter()
+            .enumerate()
+            .map(|(i, &p)| (dist2(p, q), i as u32))
+            .filter(|(d, _)| *d <= r * r)
+            .collect();
+        all.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+        all.truncate(k);
+        all
+    }
+
+    #[test]
+    #[allow(clippy::float_cmp)] // Exact by construction: diagonal entries, copied points.
+    fn voxel_index_matches_brute_force_for_any_radius_and_voxel() {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
+        // Random points plus a grid (exact ties in distance) plus duplicates.
+        let mut points: Vec<V3> = (0..1500)
+            .map(|_| {
+                [
+                    rng.random_range(-2.0..2.0),
+                    rng.random_range(-1.0..1.0),
+                    rng.random_range(-0.5..0.5),
+                ]
+            })
+            .collect();
+        for i in 0..10 {
+            for j in 0..10 {
+                points.push([f64::from(i) * 0.1, f64::from(j) * 0.1, 0.0]);
+            }
+        }
+        points.extend_from_within(0..50);
+        for voxel_m in [0.05, 0.2, 0.5, 3.0] {
+            let index = VoxelIndex::new(points.clone(), voxel_m);
+            // The same points inserted one by one give the same index.
+            let mut grown = VoxelIndex::new(Vec::new(), voxel_m);
+            for &p in &points {
+                assert!(grown.insert_capped(p, 0, usize::MAX));
+            }
+            for case in 0..300 {
+                let q = if case % 3 == 0 {
+                    // On the grid: many equal distances.
+                    [
+                        f64::from(rng.random_range(0..10)) * 0.1,
+                        f64::from(rng.random_range(0..10)) * 0.1,
+                        0.0,
+                    ]
+                } else {
+                    [
+                        rng.random_range(-2.2..2.2),
+                        rng.random_range(-1.2..1.2),
+                        rng.random_range(-0.6..0.6),
+                    ]
+                };
+                let r = [0.0, 0.05, 0.1, 0.2, 0.35, 1.0, 10.0][case % 7];
+                let want = brute_nearest(&points, q, r, 5);
+                let mut out = [(0.0, 0); 5];
+                let n = index.nearest(q, r, &mut out);
+                assert_eq!(&out[..n], &want[..], "voxel {voxel_m} q {q:?} r {r}");
+                let n = grown.nearest(q, r, &mut out);
+                assert_eq!(&out[..n], &want[..], "grown: voxel {voxel_m} q {q:?} r {r}");
+                let mut one = [(0.0, 0); 1];
+                let n = index.nearest(q, r, &mut one);
+                assert_eq!(&one[..n], &want[..n.min(want.len())]);
+                let mut within = Vec::new();
+                index.for_each_within(q, r, |i, p| {
+                    assert_eq!(p, points[i as usize]);
+                    within.push(i);
+                });
+                within.sort_unstable();
+                let mut all = brute_nearest(&points, q, r, usize::MAX)
+                    .into_iter()
+                    .map(|(_, i)| i)
+                    .collect::<Vec<_>>();
+                all.sort_unstable();
+                assert_eq!(within, all, "within: voxel {voxel_m} q {q:?} r {r}");
+            }
+        }
+        let mut out = [(0.0, 0); 3];
+        assert_eq!(index_of_nothing().nearest([0.0; 3], 1.0, &mut out), 0);
+        let index = VoxelIndex::new(points, 0.2);
+        assert_eq!(index.nearest([f64::NAN; 3], 1.0, &mut out), 0);
+        assert_eq!(index.nearest([0.0; 3], f64::NAN, &mut out), 0);
+    }
+
+    fn index_of_nothing() -> VoxelIndex {
+        VoxelIndex::new(Vec::new(), 0.2)
+    }
+
+    #[test]
+    fn for_each_within_visits_voxels_in_ascending_order() {
+        let points = vec![
+            [0.25, 0.0, 0.0],
+            [-0.05, 0.0, 0.0],
+            [0.05, 0.0, 0.0],
+            [0.06, 0.01, 0.0],
+        ];
+        let index = VoxelIndex::new(points, 0.1);
+        let mut seen = Vec::new();
+        index.for_each_within([0.0; 3], 0.2, |i, _| seen.push(i));
+        // Voxel x = -1 first, then x = 0 in insertion order; the point 0.25 m away is left out.
+        assert_eq!(seen, vec![1, 2, 3]);
+    }
+
+    #[test]
+    fn floor_matches_the_standard_library() {
+        for x in [
+            0.0,
+            -0.0,
+            0.5,
+            -0.5,
+            1.0,
+            -1.0,
+            2.999_999,
+            -2.000_001,
+            1e10,
+            -1e10,
+            2_147_483_647.5,
+            -2_147_483_648.5,
+            -2_147_483_647.5,
+            f64::NAN,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+        ] {
+            assert_eq!(floor_i32(x), x.floor() as i32, "{x}");
+        }
+        let p = [0.31, -0.01, -0.2];
+        assert_eq!(voxel_of(p, 0.1), [3, -1, -2]);
+    }
+
+    #[test]
+    fn fx_hasher_reads_words_and_tells_lengths_apart() {
+        let hash = |bytes: &[u8]| {
+            let mut h = FxHasher::default();
+            h.write(bytes);
+            h.finish()
+        };
+        assert_ne!(hash(b"ab"), hash(b"ab\0"));
+        assert_ne!(hash(b"abcdefgh"), hash(b"abcdefgi"));
+        assert_ne!(
+            hash(&[1, 0, 0, 0, 2, 0, 0, 0, 3, 0, 0, 0]),
+            hash(&[1, 0, 0, 0, 3, 0, 0, 0, 2, 0, 0, 0])
+        );
     }
 }

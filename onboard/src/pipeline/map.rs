@@ -127,6 +127,28 @@ mod tests {
     }
 
     #[test]
+    fn accumulator_returns_to_earlier_voxels_and_sorts_by_voxel() {
+        let mut acc = CloudAccumulator::new(0.1);
+        // Back and forth between voxels, then a voxel below the others.
+        for p in [
+            [0.31, 0.0, 0.0],
+            [0.01, 0.0, 0.0],
+            [0.33, 0.0, 0.0],
+            [0.03, 0.0, 0.0],
+            [0.05, 0.0, 0.0],
+            [-0.05, 0.0, 0.0],
+        ] {
+            acc.add(p);
+        }
+        assert_eq!(acc.len(), 3);
+        let pts = acc.points();
+        assert!((pts[0][0] + 0.05).abs() < 1e-12, "{pts:?}");
+        assert!((pts[1][0] - 0.03).abs() < 1e-12, "{pts:?}");
+        assert!((pts[2][0] - 0.32).abs() < 1e-12, "{pts:?}");
+        assert!(CloudAccumulator::new(0.1).is_empty());
+    }
+
+    #[test]
     fn feature_map_caps_points_per_voxel() {
         let mut map = FeatureMap::new(0.5, 3);
         let planes: Vec<(V3, u32)> = (0..10)
