@@ -256,6 +256,9 @@ pub struct FusionConfig {
     /// Per-axis translation deviation (x, y, z) below which the laser is trusted, m/s (the paper's
     /// [0.1, 0.5, 0.1] allows more along the direction of travel).
     pub translation_tolerance_mps: [f64; 3],
+    /// Laser-wheel pairs (per translation component and interval) the wheel scale (slip) factor
+    /// is estimated over; 0 takes the wheels' distances as they are (see `fusion`).
+    pub wheel_scale_frames: usize,
 }
 
 impl Default for FusionConfig {
@@ -268,6 +271,7 @@ impl Default for FusionConfig {
             reference_frames: 10,
             rotation_tolerance_radps: [0.01, 0.01, 0.01],
             translation_tolerance_mps: [0.02, 0.02, 0.02],
+            wheel_scale_frames: 100,
         }
     }
 }

@@ -22,6 +22,16 @@
 //!    closest to the reference, else from the reference itself (constant velocity), else zero.
 //!
 //! Until the reference holds `reference_frames` rates, the laser is used wherever it is determined.
+//!
+//! **Wheel scale (slip)**: wheels that slip report more distance than the robot travels, by a
+//! nearly constant factor on one floor. Over the last `wheel_scale_frames` intervals where the
+//! laser determined a translation component that the wheels also report (and the robot moved
+//! faster than [`MIN_SCALE_SPEED_MPS`] along it), the least-squares factor
+//! `s = sum(laser * wheel) / sum(wheel^2)` is estimated and the wheels' translation is multiplied
+//! by it everywhere (prediction, selection and gap filling). So where the lidar sees the tyres or
+//! bumpers it calibrates the wheels, and where it is degenerate (between two planes) the calibrated
+//! wheels fill in. The factor is clamped to [`WHEEL_SCALE_RANGE`]; pairs that disagree by more than
+//! that range are outliers and are skipped.
 
 use std::collections::VecDeque;
 
@@ -61,11 +71,22 @@ pub struct Fused {
     pub chosen: [Source; 6],
 }
 
-/// The fusion state: the history of fused rates.
+/// Slower than this along a component (m/s), an interval says too little about the wheel scale.
+pub const MIN_SCALE_SPEED_MPS: f64 = 0.05;
+
+/// The wheel scale factor is clamped to this range (a robot slipping more than 20 % is stuck).
+pub const WHEEL_SCALE_RANGE: (f64, f64) = (0.8, 1.2);
+
+/// Fewer laser-wheel pairs than this: the wheel scale stays 1.
+const MIN_SCALE_PAIRS: usize = 10;
+
+/// The fusion state: the history of fused rates and the wheel-scale evidence.
 #[derive(Debug, Clone)]
 pub struct Fusion {
     config: FusionConfig,
     history: VecDeque<Twist6>,
+    /// `(laser, wheel)` translation rates of recent intervals where both determined a component.
+    scale_pairs: VecDeque<(f64, f64)>,
 }
 
 impl Fusion {
@@ -74,6 +95,52 @@ impl Fusion {
         Self {
             config,
             history: VecDeque::new(),
+            scale_pairs: VecDeque::new(),
+        }
+    }
+
+    /// The current wheel scale factor: laser distance over wheel distance (1 until there is
+    /// enough evidence, or when `wheel_scale_frames` is 0).
+    pub fn wheel_scale(&self) -> f64 {
+        if self.scale_pairs.len() < MIN_SCALE_PAIRS {
+            return 1.0;
+        }
+        let (lw, ww) = self
+            .scale_pairs
+            .iter()
+            .fold((0.0, 0.0), |(lw, ww), &(l, w)| (lw + l * w, ww + w * w));
+        (lw / ww).clamp(WHEEL_SCALE_RANGE.0, WHEEL_SCALE_RANGE.1)
+    }
+
+    /// `wheel` with its translation multiplied by the wheel scale.
+    fn scaled(&self, wheel: &SourceRate) -> SourceRate {
+        let s = self.wheel_scale();
+        let mut out = *wheel;
+        for k in 3..6 {
+            out.rate[k] *= s;
+        }
+        out
+    }
+
+    /// Remember the laser-wheel pairs of one interval (raw wheel rates).
+    fn update_scale(&mut self, laser: Option<&SourceRate>, wheel: Option<&SourceRate>) {
+        let window = self.config.wheel_scale_frames;
+        let (Some(l), Some(w)) = (laser, wheel) else {
+            return;
+        };
+        if window == 0 {
+            return;
+        }
+        for k in 3..6 {
+            let (lk, wk) = (l.rate[k], w.rate[k]);
+            let usable = l.available[k] && w.available[k] && wk.abs() > MIN_SCALE_SPEED_MPS;
+            let ratio = lk / wk;
+            if usable && ratio > WHEEL_SCALE_RANGE.0 && ratio < WHEEL_SCALE_RANGE.1 {
+                self.scale_pairs.push_back((lk, wk));
+            }
+        }
+        while self.scale_pairs.len() > window {
+            self.scale_pairs.pop_front();
         }
     }
 
@@ -95,6 +162,8 @@ impl Fusion {
     /// The best prediction before the laser runs: per component visual, then wheel, then the
     /// reference, then the last fused rate, else zero.
     pub fn predict(&self, visual: Option<&SourceRate>, wheel: Option<&SourceRate>) -> Twist6 {
+        let wheel = wheel.map(|w| self.scaled(w));
+        let wheel = wheel.as_ref();
         let fallback = self
             .reference()
             .or_else(|| self.history.back().copied())
@@ -116,7 +185,9 @@ impl Fusion {
         wheel: Option<&SourceRate>,
     ) -> Fused {
         let visual = visual.filter(|_| self.config.use_visual);
-        let wheel = wheel.filter(|_| self.config.use_wheel);
+        let raw_wheel = wheel.filter(|_| self.config.use_wheel);
+        let scaled_wheel = raw_wheel.map(|w| self.scaled(w));
+        let wheel = scaled_wheel.as_ref();
         let reference = self.reference();
         let candidates = [
             (Source::Laser, laser),
@@ -154,6 +225,7 @@ impl Fusion {
                 fused.chosen[k] = source;
             }
         }
+        self.update_scale(laser, raw_wheel);
         let n = self.config.reference_frames.max(1);
         self.history.push_back(fused.rate);
         while self.history.len() > n {
@@ -320,6 +392,43 @@ mod tests {
         warm(&mut ungated, [0.0, 0.0, 0.0, 0.3, 0.0, 0.0]);
         let out = ungated.fuse(Some(&laser), None, Some(&wheel));
         assert_eq!(out.chosen[3], Source::Laser);
+    }
+
+    #[test]
+    fn a_laser_that_sees_x_calibrates_slipping_wheels() {
+        // The wheels report 3 % more than the robot travels; the laser sees x every other frame.
+        let mut f = Fusion::new(FusionConfig::default());
+        let wheel = SourceRate {
+            rate: [0.0, 0.0, 0.0, 0.3, 0.0, 0.0],
+            available: [false, false, true, true, true, false],
+        };
+        let truth = 0.3 * 0.97;
+        for i in 0..60 {
+            let mut laser = rate([0.0, 0.0, 0.0, truth, 0.0, 0.0]);
+            laser.available[3] = i % 2 == 0;
+            f.fuse(Some(&laser), None, Some(&wheel));
+        }
+        assert!((f.wheel_scale() - 0.97).abs() < 1e-9, "{}", f.wheel_scale());
+        // Where the laser is degenerate in x, the calibrated wheels fill it in.
+        let mut laser = rate([0.0, 0.0, 0.0, 0.0, 0.0, 0.0]);
+        laser.available[3] = false;
+        let out = f.fuse(Some(&laser), None, Some(&wheel));
+        assert_eq!(out.chosen[3], Source::Wheel);
+        assert!((out.rate[3] - truth).abs() < 1e-9, "{:?}", out.rate);
+        assert!((f.predict(None, Some(&wheel))[3] - truth).abs() < 1e-9);
+        // Switched off, the wheels are taken as they are.
+        let mut off = Fusion::new(FusionConfig {
+            wheel_scale_frames: 0,
+            ..FusionConfig::default()
+        });
+        for _ in 0..60 {
+            off.fuse(
+                Some(&rate([0.0, 0.0, 0.0, truth, 0.0, 0.0])),
+                None,
+                Some(&wheel),
+            );
+        }
+        assert!((off.wheel_scale() - 1.0).abs() < 1e-12);
     }
 
     #[test]

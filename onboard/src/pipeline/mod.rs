@@ -49,7 +49,7 @@ use self::deskew::{DeskewModel, Velocity};
 use self::features::RingPoint;
 use self::fusion::{Fusion, Source, SourceRate};
 use self::geom::{Pose, Twist6, V3, VoxelIndex, norm, voxel_of};
-use self::laser_odometry::{FeatureTarget, register_joint, register_two_step};
+use self::laser_odometry::{FeatureTarget, GROUND_TAG_BIT, register_joint, register_two_step};
 use self::map::{CloudAccumulator, FeatureMap};
 use self::visual_odometry::{VisualOdometry, VisualStep};
 use crate::cloud::Cloud;
@@ -535,7 +535,12 @@ impl Pipeline {
                 .collect()
         };
         let mut plane_candidates = tagged(&downsample(&feats.plane_candidates, 0.05));
-        plane_candidates.extend(tagged(&downsample(&feats.ground_candidates, 0.1)));
+        // Ground points carry GROUND_TAG_BIT: plane fits never mix them with the underbody.
+        plane_candidates.extend(
+            tagged(&downsample(&feats.ground_candidates, 0.1))
+                .into_iter()
+                .map(|(p, t)| (p, t | GROUND_TAG_BIT)),
+        );
         let corner_candidates = tagged(&feats.corner_candidates);
         if cfg.map.refine {
             self.map
