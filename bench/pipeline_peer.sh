@@ -8,7 +8,8 @@
 #   whose file name contains NAME.
 # needs: python3 with the venv module (Debian: python3-venv) and PyPI for the first run; it sets
 #   up its own venv under target/peer-venv (override with PEER_VENV=DIR). taskset (util-linux) if
-#   present, to pin both sides to core 0.
+#   present, to pin both sides to core 0. BENCH_BIN=PATH uses a bench_pipeline binary built
+#   beforehand (e.g. from a clean `git archive` of a commit) instead of building this tree's.
 #
 # Per scenario and seed, in this order so that both sides see the same machine load:
 #   1. bench_pipeline SEEDS --peer --export: simulates the run, runs ours (laser only, laser +
@@ -51,8 +52,12 @@ fi
 
 pin=()
 if command -v taskset >/dev/null; then pin=(taskset -c 0); else echo "taskset not found: not pinned to one core" >&2; fi
-cargo build --release -q -p hil-sim --example bench_pipeline
-bench="${CARGO_TARGET_DIR:-target}/release/examples/bench_pipeline"
+if [ -n "${BENCH_BIN:-}" ]; then
+  bench="$BENCH_BIN"
+else
+  cargo build --release -q -p hil-sim --example bench_pipeline
+  bench="${CARGO_TARGET_DIR:-target}/release/examples/bench_pipeline"
+fi
 
 out=target/pipeline-peer
 rm -rf "$out"
