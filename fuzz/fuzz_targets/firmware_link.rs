@@ -26,7 +26,7 @@ fuzz_target!(|data: &[u8]| {
             link_rx = &rest[8..];
         }
         let bus = if step % 97 == 96 { BusState::BusOff } else { BusState::Active };
-        let out = controller.step(now_us, &Inputs { esc: &esc, link_rx, bus });
+        let out = controller.step(now_us, &Inputs { esc: &esc, link_rx, bus, battery_mv: 24_000 });
         let limit = amps_to_raw(controller.machine().config().pid.output_limit_a).unsigned_abs() + 1;
         assert!(out.currents_raw.iter().all(|c| c.unsigned_abs() <= limit), "{:?}", out.currents_raw);
     }

@@ -334,6 +334,22 @@ pub fn status(args: &StatusArgs, out: &mut dyn Write) -> anyhow::Result<()> {
         ok(s.camera_ok)
     )?;
     writeln!(out, "interlocks: {}", s.interlocks)?;
+    if s.battery_mv == 0 {
+        writeln!(out, "battery: not measured")?;
+    } else {
+        writeln!(
+            out,
+            "battery: {:.2} V{}",
+            f64::from(s.battery_mv) / 1e3,
+            if s.interlocks
+                .contains(protocol::mcu::Interlocks::BATTERY_LOW)
+            {
+                " (LOW: charge or swap the pack)"
+            } else {
+                ""
+            }
+        )?;
+    }
     writeln!(
         out,
         "results waiting for this handheld: {}",

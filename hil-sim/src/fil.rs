@@ -66,6 +66,45 @@ pub struct FilConfig {
     /// How long a receiver waits (wall clock) for frames it knows were sent, on buses with
     /// asynchronous delivery (SocketCAN). Irrelevant in-process.
     pub can_wait: Duration,
+    /// The battery the ESCs and the board run from.
+    pub battery: BatteryModel,
+}
+
+/// The battery: an open-circuit voltage behind an internal resistance, so the voltage the board
+/// measures sags with the motor currents (`v = ocv - r * sum |i|`). Approximate on purpose: the
+/// ESCs' input current is taken as the motor current (a C620 at low duty draws less from the
+/// pack than it drives through the motor), which overstates the sag, the conservative side for
+/// the firmware's under-voltage filter.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct BatteryModel {
+    /// Open-circuit voltage, V (a TB47D 6S pack: 25.2 V full, 22.2 V nominal).
+    pub open_circuit_v: f32,
+    /// Internal resistance including wiring, ohm.
+    pub internal_ohm: f32,
+}
+
+impl Default for BatteryModel {
+    fn default() -> Self {
+        Self {
+            open_circuit_v: 24.0,
+            internal_ohm: 0.06,
+        }
+    }
+}
+
+impl BatteryModel {
+    /// What the board's ADC reads at `load_a`, through the firmware's own conversion (12-bit
+    /// quantisation of the divider included), mV.
+    pub fn measured_mv(&self, load_a: f32) -> u16 {
+        let v = (self.open_circuit_v - self.internal_ohm * load_a).max(0.0);
+        let full_scale_v =
+            control::battery::ADC_REF_MV as f32 * 1e-3 * control::battery::DIVIDER_NUM as f32
+                / control::battery::DIVIDER_DEN as f32;
+        let raw = (v / full_scale_v * control::battery::ADC_FULL_SCALE as f32)
+            .round()
+            .clamp(0.0, control::battery::ADC_FULL_SCALE as f32) as u16;
+        control::battery::adc_to_mv(raw)
+    }
 }
 
 impl Default for FilConfig {
@@ -78,6 +117,7 @@ impl Default for FilConfig {
             heartbeat_period_us: 20_000,
             pacing: Pacing::Virtual,
             can_wait: Duration::from_millis(50),
+            battery: BatteryModel::default(),
         }
     }
 }
@@ -115,6 +155,8 @@ pub enum Action {
         /// Scale.
         scale: f32,
     },
+    /// The battery's open-circuit voltage changes (a flat or a fresh pack), V.
+    BatteryOpenCircuit(f32),
 }
 
 /// An action at a time.
@@ -428,6 +470,10 @@ impl Fil {
                 esc: &samples,
                 link_rx: &self.link_rx,
                 bus,
+                battery_mv: self
+                    .config
+                    .battery
+                    .measured_mv(self.escs.iter().map(|e| e.current_a().abs()).sum()),
             },
         );
         if out.recover_bus && self.can_off && self.can_recover_at_us.is_none() {
@@ -549,6 +595,7 @@ impl Fil {
             }
             Action::RawBytes(bytes) => self.host_uart.write_all(&bytes)?,
             Action::Traction { wheel, scale } => self.robot.set_traction_scale(wheel, scale),
+            Action::BatteryOpenCircuit(v) => self.config.battery.open_circuit_v = v,
         }
         self.trace.log.push((now, text));
         Ok(())
@@ -590,5 +637,6 @@ fn describe(action: &Action) -> String {
         }
         Action::RawBytes(b) => format!("host writes {} raw bytes", b.len()),
         Action::Traction { wheel, scale } => format!("wheel {wheel}: traction x{scale}"),
+        Action::BatteryOpenCircuit(v) => format!("battery open-circuit voltage {v} V"),
     }
 }

@@ -12,6 +12,7 @@
 //! | `bus-off` | the firmware's CAN controller goes bus-off | reported and counted, zero currents after recovery, cleared and driving again |
 //! | `stuck-current` | ESC 1's current sticks at 18 A at cruise (a C620 fault the firmware cannot override) | over-current named within 5 ms, all-zero commands from then on; how far the stuck wheel still pushes the robot is reported |
 //! | `link-flood` | seeded garbage and malformed frames on the MCU link, idle then at cruise | nothing moves at idle, errors counted and rejections sent, cruise unaffected |
+//! | `battery-low` | the pack's open-circuit voltage falls from 24 V to 19.2 V at cruise (a short sag to 16 V before it does not count) | the sag does not stop the run; `BATTERY_LOW` within 2.5 s of the drop, robot ramped to rest, a new drive refused naming it, the reported voltage |
 //!
 //! All figures are measured on the simulation: true velocities from [`crate::robot`], commands as
 //! the ESCs received them from the bus, reports as the onboard stand-in decoded them.
@@ -188,7 +189,7 @@ impl fmt::Display for Outcome {
 }
 
 /// The scenario names, in table order.
-pub const NAMES: [&str; 7] = [
+pub const NAMES: [&str; 8] = [
     "cruise",
     "heartbeat-loss",
     "esc-silent",
@@ -196,6 +197,7 @@ pub const NAMES: [&str; 7] = [
     "bus-off",
     "link-flood",
     "stuck-current",
+    "battery-low",
 ];
 
 /// Runs scenario `name` on a freshly built runner.
@@ -242,6 +244,12 @@ fn script(name: &str, seed: u64) -> Option<(&'static str, u64, Vec<Event>, Judge
             4_500_000,
             stuck_current_events(),
             judge_stuck_current,
+        ),
+        "battery-low" => (
+            "battery-low",
+            9_000_000,
+            battery_low_events(),
+            judge_battery_low,
         ),
         _ => return None,
     })
@@ -368,6 +376,22 @@ fn stuck_current_events() -> Vec<Event> {
             fault: EscFault::StuckCurrent(STUCK_A),
         },
     ));
+    e
+}
+
+/// When the pack sags to 16 V for 150 ms (a hard acceleration on a tired pack), microseconds.
+const SAG_AT_US: u64 = 2_000_000;
+/// When the pack's open-circuit voltage falls for good, microseconds.
+const FLAT_AT_US: u64 = FAULT_AT_US;
+/// When the onboard stand-in tries to drive again, microseconds.
+const RETRY_AT_US: u64 = 7_500_000;
+
+fn battery_low_events() -> Vec<Event> {
+    let mut e = start();
+    e.push(at(SAG_AT_US, Action::BatteryOpenCircuit(16.0)));
+    e.push(at(SAG_AT_US + 150_000, Action::BatteryOpenCircuit(24.0)));
+    e.push(at(FLAT_AT_US, Action::BatteryOpenCircuit(19.2)));
+    e.push(send(RETRY_AT_US, cruise_drive()));
     e
 }
 
@@ -780,6 +804,75 @@ fn judge_over_temperature(o: &mut Outcome) {
         .commands
         .iter()
         .any(|(t, c)| *t > 3_600_000 && *c != [0; 4]);
+    o.check("no current after the refused drive", !moved, "");
+}
+
+fn judge_battery_low(o: &mut Outcome) {
+    judge_cruise_phase(o, SAG_AT_US);
+    let healthy = first_status(&o.trace, CRUISE_FROM_US, |s| s.battery_mv > 0);
+    if let Some((_, s)) = healthy {
+        o.figure_push(
+            "battery reported at cruise",
+            f64::from(s.battery_mv) / 1e3,
+            "V",
+        );
+    }
+    let early = first_status(&o.trace, 0, |s| {
+        s.interlocks.contains(Interlocks::BATTERY_LOW)
+    })
+    .filter(|(t, _)| *t < FLAT_AT_US);
+    o.check(
+        "a 150 ms sag to 16 V does not trip BATTERY_LOW",
+        early.is_none(),
+        format!("{:?}", early.map(|(t, _)| ms(t))),
+    );
+    let low = first_status(&o.trace, FLAT_AT_US, |s| {
+        s.interlocks.contains(Interlocks::BATTERY_LOW)
+    });
+    if let Some((t, s)) = low {
+        o.figure_push(
+            "BATTERY_LOW reported after the drop",
+            ms(t - FLAT_AT_US),
+            "ms",
+        );
+        o.figure_push(
+            "battery reported with BATTERY_LOW",
+            f64::from(s.battery_mv) / 1e3,
+            "V",
+        );
+    }
+    o.check(
+        "BATTERY_LOW reported within 2.5 s of the drop",
+        low.is_some_and(|(t, _)| t - FLAT_AT_US <= 2_500_000),
+        format!("{:?}", low.map(|(t, _)| ms(t - FLAT_AT_US))),
+    );
+    let from = low.map_or(FLAT_AT_US, |(t, _)| t);
+    let rest = at_rest_from(&o.trace, from);
+    if let Some(t) = rest {
+        o.figure_push("robot at rest after BATTERY_LOW", ms(t - from), "ms");
+    }
+    o.check(
+        "robot at rest within 1 s of BATTERY_LOW and stays",
+        rest.is_some_and(|t| t - from <= 1_000_000),
+        format!("{:?}", rest.map(|t| ms(t - from))),
+    );
+    let refused = o
+        .trace
+        .rejections()
+        .find(|(t, r)| *t >= RETRY_AT_US && r.msg_id == protocol::ids::DRIVE)
+        .map(|(_, r)| (r.reason, r.field.as_str().to_owned()));
+    o.check(
+        "a new drive is refused naming BATTERY_LOW",
+        refused
+            .as_ref()
+            .is_some_and(|(r, f)| *r == RejectReason::Interlocked && f.contains("BATTERY_LOW")),
+        format!("{refused:?}"),
+    );
+    let moved = o
+        .trace
+        .commands
+        .iter()
+        .any(|(t, c)| *t > RETRY_AT_US && *c != [0; 4]);
     o.check("no current after the refused drive", !moved, "");
 }
 

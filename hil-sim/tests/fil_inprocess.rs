@@ -59,6 +59,11 @@ fn stuck_over_current() {
 }
 
 #[test]
+fn battery_low_at_cruise() {
+    run("battery-low");
+}
+
+#[test]
 fn malformed_flood_on_the_mcu_link() {
     run("link-flood");
 }

@@ -78,6 +78,11 @@ fn vcan_stuck_current() {
 }
 
 #[test]
+fn vcan_battery_low() {
+    scenario("battery-low");
+}
+
+#[test]
 fn vcan_link_flood() {
     scenario("link-flood");
 }

@@ -40,6 +40,11 @@ pub struct RunConfig {
     pub progress_period_us: u64,
     /// Extra time over `distance / speed` before a drive counts as stuck, us.
     pub drive_margin_us: u64,
+    /// The checks refuse to drive below this battery voltage, mV (0: no check). Default 21 V,
+    /// 3.5 V per cell of a 6S pack: a run of 15 m and back needs a pack above its knee. The
+    /// firmware's own cutoff (19.8 V, filtered) stops a robot whose pack sags below it mid-run.
+    /// A firmware that does not measure the battery reports 0, and the check is skipped.
+    pub min_battery_mv: u16,
 }
 
 impl Default for RunConfig {
@@ -52,6 +57,7 @@ impl Default for RunConfig {
             handheld_timeout_us: 2_000_000,
             progress_period_us: 500_000,
             drive_margin_us: 10_000_000,
+            min_battery_mv: 21_000,
         }
     }
 }
@@ -76,6 +82,8 @@ pub struct Observations {
     pub handheld_silent_us: Option<u64>,
     /// Lidar frames recorded in this run.
     pub lidar_frames: u32,
+    /// Battery voltage the firmware reports, mV (0: not measured).
+    pub battery_mv: u16,
 }
 
 /// How a run ended.
@@ -422,6 +430,14 @@ impl RunMachine {
         } else if !blocking.is_empty() {
             missing.push(format!("interlocks {blocking}"));
         }
+        let min_mv = self.config.min_battery_mv;
+        if obs.firmware_ok && obs.battery_mv != 0 && obs.battery_mv < min_mv {
+            missing.push(format!(
+                "battery {:.1} V below {:.1} V",
+                f64::from(obs.battery_mv) / 1e3,
+                f64::from(min_mv) / 1e3
+            ));
+        }
         if missing.is_empty() {
             let Some(a) = &self.active else { return };
             let vx_mps = a.params.speed_mps;
@@ -591,6 +607,7 @@ mod tests {
             odometry_xy_m: Some([1.0, 0.0]),
             handheld_silent_us: Some(100_000),
             lidar_frames: 0,
+            battery_mv: 23_900,
         }
     }
 
@@ -770,6 +787,30 @@ mod tests {
             Action::FinishRecording { outcome: Outcome::Failed(r), .. }
                 if r.contains("camera") && r.contains("ESC_OVER_TEMPERATURE")
         )));
+    }
+
+    #[test]
+    fn a_low_battery_fails_the_checks_by_voltage_and_never_drives() {
+        let mut m = RunMachine::new(RunConfig::default(), 1);
+        m.start(0, params(0.2, 5.0), 1);
+        let mut obs = healthy();
+        obs.battery_mv = 20_400;
+        let mut all = Vec::new();
+        for t in 1..=60 {
+            all.extend(m.tick(t * 100_000, &obs));
+        }
+        assert!(motions(&all).is_empty(), "never drove: {all:?}");
+        assert!(all.iter().any(|a| matches!(
+            a,
+            Action::FinishRecording { outcome: Outcome::Failed(r), .. }
+                if r.contains("battery 20.4 V below 21.0 V")
+        )));
+        // Unmeasured (0) is not "low": the firmware's own cutoff still protects the pack.
+        let mut m = RunMachine::new(RunConfig::default(), 1);
+        m.start(0, params(0.2, 5.0), 1);
+        obs.battery_mv = 0;
+        let a = m.tick(100_000, &obs);
+        assert!(!motions(&a).is_empty(), "{a:?}");
     }
 
     #[test]

@@ -554,6 +554,7 @@ impl Service {
             odometry_xy_m: self.odometry_xy_m,
             handheld_silent_us: self.radio.handheld_silent_us(now),
             lidar_frames: self.stats.lidar_frames,
+            battery_mv: self.mcu.battery_mv(),
         }
     }
 
@@ -627,6 +628,7 @@ impl Service {
             interlocks: obs.interlocks,
             pending_results: self.radio.pending_results(),
             disk_free_mib: recorder::disk_free_mib(&self.config.recording.root).unwrap_or(0),
+            battery_mv: obs.battery_mv,
         }
     }
 

@@ -136,6 +136,9 @@ bit_set! {
         const NO_HOST = 7;
         /// A stop was requested and no new drive command has arrived.
         const STOP_REQUESTED = 8;
+        /// The battery is below the firmware's cutoff (low-pass filtered, so the sag of an
+        /// acceleration does not trip it): ramped to zero, drives refused until it recovers.
+        const BATTERY_LOW = 9;
     }
 }
 
@@ -185,6 +188,9 @@ pub struct Status {
     pub link_errors: u16,
     /// Commands rejected since boot.
     pub rejected_count: u16,
+    /// Battery voltage at the board's supply input, low-pass filtered, millivolts (0: not
+    /// measured).
+    pub battery_mv: u16,
 }
 
 wire_enum! {

@@ -201,6 +201,8 @@ pub struct RobotStatus {
     pub pending_results: u16,
     /// Free space for recordings, MiB (saturating).
     pub disk_free_mib: u32,
+    /// Battery voltage as the firmware reports it, millivolts (0: not measured or no firmware).
+    pub battery_mv: u16,
 }
 
 wire_enum! {

@@ -103,7 +103,7 @@ fn from_firmware() -> impl Strategy<Value = FromFirmware> {
             proptest::sample::select(mcu::DriveMode::ALL),
             any::<u32>(),
             proptest::array::uniform4(esc),
-            any::<[u16; 3]>()
+            any::<[u16; 4]>()
         )
             .prop_map(|(t, mode, il, esc, counts)| {
                 mcu::Status {
@@ -114,6 +114,7 @@ fn from_firmware() -> impl Strategy<Value = FromFirmware> {
                     bus_off_count: counts[0],
                     link_errors: counts[1],
                     rejected_count: counts[2],
+                    battery_mv: counts[3],
                 }
                 .into()
             }),
@@ -243,21 +244,25 @@ fn to_handheld() -> impl Strategy<Value = ToHandheld> {
             any::<[bool; 3]>(),
             any::<u32>(),
             any::<u16>(),
-            any::<u32>()
+            any::<u32>(),
+            any::<u16>()
         )
-            .prop_map(|(phase, run_id, ok, il, pending_results, disk_free_mib)| {
-                radio::RobotStatus {
-                    phase,
-                    run_id,
-                    firmware_ok: ok[0],
-                    lidar_ok: ok[1],
-                    camera_ok: ok[2],
-                    interlocks: Interlocks(il),
-                    pending_results,
-                    disk_free_mib,
+            .prop_map(
+                |(phase, run_id, ok, il, pending_results, disk_free_mib, battery_mv)| {
+                    radio::RobotStatus {
+                        phase,
+                        run_id,
+                        firmware_ok: ok[0],
+                        lidar_ok: ok[1],
+                        camera_ok: ok[2],
+                        interlocks: Interlocks(il),
+                        pending_results,
+                        disk_free_mib,
+                        battery_mv,
+                    }
+                    .into()
                 }
-                .into()
-            }),
+            ),
         (
             any::<u16>(),
             any::<u16>(),

@@ -56,6 +56,7 @@ fn status() -> mcu::Status {
         bus_off_count: 0,
         link_errors: 2,
         rejected_count: 1,
+        battery_mv: 23_870,
     }
 }
 
@@ -203,6 +204,7 @@ fn exemplars() -> Vec<(&'static str, u16, usize, Vec<u8>)> {
                 interlocks: Interlocks::NO_HOST,
                 pending_results: 1,
                 disk_free_mib: 51_200,
+                battery_mv: 23_870,
             },
             none,
         ),
@@ -359,6 +361,7 @@ fn worst_cases_fit_their_bounds_and_the_link_buffer() {
     s.bus_off_count = u16::MAX;
     s.link_errors = u16::MAX;
     s.rejected_count = u16::MAX;
+    s.battery_mv = u16::MAX;
     check(&s);
     check(&mcu::Rejected {
         msg_id: u16::MAX,
@@ -421,7 +424,7 @@ fn hello_decodes_across_versions_and_others_do_not() {
                 assert_eq!(
                     decoded,
                     Ok(ToFirmware::Hello(Hello {
-                        version: 1,
+                        version: protocol::PROTOCOL_VERSION,
                         role: Role::Firmware as u8
                     }))
                 );

@@ -105,6 +105,7 @@ fn run(steps: u64) -> (Vec<u64>, BusTally) {
             esc: &esc,
             link_rx: &link_rx,
             bus: BusState::Active,
+            battery_mv: 24_000,
         };
         // The minimum over a few clones of the same step removes OS preemption from the figure
         // (this machine is shared); the step's own cost is what the firmware cares about.

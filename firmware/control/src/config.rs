@@ -5,6 +5,7 @@
 //! [`Config::validate`] first, so the controller never runs on a configuration that fails it.
 //! The geometry defaults are nominal values for the 295 x 384 mm chassis: measure and set them.
 
+use crate::battery::BatteryConfig;
 use crate::kinematics::{Geometry, Wheel};
 use crate::pid::PidGains;
 use protocol::mcu::McuConfig;
@@ -79,6 +80,8 @@ pub struct Config {
     pub odometry_period_us: u64,
     /// Status report period, microseconds (status is also sent at once when faults change).
     pub status_period_us: u64,
+    /// Battery under-voltage supervision (built in, not on the MCU link).
+    pub battery: BatteryConfig,
 }
 
 impl Default for Config {
@@ -119,6 +122,7 @@ impl Default for Config {
             stall_time_us: 400_000,
             odometry_period_us: 10_000,
             status_period_us: 100_000,
+            battery: BatteryConfig::default(),
         }
     }
 }
@@ -251,6 +255,12 @@ impl Config {
         check(
             (10_000..=10_000_000).contains(&self.status_period_us),
             "status_period_us",
+        )?;
+        let b = &self.battery;
+        check(b.hysteresis_mv <= 5_000, "battery.hysteresis_mv")?;
+        check(
+            (10_000..=10_000_000).contains(&b.filter_time_us),
+            "battery.filter_time_us",
         )?;
         Ok(())
     }

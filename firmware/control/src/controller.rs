@@ -32,6 +32,8 @@ pub struct Inputs<'a> {
     pub link_rx: &'a [u8],
     /// CAN controller state.
     pub bus: BusState,
+    /// Battery voltage this step, mV (0: not measured; see [`crate::battery`]).
+    pub battery_mv: u16,
 }
 
 /// What the shell must do after a step.
@@ -174,6 +176,7 @@ impl Controller {
             apply(machine, now_us, request)
         });
 
+        self.machine.update_battery(now_us, inputs.battery_mv);
         let step = self.machine.step(now_us, inputs.esc, inputs.bus);
 
         let config = *self.machine.config();

@@ -21,6 +21,7 @@
 #![cfg_attr(not(test), no_std)]
 #![warn(clippy::cast_possible_truncation, clippy::cast_sign_loss)]
 
+pub mod battery;
 pub mod busload;
 pub mod config;
 pub mod controller;

@@ -17,6 +17,7 @@
 use protocol::esc::EscFeedback;
 use protocol::mcu::{DriveMode, EscStatus, Odometry as OdometryReport, Status};
 
+use crate::battery::BatteryMonitor;
 use crate::config::{Config, ConfigError};
 use crate::kinematics::{self, Twist};
 use crate::odometry::{self, EncoderUnwrap, Odometry, Pose};
@@ -172,6 +173,7 @@ pub struct Machine {
     setpoint: Twist,
     command_a: [f32; 4],
     unknown_esc_frames: u32,
+    battery: BatteryMonitor,
 }
 
 impl Machine {
@@ -201,6 +203,7 @@ impl Machine {
             setpoint: Twist::ZERO,
             command_a: [0.0; 4],
             unknown_esc_frames: 0,
+            battery: BatteryMonitor::new(),
         })
     }
 
@@ -272,8 +275,22 @@ impl Machine {
         for f in self.esc_faults() {
             i.insert(interlocks_of(f));
         }
+        if self.battery.is_low() {
+            i.insert(Interlocks::BATTERY_LOW);
+        }
         i.insert(self.latched);
         i
+    }
+
+    /// Takes the battery reading of this step, mV (0: not measured); see [`crate::battery`].
+    pub fn update_battery(&mut self, now_us: u64, battery_mv: u16) {
+        self.battery
+            .update(&self.config.battery, battery_mv, now_us);
+    }
+
+    /// The battery monitor.
+    pub fn battery(&self) -> &BatteryMonitor {
+        &self.battery
     }
 
     /// The mode as the MCU link reports it.
@@ -319,6 +336,7 @@ impl Machine {
             bus_off_count: self.bus_off_count,
             link_errors: 0,
             rejected_count: 0,
+            battery_mv: self.battery.filtered_mv(),
         }
     }
 
@@ -509,6 +527,16 @@ impl Machine {
             && !self.latched.contains(Interlocks::HEARTBEAT_LOST)
         {
             self.latched.insert(Interlocks::HEARTBEAT_LOST);
+            self.target = Twist::ZERO;
+            self.limits = ramp_limits(
+                &self.config,
+                self.config.stop_accel_mps2,
+                self.config.stop_jerk_mps3,
+            );
+            self.mode = Mode::Stopping;
+        }
+        if self.mode == Mode::Driving && self.battery.is_low() {
+            // Not latched: drives are refused while it holds (see `interlocks`).
             self.target = Twist::ZERO;
             self.limits = ramp_limits(
                 &self.config,

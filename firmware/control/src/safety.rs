@@ -11,6 +11,7 @@
 //! | heartbeat lost | no heartbeat for `heartbeat_timeout_us` (100 ms) | ramp to zero, drop the drive command, latch | `HEARTBEAT_LOST` | heartbeats again, then a new drive command |
 //! | no host | no `Hello` since boot | block starts | `NO_HOST` | `Hello` |
 //! | stop requested | `Stop` received | ramp to zero (or zero at once if `immediate`) | `STOP_REQUESTED` | a new drive command |
+//! | battery low | filtered supply voltage below `battery.cutoff_mv` (19.8 V; see [`crate::battery`]) | ramp to zero, refuse drives | `BATTERY_LOW` | voltage back above cutoff + hysteresis, then a new drive command |
 //!
 //! The interlocks and per-ESC fault bits are the MCU link's wire types ([`Interlocks`],
 //! [`EscFaults`]), each bit with a name. ESC faults are also reported per wheel with the ESC id.

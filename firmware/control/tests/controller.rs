@@ -22,6 +22,7 @@ struct Bench {
     seq: u16,
     silent: [bool; 4],
     led: LedPattern,
+    battery_mv: u16,
 }
 
 impl Bench {
@@ -36,6 +37,7 @@ impl Bench {
             seq: 0,
             silent: [false; 4],
             led: LedPattern::Idle,
+            battery_mv: 24_000,
         }
     }
 
@@ -68,6 +70,7 @@ impl Bench {
                 esc: &esc,
                 link_rx,
                 bus: BusState::Active,
+                battery_mv: self.battery_mv,
             },
         );
         self.currents = out.currents_raw;
@@ -189,6 +192,86 @@ fn fault_is_reported_by_esc_id_and_name_in_the_step_it_latches() {
     assert!(s.interlocks.names().any(|n| n == "ESC_FEEDBACK_MISSING"));
     b.tick();
     assert_eq!(b.led, LedPattern::EscFault);
+}
+
+fn last_status(b: &Bench) -> protocol::mcu::Status {
+    let Some((_, FromFirmware::Status(s))) = b
+        .received
+        .iter()
+        .rev()
+        .find(|(_, m)| matches!(m, FromFirmware::Status(_)))
+    else {
+        panic!("no status")
+    };
+    *s
+}
+
+#[test]
+fn a_flat_battery_ramps_the_robot_to_rest_and_refuses_drives_until_it_recovers() {
+    let mut b = Bench::new();
+    b.tick();
+    let hello = b.frame(&Hello::new(Role::Onboard));
+    b.tick_with(&hello);
+    b.tick();
+    let d = b.frame(&drive(0.3));
+    b.tick_with(&d);
+    for _ in 0..1000 {
+        b.tick();
+    }
+    assert_eq!(last_status(&b).battery_mv, 24_000, "{:?}", last_status(&b));
+    assert_eq!(
+        last_status(&b).mode,
+        DriveMode::Cruising,
+        "{:?}",
+        last_status(&b)
+    );
+    // A 150 ms sag to 17 V (a hard acceleration on a tired pack) does not stop the run.
+    b.battery_mv = 17_000;
+    for _ in 0..150 {
+        b.tick();
+    }
+    b.battery_mv = 24_000;
+    for _ in 0..300 {
+        b.tick();
+    }
+    assert_eq!(last_status(&b).mode, DriveMode::Cruising);
+    // The pack collapses to 19 V: BATTERY_LOW within about 1.8 s, then a ramp to rest.
+    b.battery_mv = 19_000;
+    let t0 = b.now_us;
+    while !last_status(&b).interlocks.contains(Interlocks::BATTERY_LOW) {
+        assert!(b.now_us - t0 < 2_500_000, "BATTERY_LOW never raised");
+        b.tick();
+    }
+    let s = last_status(&b);
+    assert!(s.battery_mv <= 19_800, "{s:?}");
+    assert!(s.interlocks.names().any(|n| n == "BATTERY_LOW"));
+    for _ in 0..1500 {
+        b.tick();
+    }
+    assert_eq!(b.currents, [0; 4], "at rest with zero current");
+    assert_eq!(last_status(&b).mode, DriveMode::Idle);
+    // A new drive is refused, naming the interlock.
+    let d = b.frame(&drive(0.3));
+    b.tick_with(&d);
+    let rejected = b.received.iter().rev().find_map(|(_, m)| match m {
+        FromFirmware::Rejected(r) => Some(r.clone()),
+        _ => None,
+    });
+    let r = rejected.expect("the drive is rejected");
+    assert_eq!(r.reason, RejectReason::Interlocked);
+    assert!(r.field.as_str().contains("BATTERY_LOW"), "{r:?}");
+    // A fresh pack (swapped, or the sag was load): accepted again once above 20.4 V.
+    b.battery_mv = 25_000;
+    for _ in 0..5000 {
+        b.tick();
+    }
+    assert!(!last_status(&b).interlocks.contains(Interlocks::BATTERY_LOW));
+    let d = b.frame(&drive(0.3));
+    b.tick_with(&d);
+    for _ in 0..1500 {
+        b.tick();
+    }
+    assert_eq!(last_status(&b).mode, DriveMode::Cruising);
 }
 
 #[test]

@@ -10,6 +10,7 @@
 //! | status LED (RGB)      | GPIO, active high| PH12 = red, PH11 = green, PH10 = blue | on-board LED |
 //! | time driver           | TIM2             |                            |                          |
 //! | watchdog              | IWDG             |                            |                          |
+//! | battery sense         | ADC3 channel 8   | PF10 (200k/22k divider)    | on-board, from XT30 in   |
 //!
 //! Another board or chip (F427 Type A, a G4 with FDCAN) is a new `cfg` block here, the chip
 //! feature in Cargo.toml and `--chip` in .cargo/config.toml; main.rs does not change (except for a
@@ -72,6 +73,8 @@ pub struct Board {
     pub led_green: Peri<'static, peripherals::PH11>,
     pub led_blue: Peri<'static, peripherals::PH10>,
     pub iwdg: Peri<'static, peripherals::IWDG>,
+    pub battery_adc: Peri<'static, peripherals::ADC3>,
+    pub battery_sense: Peri<'static, peripherals::PF10>,
 }
 
 impl Board {
@@ -90,6 +93,8 @@ impl Board {
             led_green: p.PH11,
             led_blue: p.PH10,
             iwdg: p.IWDG,
+            battery_adc: p.ADC3,
+            battery_sense: p.PF10,
         }
     }
 }

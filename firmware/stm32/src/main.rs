@@ -5,7 +5,7 @@
 //! ```text
 //!  CAN1 RX irq -> [can_rx] --ESC_FEEDBACK channel--> [control, 1 kHz] --CURRENTS signal--> [can_tx] -> 0x200
 //!  USART6 RX DMA ring -> [link_rx] --LINK_RX pipe--> [control] --LINK_TX pipe--> [link_tx] -> USART6 TX DMA
-//!                                                    [control] -> RGB LED, IWDG pet
+//!  ADC3 (PF10, battery) ----------------------------> [control] -> RGB LED, IWDG pet
 //! ```
 //!
 //! The control task is the only one that decides anything: every millisecond it drains what
@@ -21,6 +21,7 @@ use control::machine::EscSample;
 use control::{Config, Controller, Inputs};
 use defmt::{info, unwrap, warn};
 use embassy_executor::Spawner;
+use embassy_stm32::adc::{Adc, SampleTime};
 use embassy_stm32::can::filter::ListEntry16;
 use embassy_stm32::can::{Can, CanTx, Fifo, Frame, Mailbox, RxBuf, StandardId};
 use embassy_stm32::gpio::{Level, Output, Speed};
@@ -102,12 +103,29 @@ async fn main(spawner: Spawner) {
     let mut watchdog = IndependentWatchdog::new(b.iwdg, WATCHDOG_TIMEOUT_US);
     watchdog.unleash();
 
+    let battery = BatterySense {
+        adc: Adc::new(b.battery_adc),
+        pin: b.battery_sense,
+    };
     let controller = unwrap!(Controller::new(Config::default()).ok());
     spawner.spawn(unwrap!(can_rx_task(can_rx)));
     spawner.spawn(unwrap!(can_tx_task(can_tx)));
     spawner.spawn(unwrap!(link_rx_task(uart_rx)));
     spawner.spawn(unwrap!(link_tx_task(uart_tx)));
-    spawner.spawn(unwrap!(control_task(controller, leds, watchdog)));
+    spawner.spawn(unwrap!(control_task(controller, leds, watchdog, battery)));
+}
+
+/// The battery divider on ADC3 (see `control::battery` for the scaling).
+struct BatterySense {
+    adc: Adc<'static, embassy_stm32::peripherals::ADC3>,
+    pin: embassy_stm32::Peri<'static, embassy_stm32::peripherals::PF10>,
+}
+
+impl BatterySense {
+    /// One conversion (144 cycles at 21 MHz: about 8 us), in mV.
+    fn read_mv(&mut self) -> u16 {
+        control::battery::adc_to_mv(self.adc.blocking_read(&mut self.pin, SampleTime::CYCLES144))
+    }
 }
 
 /// Decodes ESC feedback frames and timestamps them on the MCU clock.
@@ -192,6 +210,7 @@ async fn control_task(
     mut controller: Controller,
     mut leds: [Output<'static>; 3],
     mut watchdog: IndependentWatchdog<'static, embassy_stm32::peripherals::IWDG>,
+    mut battery: BatterySense,
 ) {
     let mut ticker = Ticker::every(Duration::from_millis(1));
     let mut esc = heapless::Vec::<EscSample, 32>::new();
@@ -211,6 +230,7 @@ async fn control_task(
             esc: &esc,
             link_rx: &link_rx[..n],
             bus: board::can_bus_state(),
+            battery_mv: battery.read_mv(),
         };
         let out = controller.step(now_us, &inputs);
 

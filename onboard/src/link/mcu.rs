@@ -150,6 +150,11 @@ impl McuSession {
             .map_or(Interlocks::NO_HOST, |(_, s)| s.interlocks)
     }
 
+    /// The battery voltage of the latest status, mV (0: not measured, or no status yet).
+    pub fn battery_mv(&self) -> u16 {
+        self.status.map_or(0, |(_, s)| s.battery_mv)
+    }
+
     /// Whether the firmware reports the wheels at rest (idle or faulted with zero currents).
     pub fn at_rest(&self) -> bool {
         self.status

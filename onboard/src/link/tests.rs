@@ -224,6 +224,7 @@ fn status(mode: DriveMode, interlocks: Interlocks) -> Status {
         bus_off_count: 0,
         link_errors: 0,
         rejected_count: 0,
+        battery_mv: 23_500,
     }
 }
 
