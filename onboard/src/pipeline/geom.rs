@@ -840,34 +840,43 @@ impl<const K: usize> Best<'_, K> {
         }
     }
 
+    #[inline]
     fn scan(&mut self, cell: &[Entry], q: V3) {
+        let mut bound = self.bound();
         for e in cell {
             let d2 = dist2(e.p, q);
-            if !(d2 <= self.bound()) {
+            // One comparison per point on the common path; it also drops NaN.
+            if !(d2 <= bound) {
                 continue;
             }
-            let candidate = (d2, e.index);
-            if self.n == K && !before(candidate, self.out[K - 1]) {
-                continue;
-            }
-            let mut j = if self.n < K {
-                self.n += 1;
-                self.n - 1
-            } else {
-                K - 1
-            };
-            while j > 0 && before(candidate, self.out[j - 1]) {
-                self.out[j] = self.out[j - 1];
-                j -= 1;
-            }
-            self.out[j] = candidate;
+            self.insert((d2, e.index));
+            bound = self.bound();
         }
+    }
+
+    /// Insert a candidate within the bound, keeping the list sorted and at most K long.
+    fn insert(&mut self, candidate: (f64, u32)) {
+        if self.n == K && !before(candidate, self.out[K - 1]) {
+            return;
+        }
+        let mut j = if self.n < K {
+            self.n += 1;
+            self.n - 1
+        } else {
+            K - 1
+        };
+        while j > 0 && before(candidate, self.out[j - 1]) {
+            self.out[j] = self.out[j - 1];
+            j -= 1;
+        }
+        self.out[j] = candidate;
     }
 }
 
-/// Order of neighbours: by squared distance, then by index.
+/// Order of neighbours: by squared distance, then by index (distances here are never NaN).
+#[allow(clippy::float_cmp)] // Equal distances are exactly the ties to break.
 fn before(a: (f64, u32), b: (f64, u32)) -> bool {
-    a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)).is_lt()
+    a.0 < b.0 || (a.0 == b.0 && a.1 < b.1)
 }
 
 #[cfg(test)]
