@@ -24,7 +24,9 @@
 //!   prisms, parts): median and 95th percentile, metres.
 //! - angles: `onboard::angles::compute_angles` on the built cloud (moved into the vehicle frame by
 //!   the true start pose) against `hil_sim::truth::true_angles`, degrees.
-//! - time: wall time of `Pipeline` calls per lidar frame (decode and simulation excluded), ms.
+//! - time: wall time of `Pipeline` calls per lidar frame (decode and simulation excluded), ms,
+//!   and the thread's CPU time over the same calls (`/proc/thread-self/schedstat`; the pipeline
+//!   is single-threaded), which other processes' load on a shared machine does not inflate.
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -228,13 +230,28 @@ fn wheel_odometry(run: &StraightRun, duration_s: f64) -> Vec<WheelOdometry> {
         .collect()
 }
 
-/// Feed everything in time order; returns the result and the pipeline's wall time in seconds.
+/// CPU time this thread has run, seconds, from the kernel's scheduler statistics
+/// (`/proc/thread-self/schedstat`, first field in nanoseconds); `None` where that file is
+/// missing. On a shared machine it is the figure that other processes' load does not inflate.
+fn thread_cpu_s() -> Option<f64> {
+    let text = std::fs::read_to_string("/proc/thread-self/schedstat").ok()?;
+    let ns: u64 = text.split_whitespace().next()?.parse().ok()?;
+    Some(ns as f64 * 1e-9)
+}
+
+/// Time the pipeline took: wall clock and, where the kernel reports it, this thread's CPU time.
+struct Timing {
+    wall_s: f64,
+    cpu_s: Option<f64>,
+}
+
+/// Feed everything in time order; returns the result and the time the pipeline's calls took.
 fn run_pipeline(
     config: PipelineConfig,
     lidar: &[LidarFrame],
     depth: &[DepthFrame],
     wheel: &[WheelOdometry],
-) -> (BuiltCloud, f64) {
+) -> (BuiltCloud, Timing) {
     enum Ev<'a> {
         L(&'a LidarFrame),
         D(&'a DepthFrame),
@@ -247,6 +264,7 @@ fn run_pipeline(
     events.extend(wheel.iter().map(|w| (w.stamp_s, Ev::W(w))));
     events.sort_by(|a, b| a.0.total_cmp(&b.0));
     let start = Instant::now();
+    let cpu_start = thread_cpu_s();
     let mut pipeline = Pipeline::new(config).expect("valid config");
     for (_, e) in events {
         let r = match e {
@@ -257,7 +275,11 @@ fn run_pipeline(
         r.expect("simulated input is well-formed");
     }
     let built = pipeline.finish();
-    (built, start.elapsed().as_secs_f64())
+    let timing = Timing {
+        wall_s: start.elapsed().as_secs_f64(),
+        cpu_s: cpu_start.zip(thread_cpu_s()).map(|(a, b)| b - a),
+    };
+    (built, timing)
 }
 
 /// Distance from `p` (vehicle frame) to the nearest true surface.
@@ -296,10 +318,11 @@ struct Figures {
     cloud_p95_m: f64,
     angle_error_deg: [f64; 3],
     ms_per_frame: f64,
+    cpu_ms_per_frame: f64,
     points: usize,
 }
 
-fn evaluate(scenario: &Scenario, scene: &Scene, built: &BuiltCloud, secs: f64) -> Figures {
+fn evaluate(scenario: &Scenario, scene: &Scene, built: &BuiltCloud, time: &Timing) -> Figures {
     let truth = |t: f64| pose_of(&scenario.run.pose_at(t).to_isometry());
     let t0 = truth(built.trajectory[0].stamp_s);
     let mut sq = 0.0;
@@ -355,7 +378,8 @@ fn evaluate(scenario: &Scenario, scene: &Scene, built: &BuiltCloud, secs: f64) -
         cloud_median_m: percentile(&dist, 0.5),
         cloud_p95_m: percentile(&dist, 0.95),
         angle_error_deg,
-        ms_per_frame: secs * 1e3 / n,
+        ms_per_frame: time.wall_s * 1e3 / n,
+        cpu_ms_per_frame: time.cpu_s.map_or(f64::NAN, |s| s * 1e3 / n),
         points: built.points_in_world.len(),
     }
 }
@@ -457,7 +481,7 @@ fn export_frames(
     // Our variants append their lines to it; a re-export starts it afresh.
     std::fs::write(
         root.join("ours.tsv"),
-        "# variant slug ate_m drift_per_m ms_per_frame frames\n",
+        "# variant slug ate_m drift_per_m ms_per_frame cpu_ms_per_frame frames\n",
     )?;
     Ok(())
 }
@@ -484,10 +508,11 @@ fn export_trajectory(
     }
     std::fs::write(root.join(format!("ours-{slug}.txt")), text)?;
     let line = format!(
-        "{variant}\t{slug}\t{}\t{}\t{}\t{}\n",
+        "{variant}\t{slug}\t{}\t{}\t{}\t{}\t{}\n",
         figures.ate_m,
         figures.drift_per_m,
         figures.ms_per_frame,
+        figures.cpu_ms_per_frame,
         built.trajectory.len()
     );
     let tsv = root.join("ours.tsv");
@@ -549,9 +574,9 @@ fn main() -> anyhow::Result<()> {
         .collect();
     paths.sort();
     println!(
-        "| scenario | seed | variant | ATE m | drift %/m | cloud median mm | cloud p95 mm | approach err deg | breakover err deg | departure err deg | ms/frame | points |"
+        "| scenario | seed | variant | ATE m | drift %/m | cloud median mm | cloud p95 mm | approach err deg | breakover err deg | departure err deg | ms/frame | cpu ms/frame | points |"
     );
-    println!("|---|---|---|---|---|---|---|---|---|---|---|---|");
+    println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|");
     let mut per_vehicle: Vec<(String, Vec<[f64; 3]>)> = Vec::new();
     for path in &paths {
         let base = Scenario::load(path)?;
@@ -602,8 +627,8 @@ fn main() -> anyhow::Result<()> {
                     config.map.refine = false;
                 }
                 let d: &[DepthFrame] = if v.depth { &depth } else { &[] };
-                let (built, secs) = run_pipeline(config, &lidar, d, &wheel);
-                let f = evaluate(&scenario, &scene, &built, secs);
+                let (built, time) = run_pipeline(config, &lidar, d, &wheel);
+                let f = evaluate(&scenario, &scene, &built, &time);
                 if let Some(dir) = &export_dir {
                     export_trajectory(dir, &format!("{name}-{seed}"), v.name, &built, &f)?;
                 }
@@ -611,7 +636,7 @@ fn main() -> anyhow::Result<()> {
                     errors.push(f.angle_error_deg);
                 }
                 println!(
-                    "| {name} | {seed} | {} | {:.4} | {:.2} | {:.1} | {:.1} | {:+.2} | {:+.2} | {:+.2} | {:.1} | {} |",
+                    "| {name} | {seed} | {} | {:.4} | {:.2} | {:.1} | {:.1} | {:+.2} | {:+.2} | {:+.2} | {:.1} | {:.1} | {} |",
                     v.name,
                     f.ate_m,
                     f.drift_per_m * 100.0,
@@ -621,6 +646,7 @@ fn main() -> anyhow::Result<()> {
                     f.angle_error_deg[1],
                     f.angle_error_deg[2],
                     f.ms_per_frame,
+                    f.cpu_ms_per_frame,
                     f.points
                 );
             }
