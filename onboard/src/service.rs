@@ -156,15 +156,19 @@ const LIVE_QUEUE: usize = 4_096;
 struct LiveWorker {
     data: SyncSender<SensorItem>,
     finish: SyncSender<ProcessInput>,
-    result: Receiver<Result<Processed, String>>,
+    result: Receiver<WorkerMsg>,
 }
 
 impl LiveWorker {
     /// Starts `live` on a thread; `None` (logged) if the thread cannot start.
-    fn spawn(run_id: u32, mut live: Box<dyn LiveRun>) -> Option<Self> {
+    fn spawn(
+        run_id: u32,
+        mut live: Box<dyn LiveRun>,
+        preview: config::PreviewConfig,
+    ) -> Option<Self> {
         let (data, data_rx) = sync_channel::<SensorItem>(LIVE_QUEUE);
         let (finish, finish_rx) = sync_channel::<ProcessInput>(1);
-        let (result_tx, result) = sync_channel(1);
+        let (result_tx, result) = sync_channel(2);
         let spawned = thread::Builder::new()
             .name(format!("live-run-{run_id}"))
             .spawn(move || {
@@ -174,7 +178,14 @@ impl LiveWorker {
                     live.push(item);
                 }
                 if let Ok(input) = finish_rx.recv() {
-                    let _ = result_tx.send(live.finish(&input));
+                    let started = Instant::now();
+                    let outcome = live.finish(&input);
+                    tracing::info!(
+                        run_id,
+                        seconds = started.elapsed().as_secs_f64(),
+                        "live processing finished"
+                    );
+                    complete(outcome, &input.run_dir, preview, &result_tx);
                 }
             });
         match spawned {
@@ -289,7 +300,69 @@ fn read_available(port: &mut dyn Port, buf: &mut [u8]) -> io::Result<usize> {
 
 struct Worker {
     run_id: u32,
-    rx: Receiver<Result<Processed, String>>,
+    rx: Receiver<WorkerMsg>,
+    /// The result has been handed to the run machine; only the files are still being written.
+    delivered: bool,
+}
+
+/// What a processing thread reports, in this order.
+enum WorkerMsg {
+    /// The result and its preview (or why there is none): goes to the handheld at once.
+    Done(Result<Ready, String>),
+    /// `cloud.ply` and `side_view.svg` are written (errors, e.g. a full disk, named).
+    Saved(Vec<String>),
+}
+
+/// A result ready to send.
+struct Ready {
+    result: MeasurementResult,
+    preview_mm: Vec<[i16; 3]>,
+}
+
+/// The end of every processing thread (live or from the recording): the heavy work after the
+/// angles (preview decimation, PLY encoding, writing the files) stays off the service loop, and
+/// the result is reported before the files are written.
+fn complete(
+    outcome: Result<Processed, String>,
+    run_dir: &std::path::Path,
+    preview: config::PreviewConfig,
+    tx: &SyncSender<WorkerMsg>,
+) {
+    let processed = match outcome {
+        Ok(p) => p,
+        Err(e) => {
+            let _ = tx.send(WorkerMsg::Done(Err(e)));
+            return;
+        }
+    };
+    let preview_mm = preview::decimate(
+        &processed.cloud.points_m,
+        preview.voxel_m,
+        preview.max_points,
+    );
+    let _ = tx.send(WorkerMsg::Done(Ok(Ready {
+        result: processed.result,
+        preview_mm,
+    })));
+    let mut errors = Vec::new();
+    let mut ply = Vec::new();
+    match crate::cloud::write_ply(
+        &mut ply,
+        &processed.cloud,
+        crate::cloud::PlyEncoding::BinaryLittleEndian,
+    ) {
+        Ok(()) => {
+            if let Err(e) = recorder::write_atomic(&run_dir.join("cloud.ply"), &ply) {
+                errors.push(e.to_string());
+            }
+        }
+        Err(e) => errors.push(format!("cloud.ply: {e}")),
+    }
+    if let Err(e) = recorder::write_atomic(&run_dir.join("side_view.svg"), processed.svg.as_bytes())
+    {
+        errors.push(e.to_string());
+    }
+    let _ = tx.send(WorkerMsg::Saved(errors));
 }
 
 /// The service state between loop iterations.
@@ -772,43 +845,47 @@ impl Service {
     }
 
     fn check_worker(&mut self, now: u64) {
-        let Some(w) = &self.worker else { return };
-        let outcome = match w.rx.try_recv() {
-            Ok(o) => o,
-            Err(TryRecvError::Empty) => return,
-            Err(TryRecvError::Disconnected) => Err("processing thread died".to_owned()),
-        };
-        let run_id = w.run_id;
-        self.worker = None;
-        let outcome = outcome.map(|p| self.finish_processing(&p));
-        let actions = self.run.processing_finished(now, run_id, outcome);
-        self.execute(now, actions);
+        loop {
+            let Some(w) = &mut self.worker else { return };
+            let msg = match w.rx.try_recv() {
+                Ok(m) => m,
+                Err(TryRecvError::Empty) => return,
+                Err(TryRecvError::Disconnected) if w.delivered => {
+                    self.worker = None;
+                    return;
+                }
+                Err(TryRecvError::Disconnected) => {
+                    WorkerMsg::Done(Err("processing thread died".to_owned()))
+                }
+            };
+            let run_id = w.run_id;
+            match msg {
+                WorkerMsg::Done(outcome) => {
+                    w.delivered = true;
+                    let outcome = outcome.map(|r| self.deliver(&r));
+                    let actions = self.run.processing_finished(now, run_id, outcome);
+                    self.execute(now, actions);
+                }
+                WorkerMsg::Saved(errors) => {
+                    self.worker = None;
+                    for e in errors {
+                        let text = format!("run {run_id}: {e}");
+                        tracing::error!("{text}");
+                        self.radio.send_log(LogLevel::Error, &text);
+                    }
+                }
+            }
+        }
     }
 
-    fn finish_processing(&mut self, p: &Processed) {
-        let preview_cfg = self.config.preview;
-        let preview_mm = preview::decimate(
-            &p.cloud.points_m,
-            preview_cfg.voxel_m,
-            preview_cfg.max_points,
-        );
-        // The result goes out first: the files follow (they take longer and may hit a full disk).
-        if let Err(e) = self.radio.deliver(p.result.clone(), &preview_mm) {
+    /// The result goes out first; `result.json` follows (small); the cloud and the SVG are
+    /// written by the processing thread.
+    fn deliver(&mut self, r: &Ready) {
+        if let Err(e) = self.radio.deliver(r.result.clone(), &r.preview_mm) {
             tracing::error!("cannot send the result: {e}");
         }
-        if let Some(r) = &mut self.recorder {
-            r.save_result(&ResultRecord::from_wire(&p.result));
-            let mut ply = Vec::new();
-            if crate::cloud::write_ply(
-                &mut ply,
-                &p.cloud,
-                crate::cloud::PlyEncoding::BinaryLittleEndian,
-            )
-            .is_ok()
-            {
-                r.save_file("cloud.ply", &ply);
-            }
-            r.save_file("side_view.svg", p.svg.as_bytes());
+        if let Some(rec) = &mut self.recorder {
+            rec.save_result(&ResultRecord::from_wire(&r.result));
         }
     }
 
@@ -829,7 +906,7 @@ impl Service {
                     self.live = self
                         .processor
                         .start_live()
-                        .and_then(|live| LiveWorker::spawn(run_id, live));
+                        .and_then(|live| LiveWorker::spawn(run_id, live, self.config.preview));
                     match RunRecorder::begin(
                         &self.config.recording.root,
                         run_id,
@@ -918,19 +995,27 @@ impl Service {
                 self.worker = Some(Worker {
                     run_id,
                     rx: live.result,
+                    delivered: false,
                 });
                 return;
             }
         }
-        let (tx, rx): (SyncSender<_>, _) = sync_channel(1);
+        let (tx, rx) = sync_channel(2);
         let processor = Arc::clone(&self.processor);
+        let preview = self.config.preview;
         let spawned = thread::Builder::new()
             .name(format!("process-run-{run_id}"))
             .spawn(move || {
-                let _ = tx.send(processor.process(&input));
+                complete(processor.process(&input), &input.run_dir, preview, &tx);
             });
         match spawned {
-            Ok(_) => self.worker = Some(Worker { run_id, rx }),
+            Ok(_) => {
+                self.worker = Some(Worker {
+                    run_id,
+                    rx,
+                    delivered: false,
+                });
+            }
             Err(e) => {
                 let now = self.now_us();
                 let actions = self.run.processing_finished(
