@@ -102,6 +102,19 @@ fn arrivals(duration_s: f64) -> Vec<Arrival> {
     out
 }
 
+/// What the service does with one arrival.
+fn push(live: &mut RunBuilder, a: &Arrival) {
+    match a {
+        Arrival::Packet {
+            wall_ns,
+            payload,
+            position,
+        } => live.push_lidar_packet(*wall_ns, payload, *position),
+        Arrival::Odometry { wall_us, odometry } => live.push_odometry(*wall_us, odometry),
+    }
+    live.release(REORDER_WINDOW_S);
+}
+
 fn config() -> ProcessConfig {
     let mut c = ProcessConfig {
         min_cloud_points: 0,
@@ -134,23 +147,19 @@ fn live_processing_builds_the_same_cloud_as_the_recording() {
     let src = "192.168.1.201:2368".parse().unwrap();
     let data_dst = "192.168.1.100:2368".parse().unwrap();
     let position_dst = "192.168.1.100:8308".parse().unwrap();
-    for a in arrivals(3.0) {
+    for a in &arrivals(3.0) {
         match a {
             Arrival::Packet {
                 wall_ns,
                 payload,
                 position,
             } => {
-                let dst = if position { position_dst } else { data_dst };
-                recorder.lidar_packet(wall_ns, src, dst, &payload);
-                live.push_lidar_packet(wall_ns, &payload, position);
+                let dst = if *position { position_dst } else { data_dst };
+                recorder.lidar_packet(*wall_ns, src, dst, payload);
             }
-            Arrival::Odometry { wall_us, odometry } => {
-                recorder.odometry(wall_us, &odometry);
-                live.push_odometry(wall_us, &odometry);
-            }
+            Arrival::Odometry { wall_us, odometry } => recorder.odometry(*wall_us, odometry),
         }
-        live.release(REORDER_WINDOW_S);
+        push(&mut live, a);
     }
     let dir = recorder.dir().to_owned();
     assert!(recorder.finish(RecordedOutcome::Completed).is_empty());
@@ -174,15 +183,7 @@ fn live_processing_keeps_up_during_the_drive() {
     // (0.5 s at 10 Hz: about 5) and the last partial revolutions are still waiting.
     let mut live = RunBuilder::new(&config()).unwrap();
     for a in arrivals(3.0) {
-        match a {
-            Arrival::Packet {
-                wall_ns,
-                payload,
-                position,
-            } => live.push_lidar_packet(wall_ns, &payload, position),
-            Arrival::Odometry { wall_us, odometry } => live.push_odometry(wall_us, &odometry),
-        }
-        live.release(REORDER_WINDOW_S);
+        push(&mut live, &a);
     }
     let frames = live.counts().lidar_frames;
     let done = live.frames_processed();

@@ -527,23 +527,11 @@ impl Machine {
             && !self.latched.contains(Interlocks::HEARTBEAT_LOST)
         {
             self.latched.insert(Interlocks::HEARTBEAT_LOST);
-            self.target = Twist::ZERO;
-            self.limits = ramp_limits(
-                &self.config,
-                self.config.stop_accel_mps2,
-                self.config.stop_jerk_mps3,
-            );
-            self.mode = Mode::Stopping;
+            self.safety_stop();
         }
         if self.mode == Mode::Driving && self.battery.is_low() {
             // Not latched: drives are refused while it holds (see `interlocks`).
-            self.target = Twist::ZERO;
-            self.limits = ramp_limits(
-                &self.config,
-                self.config.stop_accel_mps2,
-                self.config.stop_jerk_mps3,
-            );
-            self.mode = Mode::Stopping;
+            self.safety_stop();
         }
         if !self.hard_faults().is_empty() {
             self.mode = Mode::Faulted;
@@ -600,6 +588,17 @@ impl Machine {
             }
         }
         currents_raw
+    }
+
+    /// Drops the drive command and ramps to zero with the safety-stop limits.
+    fn safety_stop(&mut self) {
+        self.target = Twist::ZERO;
+        self.limits = ramp_limits(
+            &self.config,
+            self.config.stop_accel_mps2,
+            self.config.stop_jerk_mps3,
+        );
+        self.mode = Mode::Stopping;
     }
 
     fn rest(&mut self) {

@@ -145,14 +145,7 @@ fn handshake_drive_and_report_rates() {
     assert!((last.vx_mps - 0.3).abs() < 0.01, "{last:?}");
     assert!(last.x_m > 0.4, "{last:?}");
     assert!(last.stamp_us > t0);
-    let Some((_, FromFirmware::Status(s))) = b
-        .received
-        .iter()
-        .rev()
-        .find(|(_, m)| matches!(m, FromFirmware::Status(_)))
-    else {
-        panic!("no status")
-    };
+    let s = last_status(&b);
     assert_eq!(s.mode, DriveMode::Cruising);
     assert!(s.interlocks.is_empty(), "{}", s.interlocks);
     assert_eq!(b.led, LedPattern::Driving);
