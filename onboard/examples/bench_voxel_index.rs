@@ -13,6 +13,9 @@
 //! ground within 8 m, an underbody plane 0.35 m up, four tyre cylinders, 3 mm noise; queries are
 //! points of the same surfaces moved by up to 3 cm (a registration's moved features). Cases:
 //! - `scan k=5 r=0.2 voxel=0.2`: the scan-to-scan target (`max_correspondence_m` voxels);
+//! - `scan ... voxel=0.1` and `voxel=0.05`: the same with voxels smaller than the radius, to show
+//!   the trade-off (more voxels to visit; `old27` is faster there only because it scans 27 voxels
+//!   whatever the radius and so misses neighbours: its mismatches);
 //! - `map k=5 r=0.2 voxel=0.5`: the scan-to-map feature map (`feature_voxel_m` voxels);
 //! - `filter within r=0.05 voxel=0.05`: the bilateral filter's neighbourhoods (all points within
 //!   the radius; `old27` is the filter's former loop).
