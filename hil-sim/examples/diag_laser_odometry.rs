@@ -210,6 +210,8 @@ fn main() -> anyhow::Result<()> {
     let mut sum_sq = [0.0; 6];
     let mut degenerate = [0usize; 6];
     let mut n = 0usize;
+    // Sum of estimated and true x, and the count, over the frames where x was determined.
+    let mut x_determined = (0.0, 0.0, 0usize);
     let mut travelled_m = 0.0;
     let explain = args.iter().any(|a| a == "--explain");
     let dump = flag("--dump");
@@ -287,6 +289,11 @@ fn main() -> anyhow::Result<()> {
                 degenerate[k] += usize::from(reg.degenerate[k]);
             }
             travelled_m += tru[3];
+            if !reg.degenerate[3] {
+                x_determined.0 += est[3];
+                x_determined.1 += tru[3];
+                x_determined.2 += 1;
+            }
             n += 1;
             if per_frame {
                 println!(
@@ -329,6 +336,11 @@ fn main() -> anyhow::Result<()> {
         "summed x error {:+.4} m = {:+.2} % of the distance",
         sum[3],
         100.0 * sum[3] / travelled_m.abs().max(1e-9)
+    );
+    println!(
+        "x determined in {} frames: estimated / true distance there {:.4}",
+        x_determined.2,
+        x_determined.0 / x_determined.1
     );
     Ok(())
 }
