@@ -271,7 +271,9 @@ impl Default for FusionConfig {
             reference_frames: 10,
             rotation_tolerance_radps: [0.01, 0.01, 0.01],
             translation_tolerance_mps: [0.02, 0.02, 0.02],
-            wheel_scale_frames: 100,
+            // Off: on the slip-free simulated passes the estimate drifted off 1 (laser x in the
+            // determined frames is not unbiased enough yet); see the README's pipeline figures.
+            wheel_scale_frames: 0,
         }
     }
 }

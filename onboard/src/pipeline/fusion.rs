@@ -400,7 +400,10 @@ mod tests {
     #[test]
     fn a_laser_that_sees_x_calibrates_slipping_wheels() {
         // The wheels report 3 % more than the robot travels; the laser sees x every other frame.
-        let mut f = Fusion::new(FusionConfig::default());
+        let mut f = Fusion::new(FusionConfig {
+            wheel_scale_frames: 100,
+            ..FusionConfig::default()
+        });
         let wheel = SourceRate {
             rate: [0.0, 0.0, 0.0, 0.3, 0.0, 0.0],
             available: [false, false, true, true, true, false],
