@@ -407,6 +407,13 @@ pub fn compute_angles(
         band_y_m,
         &mut counts,
     );
+    let mut body = body;
+    let detached = drop_detached(&mut body.samples, front, rear);
+    if detached > 0 {
+        warnings.push(format!(
+            "{detached} envelope samples lie beyond a gap of more than {DETACHED_GAP_M} m ahead of or behind the vehicle's body and were ignored (ground noise, kerbs or other objects)"
+        ));
+    }
     let findings = find_angles(&body.samples, front, rear, config.zone, &frame);
     let plane = settled.plane;
     let heading = frame.x_axis_in_cloud;
@@ -618,7 +625,8 @@ fn classify(
         ends,
         noise_sigma_m,
         bin_m,
-        unsupported_bins: env.unsupported_bins + env.fringe_bins,
+        // Fringe bins are the expected smear of a surface's edge, not missing data: not warned.
+        unsupported_bins: env.unsupported_bins,
     }
 }
 
@@ -659,6 +667,7 @@ fn fit_tyres(
             gap_m: config.tyre_gap_m,
             noise_m: noise,
             inward_sign: if s.y < centre_y { 1.0 } else { -1.0 },
+            seed: config.seed,
         };
         match tyres::fit_tyre(in_frame, s, params) {
             Some(f) => fits.push(f),
@@ -862,6 +871,36 @@ fn auto_bin(points: &[V3], min_support: usize) -> f64 {
         bin *= 2.0;
     }
     bin
+}
+
+/// Largest gap along x inside the vehicle's side-view envelope ahead of the front axle or behind
+/// the rear one (metres); the first step from the axle may add the tyre's free radius.
+const DETACHED_GAP_M: f64 = 0.5;
+
+/// Drop the envelope samples that are not connected to the vehicle: walking out from each axle,
+/// the envelope ends at the first gap along x wider than [`DETACHED_GAP_M`] (the first step from
+/// the axle may add the tyre's free radius). Whatever lies beyond is not the vehicle: on the
+/// pickup's wheel-odometry cloud, ground 8 m behind the rear axle rose 3.3 cm above the fitted
+/// plane and gave a departure angle of 0.2 degrees. Samples between the axles are all kept.
+/// Returns how many were dropped. `samples` must be sorted by x.
+fn drop_detached(samples: &mut Vec<EnvelopeSample>, front: Axle, rear: Axle) -> usize {
+    let mut front_end = front.x_m + front.free_radius_m;
+    for s in samples.iter().filter(|s| s.x_m > front.x_m) {
+        if s.x_m - front_end > DETACHED_GAP_M {
+            break;
+        }
+        front_end = front_end.max(s.x_m);
+    }
+    let mut rear_end = rear.x_m - rear.free_radius_m;
+    for s in samples.iter().rev().filter(|s| s.x_m < rear.x_m) {
+        if rear_end - s.x_m > DETACHED_GAP_M {
+            break;
+        }
+        rear_end = rear_end.min(s.x_m);
+    }
+    let before = samples.len();
+    samples.retain(|s| s.x_m >= rear_end && s.x_m <= front_end);
+    before - samples.len()
 }
 
 struct Findings {
@@ -1070,8 +1109,47 @@ fn finding_warnings(
     }
     if unsupported_bins > 0 {
         w.push(format!(
-            "{unsupported_bins} envelope bins were ignored (fewer than {} points in their lowest mode, or noise fringe)",
+            "{unsupported_bins} envelope bins were ignored (fewer than {} points in their lowest mode)",
             config.min_support
         ));
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn sample(x_m: f64) -> EnvelopeSample {
+        EnvelopeSample {
+            x_m,
+            z_m: 0.3,
+            y_m: 0.0,
+            support: 10,
+        }
+    }
+
+    #[test]
+    fn envelope_beyond_a_gap_is_not_the_vehicle() {
+        let axle = |x_m| Axle {
+            x_m,
+            loaded_radius_m: 0.33,
+            free_radius_m: 0.34,
+        };
+        let (front, rear) = (axle(1.5), axle(-1.5));
+        // Body from 1 cm outside each tyre to 0.9 m beyond it, 2 cm steps; between the axles a
+        // 0.8 m hole (kept: between the axles nothing is dropped); detached clusters 0.6 m beyond
+        // each end of the body.
+        let mut xs: Vec<f64> = (0..45).map(|i| 1.85 + 0.02 * f64::from(i)).collect();
+        xs.extend(xs.clone().iter().map(|x| -x));
+        xs.extend([-0.5, 0.3, 3.4, 3.45, -3.4]);
+        xs.sort_by(f64::total_cmp);
+        let mut samples: Vec<EnvelopeSample> = xs.iter().map(|&x| sample(x)).collect();
+        assert_eq!(drop_detached(&mut samples, front, rear), 3);
+        assert_eq!(samples.len(), 92);
+        assert!(samples.iter().all(|s| s.x_m.abs() < 2.8));
+        // A body that starts within the tyre's radius plus the gap is connected.
+        let mut near: Vec<EnvelopeSample> = [2.3, 2.4, -2.3].map(sample).to_vec();
+        near.sort_by(|a, b| a.x_m.total_cmp(&b.x_m));
+        assert_eq!(drop_detached(&mut near, front, rear), 0);
     }
 }

@@ -14,6 +14,9 @@
 
 use std::collections::HashMap;
 
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
 use super::geom::{Circle, V3, fit_circle, median};
 
 /// Grid cell for seed clustering (metres).
@@ -139,6 +142,8 @@ pub(crate) struct TyreParams {
     pub noise_m: f64,
     /// Which side the vehicle centreline lies on: +1 if the centreline has larger y than this tyre.
     pub inward_sign: f64,
+    /// RANSAC seed.
+    pub seed: u64,
 }
 
 /// Fit one tyre around its seed; `None` if no consistent circle is found.
@@ -162,20 +167,22 @@ pub(crate) fn fit_tyre(points: &[V3], seed: &Seed, params: TyreParams) -> Option
         .collect();
     let h = params.h_hi;
     let r0 = ((seed.half_chord_m.powi(2) + h * h) / (2.0 * h)).clamp(0.15, 1.0);
-    let mut circle = Circle {
-        u: 0.5 * (seed.x_min + seed.x_max),
-        v: r0,
-        r: r0,
-    };
+    let centre_x = 0.5 * (seed.x_min + seed.x_max);
+    let edges = slice_edges(&cand, 2.0 * r0 + 0.3, params.gap_m);
+    let mut circle = ground_constrained_ransac(&edges, centre_x, params)?;
+    // Least squares on the RANSAC inliers above the bulge zone of the fitted centre height (a
+    // loaded tyre is flattened and bulges near the road), trimmed; repeated as the circle moves.
     let mut used = 0;
     let mut rms = f64::NAN;
-    for _ in 0..5 {
-        let sil = silhouette(&cand, circle, params.gap_m);
-        let sil: Vec<[f64; 2]> = sil
-            .into_iter()
-            .filter(|p| p[1] > 0.3 * circle.v.max(0.1))
+    for _ in 0..3 {
+        let low = 0.3 * circle.v.max(0.1);
+        let tol = inlier_tolerance(params.noise_m);
+        let inliers: Vec<[f64; 2]> = edges
+            .iter()
+            .copied()
+            .filter(|p| p[1] > low && circle_residual(*p, circle).abs() < tol)
             .collect();
-        let (c, n, e) = trimmed_circle(&sil, params.noise_m)?;
+        let (c, n, e) = trimmed_circle(&inliers, params.noise_m)?;
         let moved = (c.u - circle.u).abs() + (c.v - circle.v).abs() + (c.r - circle.r).abs();
         circle = c;
         used = n;
@@ -200,53 +207,111 @@ pub(crate) fn fit_tyre(points: &[V3], seed: &Seed, params: TyreParams) -> Option
     })
 }
 
-/// Outermost connected point per 3-degree sector around `c`.
-fn silhouette(cand: &[[f64; 2]], c: Circle, gap_m: f64) -> Vec<[f64; 2]> {
-    const SECTORS: usize = 120;
-    let mut sectors: Vec<Vec<(f64, usize)>> = vec![Vec::new(); SECTORS];
-    for (i, p) in cand.iter().enumerate() {
-        let (du, dv) = (p[0] - c.u, p[1] - c.v);
-        let rho = du.hypot(dv);
-        if rho > 1.6 * c.r {
-            continue;
-        }
-        let t = (dv.atan2(du) + std::f64::consts::PI) / std::f64::consts::TAU;
-        let k = ((t * SECTORS as f64) as usize).min(SECTORS - 1);
-        sectors[k].push((rho, i));
-    }
-    for s in &mut sectors {
-        s.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
-    }
-    // Sparse clouds have wide radial steps inside the tyre too: the gap that ends the tyre is at
-    // least 4 x the median step between consecutive points of a sector (inside 0.5 .. 1 radius).
-    let mut steps: Vec<f64> = sectors
+fn circle_residual(p: [f64; 2], c: Circle) -> f64 {
+    (p[0] - c.u).hypot(p[1] - c.v) - c.r
+}
+
+/// Height of the horizontal slices whose ends are the tyre's side-view silhouette (metres).
+const SLICE_M: f64 = 0.01;
+
+/// The tyre's side-view silhouette candidates: the ends of the connected runs of each horizontal
+/// slice.
+///
+/// Per slice of [`SLICE_M`] below `z_max`, the points are sorted along x and split into runs at
+/// every gap wider than `gap_m` (or 4 x the slice's median step, in sparse clouds). Both ends of
+/// every run are candidates: the tyre's outline, but also the rim's edge, the body faces, sills or
+/// mud flaps beside the tyre; [`ground_constrained_ransac`] keeps the circle that stands on the
+/// ground and explains the most of them.
+///
+/// Why slices, not the outermost point per angular sector around a guessed centre: a low sensor
+/// sees only the tyre's lower part (a VLP-16 0.12 m up sees about the lower two thirds), and the
+/// upper boundary of what it sees lies well inside the circle. Every angular sector above the
+/// centre then returns a point of that boundary, which pulls the fit down (on the sedan demo's
+/// cloud the fitted centre heights were 2 cm low and one rear tyre failed outright). A slice's
+/// run ends lie on the circle wherever the slice reaches the tyre's sides.
+pub(crate) fn slice_edges(cand: &[[f64; 2]], z_max: f64, gap_m: f64) -> Vec<[f64; 2]> {
+    let mut keyed: Vec<(i64, [f64; 2])> = cand
         .iter()
-        .flat_map(|s| {
-            s.windows(2)
-                .filter(|w| w[0].0 >= 0.5 * c.r && w[1].0 <= c.r)
-                .map(|w| w[1].0 - w[0].0)
-        })
+        .filter(|p| p[1] < z_max)
+        .map(|p| ((p[1] / SLICE_M).floor() as i64, *p))
         .collect();
-    let gap_m = gap_m.max(4.0 * median(&mut steps).unwrap_or(0.0));
-    let mut out = Vec::with_capacity(SECTORS);
-    for s in sectors {
-        let mut last: Option<(f64, usize)> = None;
-        for &(rho, i) in &s {
-            if let Some((prev, _)) = last
-                && rho - prev > gap_m
-                && prev >= 0.5 * c.r
-            {
-                break;
+    keyed.sort_unstable_by(|a, b| a.0.cmp(&b.0).then(a.1[0].total_cmp(&b.1[0])));
+    let mut out = Vec::new();
+    for slice in keyed.chunk_by(|a, b| a.0 == b.0) {
+        let xs: Vec<[f64; 2]> = slice.iter().map(|(_, p)| *p).collect();
+        let mut steps: Vec<f64> = xs.windows(2).map(|w| w[1][0] - w[0][0]).collect();
+        let gap = gap_m.max(4.0 * median(&mut steps).unwrap_or(0.0));
+        for run in xs.chunk_by(|a, b| b[0] - a[0] <= gap) {
+            if let [first, .., last] = run {
+                out.push(*first);
+                out.push(*last);
             }
-            last = Some((rho, i));
-        }
-        if let Some((rho, i)) = last
-            && rho >= 0.5 * c.r
-        {
-            out.push(cand[i]);
         }
     }
     out
+}
+
+/// Distance within which a silhouette point supports a circle (metres).
+fn inlier_tolerance(noise_m: f64) -> f64 {
+    (3.0 * noise_m).max(0.008)
+}
+
+/// RANSAC over silhouette points (seeded): circles through three of them whose centre lies
+/// within 0.3 m of the footprint's centre along x and that stand on the ground (the lowest point
+/// at most 2 cm below it, a deflection of at most 15 % of the radius). The hypothesis with the
+/// most points within [`inlier_tolerance`] wins (ties: the smaller sum of residuals).
+fn ground_constrained_ransac(
+    edges: &[[f64; 2]],
+    centre_x: f64,
+    params: TyreParams,
+) -> Option<Circle> {
+    const HYPOTHESES: usize = 400;
+    if edges.len() < 6 {
+        return None;
+    }
+    let mut rng = ChaCha8Rng::seed_from_u64(params.seed);
+    let tol = inlier_tolerance(params.noise_m);
+    let mut best: Option<(usize, f64, Circle)> = None;
+    for _ in 0..HYPOTHESES {
+        let [a, b, c] = [0, 1, 2].map(|_| edges[rng.random_range(0..edges.len())]);
+        let Some(circle) = circle_through(a, b, c) else {
+            continue;
+        };
+        let stands = circle.v - circle.r <= 0.02 && circle.r - circle.v <= 0.15 * circle.r;
+        if !stands || (circle.u - centre_x).abs() > 0.3 || !(0.1..=1.2).contains(&circle.r) {
+            continue;
+        }
+        let (mut count, mut sum) = (0, 0.0);
+        for p in edges {
+            let d = circle_residual(*p, circle).abs();
+            if d < tol {
+                count += 1;
+                sum += d;
+            }
+        }
+        if best.is_none_or(|(n, s, _)| count > n || (count == n && sum < s)) {
+            best = Some((count, sum, circle));
+        }
+    }
+    best.filter(|(n, _, _)| *n >= 6).map(|(_, _, c)| c)
+}
+
+/// The circle through three points, `None` if they are (nearly) collinear.
+fn circle_through(a: [f64; 2], b: [f64; 2], c: [f64; 2]) -> Option<Circle> {
+    let (bx, by) = (b[0] - a[0], b[1] - a[1]);
+    let (cx, cy) = (c[0] - a[0], c[1] - a[1]);
+    let d = 2.0 * (bx * cy - by * cx);
+    if d.abs() < 1e-9 {
+        return None;
+    }
+    let (b2, c2) = (bx * bx + by * by, cx * cx + cy * cy);
+    let u = (cy * b2 - by * c2) / d;
+    let v = (bx * c2 - cx * b2) / d;
+    Some(Circle {
+        u: a[0] + u,
+        v: a[1] + v,
+        r: u.hypot(v),
+    })
 }
 
 /// Circle fit, then refit without residuals beyond 3 sigma (robust MAD), twice.
@@ -312,5 +377,115 @@ fn lateral_faces(points: &[V3], seed: &Seed, c: Circle, params: TyreParams) -> (
         (hi, lo)
     } else {
         (lo, hi)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Gaussian sample by Box-Muller (no extra dependency).
+    fn gauss(rng: &mut ChaCha8Rng) -> f64 {
+        let u1: f64 = rng.random_range(f64::EPSILON..1.0);
+        let u2: f64 = rng.random_range(0.0..1.0);
+        (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
+    }
+
+    /// A tyre as a VLP-16 0.12 m up sees it from under the car: the inner sidewall annulus
+    /// (rim to tread) and the tread's front and back, only below `seen_top_m` (the sensor does not
+    /// see the upper third), sampled every `spacing_m`, with range noise `noise_m` along x (the
+    /// rays that graze a tyre's front and back run along the vehicle). Beside it: the ground and
+    /// the vertical body faces 0.46 m ahead of and behind the axle.
+    pub(super) fn seen_tyre(
+        centre_x: f64,
+        loaded_m: f64,
+        free_m: f64,
+        spacing_m: f64,
+        noise_m: f64,
+    ) -> Vec<V3> {
+        let mut rng = ChaCha8Rng::seed_from_u64(7);
+        let (inner_y, width, rim) = (0.70, 0.245, 0.24);
+        let seen_top_m = 0.48;
+        let mut pts = Vec::new();
+        let steps = |lo: f64, hi: f64| {
+            let n = ((hi - lo) / spacing_m).ceil() as usize;
+            (0..=n).map(move |i| lo + (hi - lo) * i as f64 / n as f64)
+        };
+        for x in steps(centre_x - free_m, centre_x + free_m) {
+            for z in steps(0.0, seen_top_m) {
+                let rho = (x - centre_x).hypot(z - loaded_m);
+                // Inside the free circle and above the flattened contact patch.
+                if rho > rim && rho < free_m && z > 0.0 {
+                    pts.push([x + noise_m * gauss(&mut rng), inner_y, z]);
+                }
+            }
+        }
+        // Tread front and back, across the width.
+        for z in steps(0.0, seen_top_m) {
+            let h = free_m * free_m - (z - loaded_m).powi(2);
+            if h <= 0.0 {
+                continue;
+            }
+            for y in steps(inner_y, inner_y + width) {
+                for side in [-1.0, 1.0] {
+                    pts.push([centre_x + side * h.sqrt() + noise_m * gauss(&mut rng), y, z]);
+                }
+            }
+        }
+        for x in steps(centre_x - 1.2, centre_x + 1.2) {
+            for y in steps(0.3, 1.1) {
+                pts.push([x, y, 0.002 * gauss(&mut rng)]);
+            }
+        }
+        for side in [-1.0, 1.0] {
+            for z in steps(0.17, 0.45) {
+                for y in steps(0.70, 0.90) {
+                    pts.push([centre_x + side * 0.46 + noise_m * gauss(&mut rng), y, z]);
+                }
+            }
+        }
+        pts
+    }
+
+    fn fit(points: &[V3], noise_m: f64) -> TyreFit {
+        let (seeds, _) = find_seeds(points, 0.025, 0.08);
+        let params = TyreParams {
+            h_lo: 0.025,
+            h_hi: 0.08,
+            gap_m: 0.025,
+            noise_m,
+            inward_sign: -1.0,
+            seed: 1,
+        };
+        fit_tyre(points, &seeds[0], params).expect("a tyre fit")
+    }
+
+    #[test]
+    fn sparse_noisy_lower_two_thirds_give_the_centre() {
+        // 2 cm spacing, 4 mm noise: the cloud a 1-2 cm output voxel leaves of a VLP-16 pass.
+        // The angular-sector silhouette used before took the upper boundary of the seen part for
+        // the tyre's outline and put the centre about 4 cm low here.
+        let pts = seen_tyre(0.3, 0.335, 0.335, 0.02, 0.004);
+        let f = fit(&pts, 0.004);
+        assert!((f.centre_x - 0.3).abs() < 0.005, "{f:?}");
+        assert!((f.loaded_radius_m - 0.335).abs() < 0.008, "{f:?}");
+        assert!((f.free_radius_m - 0.335).abs() < 0.012, "{f:?}");
+    }
+
+    #[test]
+    fn deflected_tyre_keeps_centre_height_and_free_radius_apart() {
+        // Loaded radius 0.32 (centre height), free tread radius 0.335, dense and noiseless.
+        let pts = seen_tyre(-0.2, 0.32, 0.335, 0.005, 0.0);
+        let f = fit(&pts, 0.0);
+        assert!((f.centre_x + 0.2).abs() < 0.002, "{f:?}");
+        assert!((f.loaded_radius_m - 0.32).abs() < 0.003, "{f:?}");
+        assert!((f.free_radius_m - 0.335).abs() < 0.003, "{f:?}");
+    }
+
+    #[test]
+    fn circle_through_three_points() {
+        let c = circle_through([1.0, 0.0], [0.0, 1.0], [-1.0, 0.0]).expect("a circle");
+        assert!(c.u.abs() < 1e-12 && c.v.abs() < 1e-12 && (c.r - 1.0).abs() < 1e-12);
+        assert!(circle_through([0.0, 0.0], [1.0, 1.0], [2.0, 2.0]).is_none());
     }
 }
