@@ -3,12 +3,18 @@
 //! 1. Seeds: points a few centimetres above the ground (between `seed_low_m` and `seed_high_m`) are
 //!    almost only tyre: cluster them on a 5 cm grid; keep compact clusters (a vehicle body part that
 //!    low is wide, a tyre's footprint is not). The four largest are the tyres.
-//! 2. Side-view circle per tyre: points in the tyre's lateral slab, projected onto the x-z plane.
-//!    The silhouette (outermost point per 3-degree sector, walking outward from the centre and
-//!    stopping at the first radial gap wider than `tyre_gap_m`, or 4 x the median radial step in
-//!    sparse clouds, so the wheel arch and sills are not taken) is fitted with a geometric least-squares circle, trimmed at 3 sigma, iterated from a
-//!    chord-based first guess. Silhouette points lower than 30 % of the centre height are not used:
-//!    a loaded tyre is flattened and bulges near the road.
+//! 2. Side-view circle per tyre: points in the tyre's lateral slab, projected onto the x-z plane,
+//!    cut into 1 cm horizontal slices; each slice splits into runs at gaps wider than `tyre_gap_m`
+//!    (or 4 x the slice's median step in sparse clouds), and the ends of every run are silhouette
+//!    candidates ([`slice_edges`]). A seeded RANSAC keeps the circle through three candidates that
+//!    stands on the ground (lowest point within 2 cm above to 15 % of the radius below it), lies
+//!    over the footprint, and explains the most candidates; then geometric least squares on its
+//!    inliers, trimmed at 3 sigma. Candidates lower than 30 % of the centre height are not used:
+//!    a loaded tyre is flattened and bulges near the road. Rim edges, body faces, sills and mud
+//!    flaps beside the tyre are candidates too, but no ground-standing circle explains them.
+//!    Known bias: range noise along the rays that graze the tyre's front and back widens every
+//!    slice, so with 1.5 cm lidar noise the tread radius comes out 1-2.5 cm large and the centre
+//!    height up to 1.5 cm low (the angles move by a few hundredths of a degree for that).
 //! 3. The static loaded radius is the centre's height above the ground; the fitted radius is the
 //!    free tread radius. The lateral faces are the 1 % / 99 % quantiles of y of the points in the disc.
 
