@@ -296,6 +296,11 @@ pub struct MapConfig {
     pub output_max_range_m: f64,
     /// Keep ground points in the output cloud (the angle calculator fits the ground plane).
     pub keep_ground: bool,
+    /// Voxel of the ground points in the output cloud, metres (0: `output-voxel-m`, one
+    /// accumulator for everything). The calculator needs the ground only for its plane, and the
+    /// floor is most of a run's points (about 70 % at 1 cm), so a coarser ground voxel makes the
+    /// cloud, the filter and the calculator several times smaller.
+    pub ground_voxel_m: f64,
     /// Set each frame's roll, pitch and height from its RANSAC ground plane against the first
     /// frame's (a flat floor is an absolute reference; removes z, roll and pitch drift).
     pub level_with_ground: bool,
@@ -311,6 +316,7 @@ impl Default for MapConfig {
             output_voxel_m: 0.02,
             output_max_range_m: 8.0,
             keep_ground: true,
+            ground_voxel_m: 0.0,
             level_with_ground: true,
         }
     }

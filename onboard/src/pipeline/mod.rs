@@ -250,6 +250,12 @@ impl PipelineConfig {
                 )));
             }
         }
+        if !(self.map.ground_voxel_m >= 0.0 && self.map.ground_voxel_m.is_finite()) {
+            return Err(PipelineError::InvalidConfig(format!(
+                "map.ground-voxel-m = {}: must be 0 (the output voxel) or a positive number",
+                self.map.ground_voxel_m
+            )));
+        }
         if !(0.0..=1.0).contains(&self.ground.early_stop_fraction) {
             return Err(PipelineError::InvalidConfig(
                 "ground.early-stop-fraction must lie in 0..=1".into(),
@@ -294,6 +300,8 @@ pub struct Pipeline {
     last_rate: Twist6,
     map: FeatureMap,
     cloud: CloudAccumulator,
+    /// Ground points of the output when `map.ground-voxel-m` is set (else they go to `cloud`).
+    ground_cloud: Option<CloudAccumulator>,
     trajectory: Vec<TrajectoryPoint>,
     stats: PipelineStats,
     /// The ground plane of the first frame, world frame: `(normal, offset)`.
@@ -324,6 +332,8 @@ impl Pipeline {
             last_rate: [0.0; 6],
             map: FeatureMap::new(config.map.feature_voxel_m, config.map.points_per_voxel),
             cloud: CloudAccumulator::new(config.map.output_voxel_m),
+            ground_cloud: (config.map.ground_voxel_m > 0.0)
+                .then(|| CloudAccumulator::new(config.map.ground_voxel_m)),
             trajectory: Vec::new(),
             stats: PipelineStats::default(),
             world_ground: None,
@@ -414,7 +424,10 @@ impl Pipeline {
     pub fn finish(mut self) -> BuiltCloud {
         self.drain(true);
         self.flush_depth_points(f64::INFINITY);
-        let raw = self.cloud.points();
+        let mut raw = self.cloud.points();
+        if let Some(ground) = &self.ground_cloud {
+            raw.extend(ground.points());
+        }
         let points_in_world = filter::bilateral(&raw, &self.config.filter);
         BuiltCloud {
             points_in_world,
@@ -554,7 +567,7 @@ impl Pipeline {
             {
                 continue;
             }
-            self.cloud.add(world_from_robot.apply(points[i]));
+            self.add_output(world_from_robot.apply(points[i]), is_ground[i]);
         }
         self.trajectory.push(TrajectoryPoint {
             stamp_s: frame.stamp_s,
@@ -571,6 +584,14 @@ impl Pipeline {
             },
             world_from_robot,
         });
+    }
+
+    /// A point of the output cloud, world frame; ground points go to their own voxels if set.
+    fn add_output(&mut self, p: V3, is_ground: bool) {
+        match &mut self.ground_cloud {
+            Some(ground) if is_ground => ground.add(p),
+            _ => self.cloud.add(p),
+        }
     }
 
     /// Steps 5-7: laser odometry, fusion, scan-to-map.

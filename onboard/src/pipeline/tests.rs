@@ -212,3 +212,28 @@ fn levelling_restores_roll_pitch_and_height_and_keeps_yaw() {
     assert!((rpy[2] - 0.3).abs() < 1e-3, "{rpy:?}");
     assert!(fixed.translation[2].abs() < 1e-9, "{:?}", fixed.translation);
 }
+
+#[test]
+fn a_coarser_ground_voxel_thins_the_floor_and_keeps_the_rest() {
+    let mut config = PipelineConfig::default();
+    config.filter.enabled = false;
+    let (_, fine) = run(config.clone(), 10, Some(0.0));
+    config.map.ground_voxel_m = 0.05;
+    let (_, coarse) = run(config.clone(), 10, Some(0.0));
+    let below = |c: &BuiltCloud, z: f64| c.points_in_world.iter().filter(|p| p[2] < z).count();
+    let above = |c: &BuiltCloud| c.points_in_world.len() - below(c, 0.03);
+    // The floor (z ~ 0) is thinned to 5 cm cells: (5 / 1)^2 = 25 times fewer where it is dense.
+    assert!(
+        below(&coarse, 0.03) * 5 < below(&fine, 0.03),
+        "ground {} -> {}",
+        below(&fine, 0.03),
+        below(&coarse, 0.03)
+    );
+    // Everything above the floor is the same cloud, up to the few points of voxels that held
+    // ground and non-ground points together.
+    let (a, b) = (above(&fine), above(&coarse));
+    assert!(a.abs_diff(b) * 100 < a, "above the floor {a} -> {b}");
+    config.map.ground_voxel_m = -1.0;
+    let e = Pipeline::new(config).unwrap_err().to_string();
+    assert!(e.contains("map.ground-voxel-m"), "{e}");
+}
