@@ -8,9 +8,11 @@
 //! - **point-to-line** (corner features): the five nearest target corners; if they are linear
 //!   (largest eigenvalue dominates) the residual is the distance from `q` to the line.
 //!
-//! Both are weighted by a Huber kernel (`huber_m`). The increment is left-multiplied,
-//! `T <- exp(delta) T`, with `delta = [rx, ry, rz, tx, ty, tz]`, so the Jacobian of a residual with
-//! unit direction `e` (the plane normal, or the perpendicular to the line) is `[q x e, e]`.
+//! Both are weighted by a Huber kernel (`huber_m`). The increment is left-multiplied with its
+//! rotation about the prior's position `c`, `T <- about(c, delta) T`, with
+//! `delta = [rx, ry, rz, tx, ty, tz]`, so the Jacobian of a residual with unit direction `e` (the
+//! plane normal, or the perpendicular to the line) is `[(q - c) x e, e]`: the same numbers wherever
+//! the robot is in the target frame (see `about`).
 //!
 //! **Two steps** (scan-to-scan): step 1 solves z, roll and pitch from the plane features (the
 //! underbody and any remaining ground fix them well); step 2 solves x, y and yaw with the
@@ -27,8 +29,8 @@
 
 use super::config::LaserOdometryConfig;
 use super::geom::{
-    Pose, Twist6, V3, VoxelIndex, centroid_covariance, cross, dot, norm, scale, solve_spd, sub,
-    symmetric_eigen,
+    Pose, Twist6, V3, VoxelIndex, add, centroid_covariance, cross, dot, mat_vec, norm, scale,
+    solve_spd, sub, symmetric_eigen,
 };
 
 /// The target of a registration: feature points indexed for nearest-neighbour search.
@@ -233,14 +235,19 @@ fn cost(corr: &[Correspondence], pose: &Pose, k: f64) -> f64 {
 }
 
 /// Normal equations `(H, g)` over all six parameters.
-fn normal_equations(corr: &[Correspondence], pose: &Pose, k: f64) -> ([[f64; 6]; 6], [f64; 6]) {
+fn normal_equations(
+    corr: &[Correspondence],
+    pose: &Pose,
+    centre: V3,
+    k: f64,
+) -> ([[f64; 6]; 6], [f64; 6]) {
     let mut h = [[0.0; 6]; 6];
     let mut g = [0.0; 6];
     for c in corr {
         let q = pose.apply(c.source);
         let r = dot(c.direction, sub(q, c.anchor));
         let w = huber_weight(r, k);
-        let jw = cross(q, c.direction);
+        let jw = cross(sub(q, centre), c.direction);
         let j = [
             jw[0],
             jw[1],
@@ -260,8 +267,33 @@ fn normal_equations(corr: &[Correspondence], pose: &Pose, k: f64) -> ([[f64; 6];
 }
 
 /// `exp(d) * pose` (left increment).
-fn apply_increment(pose: &Pose, d: &Twist6) -> Pose {
-    Pose::from_increment(*d).compose(pose)
+fn apply_increment(pose: &Pose, d: &Twist6, centre: V3) -> Pose {
+    about(centre, d).compose(pose)
+}
+
+/// The increment `d` with its rotation about `centre` instead of the origin:
+/// `p -> R (p - centre) + centre + t`. Registration rotates about the prior's position, so that
+/// the rotational Jacobian `(q - centre) x e` and the degeneracy test do not depend on how far the
+/// robot is from the target frame's origin. (With rotations about the origin, the scan-to-map
+/// refinement's yaw eigenvalue grew with the squared distance travelled, yaw was never found
+/// degenerate late in a run, and its noise went into the trajectory.)
+fn about(centre: V3, d: &Twist6) -> Pose {
+    let e = Pose::from_increment(*d);
+    let translation = add(sub(e.translation, mat_vec(&e.rotation, centre)), centre);
+    Pose {
+        rotation: e.rotation,
+        translation,
+    }
+}
+
+/// Inverse of [`about`]: the increment `d` with `about(centre, d) == m`.
+fn increment_about(centre: V3, m: &Pose) -> Twist6 {
+    let translation = sub(add(m.translation, mat_vec(&m.rotation, centre)), centre);
+    Pose {
+        rotation: m.rotation,
+        translation,
+    }
+    .to_increment()
 }
 
 /// One LM solve over the parameters in `active` (indices into `[rx, ry, rz, tx, ty, tz]`).
@@ -287,7 +319,7 @@ fn solve(
         if corr.len() < active.len() {
             break;
         }
-        let (h, g) = normal_equations(&corr, &pose, k);
+        let (h, g) = normal_equations(&corr, &pose, init.translation, k);
         last_h = h;
         last_n = corr.len();
         let before = cost(&corr, &pose, k);
@@ -311,7 +343,7 @@ fn solve(
             for (i, &pi) in active.iter().enumerate() {
                 d[pi] = x[i];
             }
-            let candidate = apply_increment(&pose, &d);
+            let candidate = apply_increment(&pose, &d, init.translation);
             if cost(&corr, &candidate, k) < before {
                 pose = candidate;
                 lambda = (lambda * 0.3).max(1e-7);
@@ -352,7 +384,8 @@ fn remap(
         }
     }
     let (values, vectors) = symmetric_eigen(&m);
-    let delta = estimate.compose(&prior.inverse()).to_increment();
+    let centre = prior.translation;
+    let delta = increment_about(centre, &estimate.compose(&prior.inverse()));
     let mut kept = [0.0; 6];
     let mut bad_weight = [0.0; 6];
     for (e, &value) in values.iter().enumerate() {
@@ -369,7 +402,7 @@ fn remap(
         }
     }
     let degenerate = std::array::from_fn(|k| active.contains(&k) && bad_weight[k] > 0.5);
-    (Pose::from_increment(kept).compose(prior), degenerate)
+    (about(centre, &kept).compose(prior), degenerate)
 }
 
 /// Register source features to `target` with all six parameters in one LM problem (the scan-to-map
@@ -537,6 +570,37 @@ pub(crate) mod tests {
         assert!(normal[2].abs() > 0.999, "normal {normal:?}");
         // From the ground side, the ground ring alone is one scan line: no plane.
         assert_eq!(plane_at(&index, [0.98, 0.0, 0.0], 0.2), None);
+    }
+
+    #[test]
+    fn degeneracy_does_not_depend_on_the_distance_from_the_target_origin() {
+        // The scan-to-map target is the world frame: late in a run the robot is metres from its
+        // origin. The same registration there must find the same degenerate directions.
+        let (planes, corners) = scene(true);
+        let truth = Pose::from_xyz_rpy([0.04, 0.01, 0.005], [0.003, -0.004, 0.01]);
+        let (sp, sc) = (moved(&planes, &truth), moved(&corners, &truth));
+        let config = LaserOdometryConfig::default();
+        let run = |shift_m: f64| {
+            let world_from_target = Pose::from_xyz_rpy([shift_m, 0.0, 0.0], [0.0; 3]);
+            let shifted =
+                |v: &[V3]| -> Vec<V3> { v.iter().map(|&p| world_from_target.apply(p)).collect() };
+            let target = target_of(&shifted(&planes), &shifted(&corners));
+            let reg = register_joint(&target, &sp, &sc, world_from_target, 10, &config);
+            let in_target = world_from_target.inverse().compose(&reg.pose);
+            (
+                reg.degenerate,
+                in_target.compose(&truth.inverse()).to_increment(),
+            )
+        };
+        let (near, near_err) = run(0.0);
+        let (far, far_err) = run(20.0);
+        assert_eq!(near, far, "errors near {near_err:?} far {far_err:?}");
+        for k in 0..6 {
+            assert!(
+                (near_err[k] - far_err[k]).abs() < 1e-6,
+                "{near_err:?} {far_err:?}"
+            );
+        }
     }
 
     #[test]
