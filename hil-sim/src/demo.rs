@@ -203,15 +203,13 @@ fn lidar_thread(
     Ok(())
 }
 
-/// The demo's `[processing.pipeline]` overrides. Measured on a sedan demo recording (7.1 m pass,
-/// 766 lidar frames, no depth camera): with these, 15.95 / 12.87 / 17.92 degrees against the true
-/// 15.98 / 12.89 / 15.25 (approach / breakover / departure); with the pipeline's defaults (laser
-/// odometry fused, scan-to-map refinement, 2 cm output voxels, bilateral filter) the cloud is too
-/// sparse for the tyre fits, and at 5 mm voxels the laser-fused cloud is yawed by 2 degrees and
-/// gives a departure angle of 0.2 degrees. So the demo builds its cloud from wheel odometry (the
-/// firmware's encoders, which the simulated robot's straight constant-speed run makes reliable)
-/// with dense 5 mm output voxels and no filter. Revisit when laser odometry stops drifting here.
-const DEMO_PIPELINE: &str = "[processing.pipeline.fusion]\nuse-laser = false\nuse-visual = false\n[processing.pipeline.map]\nrefine = false\noutput-voxel-m = 0.005\n[processing.pipeline.filter]\nenabled = false\n";
+/// The demo's `[processing.pipeline]` overrides: the cloud is built from wheel odometry alone (the
+/// firmware's encoders, which the simulated robot's straight constant-speed run makes reliable),
+/// without laser odometry and scan-to-map refinement, because on the demo's recordings the fused
+/// laser odometry yawed the sedan's cloud by 2 degrees (departure angle 0.2 degrees instead of
+/// 15.25). Revisit when laser odometry stops drifting here. The output voxel (5 mm) and the
+/// bilateral filter (off) are the pipeline's defaults: see `onboard::pipeline::PipelineConfig`.
+const DEMO_PIPELINE: &str = "[processing.pipeline.fusion]\nuse-laser = false\nuse-visual = false\n[processing.pipeline.map]\nrefine = false\n";
 
 /// Runs the demo; prints progress to stderr unless `quiet`.
 // The wiring reads top to bottom as the diagram in the module docs; `{:?}` quotes paths for TOML.
