@@ -141,7 +141,8 @@ pub(crate) fn lower_envelope(points: &[[f64; 3]], params: EnvelopeParams) -> Env
 
 /// Noise fringe: range noise smears a surface's edge beyond it (mostly along x, since a low
 /// sensor sees the underside and the bumpers' lower edges along the vehicle), into bins that hold
-/// fewer points than the surface. A bin is fringe if a bin within `FRINGE_REACH_M` along x has at
+/// fewer points than the surface. A bin is fringe if a bin within 4 noise sigma (at most
+/// `FRINGE_REACH_M`; none without noise) along x has at
 /// least `FRINGE_RATIO` x its support and a mode no higher than its own plus `max(3 sigma, 2 mm)`:
 /// a sparser bin beside a denser surface at about the same height or lower. Ratio 2 is the
 /// half-density point where a blurred edge truly ends: on lidar-only simulator clouds (VLP-16,
@@ -155,7 +156,13 @@ fn fringe_bins(
     modes: &[(i64, usize, f64, Vec<EnvelopeSample>)],
     params: EnvelopeParams,
 ) -> Vec<bool> {
-    let reach = (FRINGE_REACH_M / params.bin_m).ceil() as i64;
+    // The fringe is as wide as the noise blur: about 4 sigma, capped at `FRINGE_REACH_M`; a
+    // noiseless cloud has none (its sparse bins are real corners, e.g. steep bumper faces).
+    let reach_m = (4.0 * params.noise_m).min(FRINGE_REACH_M);
+    if reach_m < 1e-4 {
+        return vec![false; modes.len()];
+    }
+    let reach = (reach_m / params.bin_m).ceil() as i64;
     let tol = (3.0 * params.noise_m).max(0.002);
     modes
         .iter()
