@@ -339,6 +339,9 @@ impl Default for PreviewConfig {
     }
 }
 
+/// What `run.stop-timeout-us` must leave beyond [`OnboardConfig::stop_time_s`], seconds.
+const STOP_MARGIN_S: f64 = 1.0;
+
 impl OnboardConfig {
     /// Parses and checks a configuration text; `path` is only used in messages.
     pub fn parse(text: &str, path: &Path) -> Result<Self, ConfigError> {
@@ -357,6 +360,18 @@ impl OnboardConfig {
             source,
         })?;
         Self::parse(&text, path)
+    }
+
+    /// How long the firmware takes from a stop at `run.max-speed-mps` to reporting rest: the
+    /// S-curve ramp down at `mcu.accel-mps2` and `mcu.jerk-mps3`, then its zero-speed hold.
+    pub fn stop_time_s(&self) -> f64 {
+        let v = f64::from(self.run.max_speed_mps);
+        let a = f64::from(self.mcu.accel_mps2);
+        let j = f64::from(self.mcu.jerk_mps3);
+        let jerk_s = if j > 0.0 { a / j } else { 0.0 };
+        #[allow(clippy::cast_precision_loss)]
+        let hold_s = control::Config::default().hold_after_stop_us as f64 * 1e-6;
+        v / a + jerk_s + hold_s
     }
 
     /// Range checks the types cannot express.
@@ -413,6 +428,20 @@ impl OnboardConfig {
         }
         if self.run.progress_period_us == 0 {
             return bad("run.progress-period-us", "must be above 0".into());
+        }
+        let stop_s = self.stop_time_s();
+        #[allow(clippy::cast_precision_loss)]
+        let timeout_s = self.run.stop_timeout_us as f64 * 1e-6;
+        if timeout_s < stop_s + STOP_MARGIN_S {
+            return bad(
+                "run.stop-timeout-us",
+                format!(
+                    "{timeout_s} s is too short for a stop from run.max-speed-mps = {} at \
+                     mcu.accel-mps2 = {} (about {stop_s:.1} s with the jerk limit and the \
+                     firmware's hold, plus {STOP_MARGIN_S} s): raise it or the acceleration",
+                    self.run.max_speed_mps, self.mcu.accel_mps2
+                ),
+            );
         }
         let k = &self.camera.intrinsics;
         if !(k.fx > 0.0 && k.fy > 0.0 && k.depth_scale_m > 0.0) {
@@ -562,6 +591,19 @@ mod tests {
         .unwrap_err()
         .to_string();
         assert!(e.contains("`run.max-speed-mps`"), "{e}");
+        // A gentle ramp must fit in the stop timeout: 0.5 m/s at 0.05 m/s^2 is a 10 s stop.
+        let e = OnboardConfig::parse(
+            &MINIMAL.replace("[mcu]\n", "[mcu]\naccel-mps2 = 0.05\n"),
+            Path::new("e.toml"),
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.contains("`run.stop-timeout-us`") && e.contains("mcu.accel-mps2 = 0.05"),
+            "{e}"
+        );
+        let c = OnboardConfig::parse(MINIMAL, Path::new("x.toml")).unwrap();
+        assert!((c.stop_time_s() - (0.5 / 0.3 + 0.3 + 0.5)).abs() < 1e-6);
     }
 
     #[test]
