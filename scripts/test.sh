@@ -8,7 +8,8 @@
 # Tiers: (1) formatting and lints; (2) host tests: `cargo test --workspace` (protocol, firmware
 # control logic, onboard pipeline, simulator, end-to-end scenarios on the in-process CAN bus);
 # (3) no_std checks for the thumbv7em-none-eabihf target and the STM32 release build with its size
-# report; (4) the firmware-in-the-loop tests over real SocketCAN vcan0 inside a qemu guest.
+# report; (4) the end-to-end demo per example vehicle (release, real time); (5) the
+# firmware-in-the-loop tests over real SocketCAN vcan0 inside a qemu guest.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -63,6 +64,10 @@ if ldconfig -p 2>/dev/null | grep -q libclang; then
 else
     echo "NOTE: libclang is missing (apt-get install libclang-dev): the v4l2 build is SKIPPED." >&2
 fi
+
+step "end-to-end demo per example vehicle (real time, release build, one at a time)"
+# Each runs the whole measurement in real time (~35 s) and needs the optimised build to keep up.
+cargo test --release -p passangle-tests --test demo -- --nocapture
 
 if [[ -f firmware/ci.sh ]]; then
     step "STM32 firmware release build and size report"

@@ -239,9 +239,20 @@ pub fn run(options: &DemoOptions, quiet: bool) -> anyhow::Result<DemoReport> {
     let mut config = OnboardConfig::parse(&text, Path::new("demo.toml"))?;
     let fw = control::Config::default();
     config.mcu.firmware = FirmwareConfig::from_wire(&fw.to_mcu());
-    config.mcu.accel_mps2 =
-        (run_spec.accel_mps2 as f32).clamp(0.05, config.mcu.firmware.max_accel_mps2);
+    // The scenario's ramp, if it has one (0 means "cruising from t = 0", which a real robot
+    // cannot do): else the service's default ramp.
+    if run_spec.accel_mps2 > 0.0 {
+        config.mcu.accel_mps2 =
+            (run_spec.accel_mps2 as f32).min(config.mcu.firmware.max_accel_mps2);
+    }
     config.run.max_speed_mps = config.mcu.firmware.max_speed_mps;
+    // The stop must fit in the run's stop timeout at this speed and ramp (the service refuses
+    // such a config; so does the demo).
+    config.run.stop_timeout_us = config
+        .run
+        .stop_timeout_us
+        .max((config.stop_time_s() * 1e6) as u64 + 2_000_000);
+    config.check(Path::new("demo.toml"))?;
     debug_assert_eq!(config.camera.source, CameraSource::None);
 
     let stop = Arc::new(AtomicBool::new(false));

@@ -272,7 +272,15 @@ impl Client {
                     return Some(Err(ClientError::Timeout(timeout)));
                 }
                 HandheldEvent::Progress(p) => {
-                    if run_id.is_none() && p.phase == Phase::Checks {
+                    // Progress is best effort: the run is whichever the first progress of an
+                    // active phase names (the robot was idle before this start), not only the
+                    // `Checks` one, which a lossy radio may drop.
+                    if run_id.is_none()
+                        && matches!(
+                            p.phase,
+                            Phase::Checks | Phase::Driving | Phase::Stopping | Phase::Processing
+                        )
+                    {
                         run_id = Some(p.run_id);
                     }
                     if Some(p.run_id) == run_id {

@@ -331,7 +331,9 @@ pub struct MapConfig {
     /// Voxel of the ground points in the output cloud, metres (0: `output-voxel-m`, one
     /// accumulator for everything). The calculator needs the ground only for its plane, and the
     /// floor is most of a run's points (about 70 % at 1 cm), so a coarser ground voxel makes the
-    /// cloud, the filter and the calculator several times smaller.
+    /// cloud, the filter and the calculator several times smaller. 2 cm: the sedan's demo cloud
+    /// 2.7 M -> 1.3 M points, the calculator 3.4 s -> 0.7 s, the same angles within 0.02 degree
+    /// (sedan, van; offline clouds, 2026-11-22).
     pub ground_voxel_m: f64,
     /// Set each frame's roll, pitch and height from its RANSAC ground plane against the first
     /// frame's (a flat floor is an absolute reference; removes z, roll and pitch drift).
@@ -348,7 +350,7 @@ impl Default for MapConfig {
             output_voxel_m: 0.005,
             output_max_range_m: 8.0,
             keep_ground: true,
-            ground_voxel_m: 0.0,
+            ground_voxel_m: 0.02,
             level_with_ground: true,
         }
     }

@@ -217,6 +217,7 @@ fn levelling_restores_roll_pitch_and_height_and_keeps_yaw() {
 fn a_coarser_ground_voxel_thins_the_floor_and_keeps_the_rest() {
     let mut config = PipelineConfig::default();
     config.filter.enabled = false;
+    config.map.ground_voxel_m = 0.0;
     let (_, fine) = run(config.clone(), 10, Some(0.0));
     config.map.ground_voxel_m = 0.05;
     let (_, coarse) = run(config.clone(), 10, Some(0.0));
