@@ -203,13 +203,63 @@ fn lidar_thread(
     Ok(())
 }
 
+/// The demo's depth camera: the scenario's D435 at a quarter of its resolution (212 x 120) and 6
+/// frames per second, so that rendering it in real time beside everything else fits two cores.
+/// It exercises the service's whole depth path (camera channel, liveness check, recording,
+/// live processing with visual odometry); its points stay out of the cloud (`DEMO_PIPELINE`).
+fn demo_camera(scenario: &Scenario) -> crate::d435::D435Config {
+    let full = scenario.file.depth.clone();
+    let k = full.intrinsics();
+    let q = 0.25;
+    crate::d435::D435Config {
+        width: (f64::from(k.width) * q).round() as u32,
+        height: (f64::from(k.height) * q).round() as u32,
+        fps: 6.0,
+        fx_px: Some(k.fx_px * q),
+        fy_px: Some(k.fy_px * q),
+        cx_px: Some(k.cx_px * q),
+        cy_px: Some(k.cy_px * q),
+        ..full
+    }
+}
+
+fn camera_thread(
+    scenario: &Scenario,
+    live: &LiveTrajectory,
+    tx: &std::sync::mpsc::SyncSender<service::DepthFrame>,
+    stop: &AtomicBool,
+) {
+    let scene = crate::world::Scene::from_vehicle(&scenario.vehicle);
+    let sim = crate::d435::D435Sim::new(&scene, live, demo_camera(scenario), scenario.depth_seed());
+    let mut index = 0u64;
+    while !stop.load(Ordering::Relaxed) {
+        // Render a frame once the robot's pose at its exposure is known.
+        if live.latest_s() < sim.frame_time_s(index) + 0.001 {
+            thread::sleep(Duration::from_millis(2));
+            continue;
+        }
+        let f = sim.frame(index);
+        let frame = service::DepthFrame {
+            width: u16::try_from(f.width).unwrap_or(u16::MAX),
+            height: u16::try_from(f.height).unwrap_or(u16::MAX),
+            depth: f.depth_mm,
+        };
+        // A full channel drops the frame, as a camera driver would.
+        let _ = tx.try_send(frame);
+        index += 1;
+    }
+}
+
 /// The demo's `[processing.pipeline]` overrides: the cloud is built from wheel odometry alone (the
 /// firmware's encoders, which the simulated robot's straight constant-speed run makes reliable),
 /// without laser odometry and scan-to-map refinement, because on the demo's recordings the fused
 /// laser odometry yawed the sedan's cloud by 2 degrees (departure angle 0.2 degrees instead of
 /// 15.25). Revisit when laser odometry stops drifting here. The output voxel (5 mm) and the
 /// bilateral filter (off) are the pipeline's defaults: see `onboard::pipeline::PipelineConfig`.
-const DEMO_PIPELINE: &str = "[processing.pipeline.fusion]\nuse-laser = false\nuse-visual = false\n[processing.pipeline.map]\nrefine = false\n";
+/// The depth camera's frames are tracked (visual odometry runs) but neither fused nor added to
+/// the cloud: the demo's camera is a quarter-resolution stand-in, and its mount differs from the
+/// pipeline's default (`mounts.camera-*`).
+const DEMO_PIPELINE: &str = "[processing.pipeline.fusion]\nuse-laser = false\nuse-visual = false\n[processing.pipeline.map]\nrefine = false\n[processing.pipeline.visual]\nadd-to-cloud = false\n";
 
 /// Runs the demo; prints progress to stderr unless `quiet`.
 // The wiring reads top to bottom as the diagram in the module docs; `{:?}` quotes paths for TOML.
@@ -253,7 +303,19 @@ pub fn run(options: &DemoOptions, quiet: bool) -> anyhow::Result<DemoReport> {
         .stop_timeout_us
         .max((config.stop_time_s() * 1e6) as u64 + 2_000_000);
     config.check(Path::new("demo.toml"))?;
-    debug_assert_eq!(config.camera.source, CameraSource::None);
+    let camera = demo_camera(&scenario).intrinsics();
+    config.camera.source = CameraSource::Simulated;
+    config.camera.width = u16::try_from(camera.width)?;
+    config.camera.height = u16::try_from(camera.height)?;
+    config.camera.fps = 6;
+    config.camera.record_every = 1;
+    config.camera.intrinsics = onboard::recorder::Intrinsics {
+        fx: camera.fx_px as f32,
+        fy: camera.fy_px as f32,
+        cx: camera.cx_px as f32,
+        cy: camera.cy_px as f32,
+        depth_scale_m: 0.001,
+    };
 
     let stop = Arc::new(AtomicBool::new(false));
     let samples = Arc::new(Mutex::new(Vec::new()));
@@ -310,6 +372,14 @@ pub fn run(options: &DemoOptions, quiet: bool) -> anyhow::Result<DemoReport> {
             lidar_thread(&scenario, &live, lidar_addr.into(), &stop)
         }));
     }
+    let (depth_tx, depth_rx) = std::sync::mpsc::sync_channel(8);
+    {
+        let (stop, scenario, live) = (Arc::clone(&stop), scenario.clone(), live.clone());
+        threads.push(thread::spawn(move || {
+            camera_thread(&scenario, &live, &depth_tx, &stop);
+            Ok(())
+        }));
+    }
     let radio = PipeConfig::radio_lossy(options.radio_loss, options.radio_corrupt);
     let (_pair, handheld_port, onboard_port) = LossyPortPair::new(radio, options.seed);
     let stats: SharedStats = Arc::new(Mutex::new(ServiceStats::default()));
@@ -318,7 +388,7 @@ pub fn run(options: &DemoOptions, quiet: bool) -> anyhow::Result<DemoReport> {
             radio: Box::new(onboard_port),
             mcu: Box::new(onboard_uart),
             lidar: lidar_rx,
-            depth: None,
+            depth: Some(depth_rx),
             crash: None,
         };
         let processor = Arc::new(PipelineProcessor {
