@@ -11,9 +11,9 @@
 //! state machine, recorder and processing (pipeline + angle calculator), and the firmware's
 //! `control::Controller` driving simulated C620 ESCs and the chassis. The lidar model casts its
 //! rays from the pose the simulated robot actually has (firmware in the loop), placed in the
-//! scenario's start pose under the vehicle. The depth camera is not simulated in the demo (the
-//! D435 renderer costs too much CPU to run in real time beside everything else on two cores):
-//! the service runs with `camera.source = "none"`, lidar and wheel odometry only.
+//! scenario's start pose under the vehicle. The depth camera is rendered the same way at a quarter
+//! of the D435's resolution and 6 fps (full size costs too much CPU in real time beside everything
+//! else on two cores) and reaches the service as `camera.source = "simulated"` ([`demo_camera`]).
 //!
 //! The result is compared with the vehicle's true angles (`crate::truth`, brute force on the
 //! vehicle geometry, independent of the onboard code).
@@ -253,8 +253,8 @@ fn camera_thread(
 /// The demo's `[processing.pipeline]` overrides: the cloud is built from wheel odometry alone (the
 /// firmware's encoders, which the simulated robot's straight constant-speed run makes reliable),
 /// without laser odometry and scan-to-map refinement, because on the demo's recordings the fused
-/// laser odometry yawed the sedan's cloud by 2 degrees (departure angle 0.2 degrees instead of
-/// 15.25). Revisit when laser odometry stops drifting here. The output voxel (5 mm) and the
+/// laser + wheel cloud reads the sedan's departure 0.5-0.7 degree further off than wheel odometry
+/// alone (README, "Laser odometry"). Revisit when laser odometry beats the wheels here. The output voxel (5 mm) and the
 /// bilateral filter (off) are the pipeline's defaults: see `onboard::pipeline::PipelineConfig`.
 /// The depth camera's frames are tracked (visual odometry runs) but neither fused nor added to
 /// the cloud: the demo's camera is a quarter-resolution stand-in, and its mount differs from the
