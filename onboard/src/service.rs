@@ -750,15 +750,8 @@ impl Service {
             };
             let record = self.recording_sensors();
             if p.position {
-                if let Some(r) = self.recorder.as_mut().filter(|_| record) {
-                    r.lidar_packet(p.wall_ns, p.src, p.dst, &p.payload);
-                }
                 if record {
-                    self.feed_live(SensorItem::Lidar {
-                        wall_ns: p.wall_ns / 1_000 * 1_000,
-                        payload: p.payload,
-                        position: true,
-                    });
+                    self.record_lidar(p);
                 }
                 continue;
             }
@@ -777,17 +770,22 @@ impl Service {
                 self.stats.lidar_frames += 1;
             }
             self.last_azimuth = Some(azimuth);
-            if let Some(r) = self.recorder.as_mut().filter(|_| record) {
-                r.lidar_packet(p.wall_ns, p.src, p.dst, &p.payload);
-            }
             if record {
-                self.feed_live(SensorItem::Lidar {
-                    wall_ns: p.wall_ns / 1_000 * 1_000,
-                    payload: p.payload,
-                    position: false,
-                });
+                self.record_lidar(p);
             }
         }
+    }
+
+    /// A lidar packet (data or position) into the recording and the live processing.
+    fn record_lidar(&mut self, p: LidarPacket) {
+        if let Some(r) = self.recorder.as_mut() {
+            r.lidar_packet(p.wall_ns, p.src, p.dst, &p.payload);
+        }
+        self.feed_live(SensorItem::Lidar {
+            wall_ns: p.wall_ns / 1_000 * 1_000,
+            payload: p.payload,
+            position: p.position,
+        });
     }
 
     /// Hands an item to the live processing, if it runs; a full queue or a dead worker ends it
