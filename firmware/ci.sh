@@ -58,7 +58,8 @@ step "control builds for $TARGET (no_std check)"
 
 step "stm32 firmware, release"
 (cd "$here/stm32" && cargo build --release --locked)
-elf="$here/stm32/target/$TARGET/release/passangle-stm32"
+# The build honours CARGO_TARGET_DIR when it is set (a shared target directory), so look there.
+elf="${CARGO_TARGET_DIR:-$here/stm32/target}/$TARGET/release/passangle-stm32"
 
 step "sizes of $elf"
 # SysV format: one line per section, "name size address". Flash holds the vector table, code,
