@@ -37,14 +37,12 @@ use hil_sim::geometry::{Isometry, Vec3};
 use hil_sim::scenario::Scenario;
 use hil_sim::trajectory::{StraightRun, Trajectory};
 use hil_sim::truth::{TruthOptions, true_angles};
-use hil_sim::vlp16::{Datagram, Vlp16Sim};
 use hil_sim::world::{Scene, SurfaceId, SurfaceKind};
 use onboard::angles::{AnglesConfig, compute_angles};
 use onboard::pipeline::geom::{Pose, rpy_of};
 use onboard::pipeline::{
     BuiltCloud, DepthFrame, LidarFrame, Pipeline, PipelineConfig, WheelOdometry,
 };
-use onboard::vlp16::{DecoderConfig, FrameAssembler};
 
 /// One configuration of the ablation.
 struct Variant {
@@ -143,43 +141,6 @@ fn mounts_from(scenario: &Scenario, config: &mut PipelineConfig) {
     config.mounts.lidar_rpy_rad = rpy_of(&lidar.rotation);
     config.mounts.camera_xyz_m = camera.translation;
     config.mounts.camera_rpy_rad = rpy_of(&camera.rotation);
-}
-
-/// Lidar frames of a run, decoded from the simulated packets, stamped in simulation time.
-fn lidar_frames(scenario: &Scenario, scene: &Scene) -> Vec<LidarFrame> {
-    let sim = Vlp16Sim::new(
-        scene,
-        &scenario.run,
-        scenario.file.lidar.clone(),
-        scenario.lidar_seed(),
-    );
-    let mut assembler = FrameAssembler::new(DecoderConfig::default()).expect("default decoder");
-    let mut frames = Vec::new();
-    let offset_s = scenario.file.lidar.clock_offset_us as f64 * 1e-6;
-    let take = |a: &mut FrameAssembler, frames: &mut Vec<LidarFrame>| {
-        while let Some(f) = a.pop_frame() {
-            if f.is_complete() {
-                frames.push(LidarFrame::from_vlp16(
-                    &f,
-                    f.start_sensor_us * 1e-6 - offset_s,
-                ));
-            }
-        }
-    };
-    for d in sim.datagrams(scenario.duration_s) {
-        match d {
-            Datagram::Data { send_s, payload } => {
-                let _ = assembler.push_data(&payload[..], (send_s * 1e9) as u64);
-            }
-            Datagram::Position { payload, .. } => {
-                let _ = assembler.push_position(&payload[..]);
-            }
-        }
-        take(&mut assembler, &mut frames);
-    }
-    assembler.finish();
-    take(&mut assembler, &mut frames);
-    frames
 }
 
 /// Depth frames at 10 Hz (every 3rd of the 30 Hz stream).
@@ -592,7 +553,7 @@ fn main() -> anyhow::Result<()> {
             }
             let scenario = Scenario::from_parts(path, file, base.vehicle.clone())?;
             let scene = Scene::from_vehicle(&scenario.vehicle);
-            let lidar = lidar_frames(&scenario, &scene);
+            let lidar = scenario.decoded_lidar_frames(&scene);
             if let Some(dir) = &export_dir {
                 export_frames(dir, &format!("{name}-{seed}"), &scenario, &scene, &lidar)?;
             }

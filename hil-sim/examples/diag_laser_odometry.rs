@@ -25,7 +25,6 @@ use std::path::PathBuf;
 use hil_sim::geometry::Isometry;
 use hil_sim::scenario::Scenario;
 use hil_sim::trajectory::Trajectory;
-use hil_sim::vlp16::{Datagram, Vlp16Sim};
 use hil_sim::world::Scene;
 use onboard::pipeline::LidarFrame;
 use onboard::pipeline::config::PipelineConfig;
@@ -36,49 +35,12 @@ use onboard::pipeline::ground;
 use onboard::pipeline::laser_odometry::{
     FeatureTarget, GROUND_TAG_BIT, register_two_step, residuals_at,
 };
-use onboard::vlp16::{DecoderConfig, FrameAssembler};
 
 fn pose_of(iso: &Isometry) -> Pose {
     Pose {
         rotation: iso.rotation.0,
         translation: [iso.translation.x, iso.translation.y, iso.translation.z],
     }
-}
-
-fn lidar_frames(scenario: &Scenario, scene: &Scene) -> Vec<LidarFrame> {
-    let sim = Vlp16Sim::new(
-        scene,
-        &scenario.run,
-        scenario.file.lidar.clone(),
-        scenario.lidar_seed(),
-    );
-    let mut assembler = FrameAssembler::new(DecoderConfig::default()).expect("default decoder");
-    let mut frames = Vec::new();
-    let offset_s = scenario.file.lidar.clock_offset_us as f64 * 1e-6;
-    let take = |a: &mut FrameAssembler, frames: &mut Vec<LidarFrame>| {
-        while let Some(f) = a.pop_frame() {
-            if f.is_complete() {
-                frames.push(LidarFrame::from_vlp16(
-                    &f,
-                    f.start_sensor_us * 1e-6 - offset_s,
-                ));
-            }
-        }
-    };
-    for d in sim.datagrams(scenario.duration_s) {
-        match d {
-            Datagram::Data { send_s, payload } => {
-                let _ = assembler.push_data(&payload[..], (send_s * 1e9) as u64);
-            }
-            Datagram::Position { payload, .. } => {
-                let _ = assembler.push_position(&payload[..]);
-            }
-        }
-        take(&mut assembler, &mut frames);
-    }
-    assembler.finish();
-    take(&mut assembler, &mut frames);
-    frames
 }
 
 /// One point per occupied voxel (the first seen), as the pipeline does.
@@ -193,7 +155,7 @@ fn main() -> anyhow::Result<()> {
     }
     let scenario = Scenario::from_parts(&path, file, base.vehicle.clone())?;
     let scene = Scene::from_vehicle(&scenario.vehicle);
-    let frames = lidar_frames(&scenario, &scene);
+    let frames = scenario.decoded_lidar_frames(&scene);
     let mut config = PipelineConfig::default();
     let robot_from_lidar = pose_of(&scenario.file.lidar.robot_from_lidar());
     config.mounts.lidar_xyz_m = robot_from_lidar.translation;

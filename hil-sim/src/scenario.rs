@@ -189,6 +189,47 @@ pub fn derive_seed(seed: u64, tag: u64) -> u64 {
 }
 
 impl Scenario {
+    /// The run's lidar frames as the onboard pipeline takes them: the simulated VLP-16 packets
+    /// decoded by `onboard::vlp16::FrameAssembler`, complete frames only, stamped in simulation
+    /// time (the sensor clock minus the scenario's clock offset). For benches and diagnostics
+    /// that feed `onboard::pipeline` directly.
+    pub fn decoded_lidar_frames(&self, scene: &Scene) -> Vec<onboard::pipeline::LidarFrame> {
+        use onboard::vlp16::{DecoderConfig, FrameAssembler};
+
+        use crate::vlp16::{Datagram, Vlp16Sim};
+        let sim = Vlp16Sim::new(scene, &self.run, self.file.lidar.clone(), self.lidar_seed());
+        // The default decoder configuration is valid; an error here would leave no frames.
+        let Ok(mut assembler) = FrameAssembler::new(DecoderConfig::default()) else {
+            return Vec::new();
+        };
+        let offset_s = self.file.lidar.clock_offset_us as f64 * 1e-6;
+        let mut frames = Vec::new();
+        let take = |a: &mut FrameAssembler, frames: &mut Vec<onboard::pipeline::LidarFrame>| {
+            while let Some(f) = a.pop_frame() {
+                if f.is_complete() {
+                    frames.push(onboard::pipeline::LidarFrame::from_vlp16(
+                        &f,
+                        f.start_sensor_us * 1e-6 - offset_s,
+                    ));
+                }
+            }
+        };
+        for d in sim.datagrams(self.duration_s) {
+            match d {
+                Datagram::Data { send_s, payload } => {
+                    let _ = assembler.push_data(&payload[..], (send_s * 1e9) as u64);
+                }
+                Datagram::Position { payload, .. } => {
+                    let _ = assembler.push_position(&payload[..]);
+                }
+            }
+            take(&mut assembler, &mut frames);
+        }
+        assembler.finish();
+        take(&mut assembler, &mut frames);
+        frames
+    }
+
     /// Read a scenario and its vehicle.
     pub fn load(path: &Path) -> Result<Self, ScenarioError> {
         let text = std::fs::read_to_string(path).map_err(|source| ScenarioError::Io {
