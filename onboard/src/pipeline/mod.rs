@@ -36,6 +36,7 @@ pub mod geom;
 pub mod ground;
 pub mod laser_odometry;
 pub mod map;
+pub mod registration;
 pub mod visual_odometry;
 
 use std::collections::VecDeque;
@@ -49,8 +50,9 @@ use self::deskew::{DeskewModel, Velocity};
 use self::features::RingPoint;
 use self::fusion::{Fusion, Source, SourceRate};
 use self::geom::{Pose, Twist6, V3, VoxelIndex, norm, voxel_of};
-use self::laser_odometry::{FeatureTarget, GROUND_TAG_BIT, register_joint, register_two_step};
+use self::laser_odometry::{FeatureTarget, GROUND_TAG_BIT};
 use self::map::{CloudAccumulator, FeatureMap};
+use self::registration::{register_joint, register_two_step};
 use self::visual_odometry::{VisualOdometry, VisualStep};
 use crate::cloud::Cloud;
 use crate::vlp16::Frame;
@@ -288,7 +290,8 @@ struct PreviousFrame {
 pub struct Pipeline {
     config: PipelineConfig,
     robot_from_lidar: Pose,
-    pending: VecDeque<LidarFrame>,
+    /// Queued frames with their end stamps (the start plus the last point's firing time).
+    pending: VecDeque<(LidarFrame, f64)>,
     wheel: Vec<WheelOdometry>,
     visual: VisualOdometry,
     visual_steps: Vec<VisualStep>,
@@ -351,7 +354,7 @@ impl Pipeline {
         let previous_s = self
             .pending
             .back()
-            .map(|f| f.stamp_s)
+            .map(|(f, _)| f.stamp_s)
             .or(self.previous.as_ref().map(|p| p.stamp_s))
             .unwrap_or(f64::NEG_INFINITY);
         if !(frame.stamp_s > previous_s && frame.stamp_s.is_finite()) {
@@ -361,7 +364,13 @@ impl Pipeline {
                 previous_s,
             });
         }
-        self.pending.push_back(frame);
+        let end_s = frame.stamp_s
+            + frame
+                .points
+                .iter()
+                .map(|p| f64::from(p.time_offset_s))
+                .fold(0.0, f64::max);
+        self.pending.push_back((frame, end_s));
         self.drain(false);
         Ok(())
     }
@@ -438,13 +447,7 @@ impl Pipeline {
 
     /// Process queued frames whose interval every active source covers (all of them if `all`).
     fn drain(&mut self, all: bool) {
-        while let Some(front) = self.pending.front() {
-            let end_s = front.stamp_s
-                + front
-                    .points
-                    .iter()
-                    .map(|p| f64::from(p.time_offset_s))
-                    .fold(0.0, f64::max);
+        while let Some(&(_, end_s)) = self.pending.front() {
             let wheel_ready = !self.config.fusion.use_wheel
                 || self.wheel.last().is_none_or(|w| w.stamp_s >= end_s);
             let depth_ready = !(self.config.fusion.use_visual && self.config.visual.enabled)
@@ -452,7 +455,7 @@ impl Pipeline {
             if !(all || wheel_ready && depth_ready) {
                 break;
             }
-            let Some(frame) = self.pending.pop_front() else {
+            let Some((frame, _)) = self.pending.pop_front() else {
                 break;
             };
             self.process(&frame);
