@@ -8,6 +8,7 @@ pub mod client;
 pub mod cloud;
 pub mod config;
 pub mod link;
+pub mod mcu_clock;
 pub mod pcap;
 pub mod pipeline;
 pub mod process;

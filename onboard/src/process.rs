@@ -25,7 +25,10 @@ use serde::Deserialize;
 
 use crate::angles::{self, AnglesConfig, AnglesResult, Zone, compute_angles, side_view_svg};
 use crate::cloud::Cloud;
-use crate::pipeline::{DepthFrame, LidarFrame, Pipeline, PipelineConfig, WheelOdometry};
+use crate::mcu_clock::McuClockMap;
+use crate::pipeline::{
+    BuiltCloud, DepthFrame, LidarFrame, Pipeline, PipelineConfig, WheelOdometry,
+};
 use crate::recorder::{Intrinsics, Recording};
 use crate::service::{LiveRun, ProcessInput, Processed, Processor, SensorItem};
 use crate::vlp16::source::{PACKET_BUF_LEN, PacketKind, PacketSource, PcapSource};
@@ -154,8 +157,18 @@ pub struct ReadCounts {
     pub lidar_malformed: u64,
     /// Odometry lines read (a cut-short last line is not counted).
     pub odometry: usize,
+    /// `odometry.csv` ended in a cut-short line (a crash while writing it), skipped.
+    pub odometry_cut_short: bool,
+    /// `lidar.pcap` ended in a truncated or corrupt record; the packets before it were used.
+    pub lidar_cut_short: bool,
     /// Depth frames read.
     pub depth_frames: usize,
+    /// Items the pipeline refused because they broke their stream's time order (a clock step);
+    /// skipped, the run goes on.
+    pub out_of_order: usize,
+    /// Times the MCU's clock went backwards (it rebooted) and its map onto the host clock
+    /// started over ([`McuClockMap`]).
+    pub mcu_clock_resets: u32,
 }
 
 /// How long (in stamp time) [`RunBuilder::release`] holds items back before handing them to the
@@ -268,6 +281,7 @@ pub struct RunBuilder {
     released_s: f64,
     seq: u64,
     counts: ReadCounts,
+    mcu_clock: McuClockMap,
 }
 
 impl std::fmt::Debug for RunBuilder {
@@ -295,6 +309,7 @@ impl RunBuilder {
             released_s: f64::NEG_INFINITY,
             seq: 0,
             counts: ReadCounts::default(),
+            mcu_clock: McuClockMap::new(),
         })
     }
 
@@ -302,6 +317,7 @@ impl RunBuilder {
     pub fn counts(&self) -> ReadCounts {
         ReadCounts {
             lidar_malformed: self.assembler.stats().malformed_data_total(),
+            mcu_clock_resets: self.mcu_clock.resets(),
             ..self.counts
         }
     }
@@ -331,10 +347,12 @@ impl RunBuilder {
         }
     }
 
-    /// A wheel odometry report with its host arrival time, us since the Unix epoch.
+    /// A wheel odometry report with its host arrival time, us since the Unix epoch. It is placed
+    /// on the host clock at its MCU stamp, not its arrival ([`McuClockMap`]).
     pub fn push_odometry(&mut self, wall_us: u64, odometry: &Odometry) {
         self.counts.odometry += 1;
-        self.hold(Timed::Wheel(wall_us, *odometry));
+        let measured_us = self.mcu_clock.map(wall_us, odometry.stamp_us);
+        self.hold(Timed::Wheel(measured_us, *odometry));
     }
 
     /// A depth frame (Z16, row-major) with its host stamp, us since the Unix epoch.
@@ -384,37 +402,61 @@ impl RunBuilder {
         while self.held.peek().is_some_and(|h| h.stamp_s < until_s) {
             let Some(h) = self.held.pop() else { break };
             self.released_s = self.released_s.max(h.stamp_s);
-            // Items that break a source's ordering (duplicated stamps) are skipped, not fatal.
-            let _ = match h.item {
+            // Items that break a source's ordering (a clock step) are counted and skipped.
+            let pushed = match h.item {
                 Item::Wheel(w) => self.pipeline.push_wheel_odometry(w),
                 Item::Depth(d) => self.pipeline.push_depth_frame(d),
                 Item::Lidar(l) => self.pipeline.push_lidar_frame(l),
             };
+            if let Err(e) = pushed {
+                self.counts.out_of_order += 1;
+                tracing::debug!("run builder: skipped: {e}");
+            }
         }
     }
 
     /// Everything left through the pipeline; the fused, filtered cloud. `Err` if there was no
     /// complete lidar frame or the cloud is too small.
-    pub fn finish(mut self) -> Result<(Cloud, ReadCounts), String> {
+    pub fn finish(self) -> Result<(Cloud, ReadCounts), String> {
+        let min_points = self.min_cloud_points;
+        let (built, counts) = self.finish_built()?;
+        Ok((enough_points(built.to_cloud(), min_points)?, counts))
+    }
+
+    /// Everything left through the pipeline; the pipeline's whole result (cloud, trajectory,
+    /// counters), whatever its size. `Err` if there was no complete lidar frame.
+    pub fn finish_built(mut self) -> Result<(BuiltCloud, ReadCounts), String> {
         if self.t0_ns.is_none() {
             return Err("no complete lidar frame".into());
         }
         self.release(f64::NEG_INFINITY);
         let counts = self.counts();
-        let cloud = self.pipeline.finish().to_cloud();
-        if cloud.points_m.len() < self.min_cloud_points {
-            return Err(format!(
-                "the fused cloud has {} points, fewer than {}",
-                cloud.points_m.len(),
-                self.min_cloud_points
-            ));
-        }
-        Ok((cloud, counts))
+        Ok((self.pipeline.finish(), counts))
     }
+}
+
+fn enough_points(cloud: Cloud, min_points: usize) -> Result<Cloud, String> {
+    if cloud.points_m.len() < min_points {
+        return Err(format!(
+            "the fused cloud has {} points, fewer than {min_points}",
+            cloud.points_m.len(),
+        ));
+    }
+    Ok(cloud)
 }
 
 /// Reads a run directory and builds its fused cloud (vehicle-agnostic: no angles yet).
 pub fn build_cloud(dir: &Path, config: &ProcessConfig) -> Result<(Cloud, ReadCounts), String> {
+    let (built, counts) = build_run(dir, config)?;
+    Ok((
+        enough_points(built.to_cloud(), config.min_cloud_points)?,
+        counts,
+    ))
+}
+
+/// Reads a run directory through a [`RunBuilder`]: the pipeline's whole result (cloud,
+/// trajectory, counters) and what was read. `passangle replay` prints it.
+pub fn build_run(dir: &Path, config: &ProcessConfig) -> Result<(BuiltCloud, ReadCounts), String> {
     let rec = Recording::open(dir).map_err(|e| e.to_string())?;
     let mut builder = RunBuilder::new(config)?;
     let pcap = dir.join("lidar.pcap");
@@ -429,12 +471,14 @@ pub fn build_cloud(dir: &Path, config: &ProcessConfig) -> Result<(Cloud, ReadCou
             meta.kind == PacketKind::Position,
         );
     }
-    let (odometry, _) = rec.odometry().map_err(|e| e.to_string())?;
+    builder.counts.lidar_cut_short = source.truncated().is_some();
+    let (odometry, cut) = rec.odometry().map_err(|e| e.to_string())?;
+    builder.counts.odometry_cut_short = cut > 0;
     for (wall_us, o) in &odometry {
         builder.push_odometry(*wall_us, o);
     }
     read_depth(dir, &mut builder)?;
-    builder.finish().map_err(|e| {
+    builder.finish_built().map_err(|e| {
         if e.starts_with("no complete") {
             format!("{}: {e}", pcap.display())
         } else {

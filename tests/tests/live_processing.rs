@@ -48,8 +48,9 @@ impl Arrival {
     }
 }
 
-/// The streams of `duration_s` of the sedan scenario, in arrival order.
-fn arrivals(duration_s: f64) -> Vec<Arrival> {
+/// The streams of `duration_s` of the sedan scenario, in arrival order. `batched`: the service
+/// reads the odometry reports two at a time, so each pair shares one arrival stamp.
+fn arrivals(duration_s: f64, batched: bool) -> Vec<Arrival> {
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../hil-sim/scenarios/sedan-pass.toml");
     let scenario = Scenario::load(&path).unwrap();
     let scene = Scene::from_vehicle(&scenario.vehicle);
@@ -84,8 +85,14 @@ fn arrivals(duration_s: f64) -> Vec<Arrival> {
             .wrapping_add(1_442_695_040_888_963_407);
         let jitter_s = (state >> 40) as f64 / f64::from(1u32 << 24) * 0.040;
         let d = scenario.run.wheel_distance_at(t);
+        let wall_us = if batched {
+            // Read 1 ms after the odd-numbered report of the pair was sent.
+            to_us(f64::from(i | 1) * 0.01) + 1_000
+        } else {
+            to_us(t + jitter_s)
+        };
         out.push(Arrival::Odometry {
-            wall_us: to_us(t + jitter_s),
+            wall_us,
             odometry: Odometry {
                 stamp_us: (t * 1e6) as u64,
                 x_m: d as f32,
@@ -147,7 +154,7 @@ fn live_processing_builds_the_same_cloud_as_the_recording() {
     let src = "192.168.1.201:2368".parse().unwrap();
     let data_dst = "192.168.1.100:2368".parse().unwrap();
     let position_dst = "192.168.1.100:8308".parse().unwrap();
-    for a in &arrivals(3.0) {
+    for a in &arrivals(3.0, false) {
         match a {
             Arrival::Packet {
                 wall_ns,
@@ -182,7 +189,7 @@ fn live_processing_keeps_up_during_the_drive() {
     // Frames are processed as they arrive: at the last arrival only the reorder window's frames
     // (0.5 s at 10 Hz: about 5) and the last partial revolutions are still waiting.
     let mut live = RunBuilder::new(&config()).unwrap();
-    for a in arrivals(3.0) {
+    for a in arrivals(3.0, false) {
         push(&mut live, &a);
     }
     let frames = live.counts().lidar_frames;
@@ -192,4 +199,31 @@ fn live_processing_keeps_up_during_the_drive() {
         frames - done <= 7,
         "{done} of {frames} frames processed before the stop"
     );
+}
+
+#[test]
+fn odometry_read_in_pairs_is_placed_at_its_mcu_stamps() {
+    // Two reports per serial read share one arrival stamp. On the arrival clock the second of each
+    // pair is "not after the previous one" and the pipeline would drop it (half the odometry);
+    // mapped from the MCU's stamps, none is dropped.
+    let mut live = RunBuilder::new(&config()).unwrap();
+    let arrivals = arrivals(3.0, true);
+    let shared = arrivals
+        .windows(2)
+        .filter(|w| {
+            matches!(
+                w,
+                [Arrival::Odometry { wall_us: a, .. }, Arrival::Odometry { wall_us: b, .. }]
+                    if a == b
+            )
+        })
+        .count();
+    assert!(shared >= 100, "{shared} pairs share an arrival stamp");
+    for a in &arrivals {
+        push(&mut live, a);
+    }
+    let (_, counts) = live.finish().unwrap();
+    assert_eq!(counts.out_of_order, 0, "{counts:?}");
+    assert_eq!(counts.mcu_clock_resets, 0, "{counts:?}");
+    assert!(counts.odometry >= 300, "{counts:?}");
 }
