@@ -513,6 +513,13 @@ fn angles_of(
     if counts.lidar_malformed > 0 {
         result.warnings.insert(ResultWarnings::LIDAR_LOSS);
     }
+    if counts.out_of_order > 0 || counts.mcu_clock_resets > 0 {
+        tracing::warn!(
+            "processing: {} items out of time order skipped, MCU clock reset {} times (reboot?)",
+            counts.out_of_order,
+            counts.mcu_clock_resets
+        );
+    }
     let svg = side_view_svg(&found);
     Ok(Processed { result, cloud, svg })
 }
