@@ -20,6 +20,16 @@
 //!    slowly biased laser otherwise wins every frame).
 //! 4. **Gaps**: a component the winner does not determine is taken from the available source
 //!    closest to the reference, else from the reference itself (constant velocity), else zero.
+//!    A rotation rate taken from the reference is multiplied by `rotation_gap_decay` (the same
+//!    factor applies to the prediction, [`Fusion::predict`]): the reference is the mean of the last
+//!    fused rates, so holding it (factor 1, the behaviour before) keeps whatever rotation rate the
+//!    laser last reported, noise included, and integrates it for as long as the laser stays
+//!    degenerate (laser only under a car: tens of degrees of yaw over a pass). The robot drives
+//!    straight by design (DESIGN.md's run), so without a source the best guess of a rotation rate
+//!    is zero; a factor below 1 decays the held rate towards it frame by frame. Translation keeps
+//!    the reference as it is (the robot does keep driving at its speed).
+//!
+//! The same wheel gate is offered to the scan-to-map refinement ([`Fusion::agrees_with_wheel`]).
 //!
 //! Until the reference holds `reference_frames` rates, the laser is used wherever it is determined.
 //!
@@ -160,15 +170,36 @@ impl Fusion {
         Some(mean)
     }
 
+    /// The reference with its rotation rates multiplied by `rotation_gap_decay`: the value for a
+    /// component no source determines.
+    fn gap_reference(&self) -> Option<Twist6> {
+        let decay = self.config.rotation_gap_decay;
+        self.reference()
+            .map(|r| std::array::from_fn(|k| if k < 3 { r[k] * decay } else { r[k] }))
+    }
+
+    /// Per group (rotation, translation): whether `rate` lies within the tolerances of the wheel
+    /// odometry wherever the wheels determine a component (true without wheels or with the gate
+    /// off). The scan-to-map refinement uses it as Algorithm 1's laser is gated.
+    pub fn agrees_with_wheel(&self, rate: &Twist6, wheel: Option<&SourceRate>) -> [bool; 2] {
+        let wheel = wheel.filter(|_| self.config.use_wheel && self.config.gate_laser_by_wheel);
+        let c = &self.config;
+        [
+            ([0, 1, 2], c.rotation_tolerance_radps),
+            ([3, 4, 5], c.translation_tolerance_mps),
+        ]
+        .map(|(group, tol)| wheel.is_none_or(|w| within_wheel(rate, w, &group, &tol)))
+    }
+
     /// The best prediction before the laser runs: per component visual, then wheel, then the
-    /// reference, then the last fused rate, else zero.
+    /// reference (rotation decayed, see the module docs), then the last fused rate, else zero.
     ///
     /// The wheels enter unscaled: the prediction is the laser's starting point, and a laser that
     /// converges only part of the way would otherwise confirm the current wheel scale and drive
     /// it further each frame (a feedback loop that took a 3 % slip for 6 % on the simulated SUV).
     pub fn predict(&self, visual: Option<&SourceRate>, wheel: Option<&SourceRate>) -> Twist6 {
         let fallback = self
-            .reference()
+            .gap_reference()
             .or_else(|| self.history.back().copied())
             .unwrap_or([0.0; 6]);
         std::array::from_fn(|k| {
@@ -192,6 +223,7 @@ impl Fusion {
         let scaled_wheel = raw_wheel.map(|w| self.scaled(w));
         let wheel = scaled_wheel.as_ref();
         let reference = self.reference();
+        let gap_reference = self.gap_reference();
         let candidates = [
             (Source::Laser, laser),
             (Source::Visual, visual),
@@ -222,7 +254,13 @@ impl Fusion {
                 let (source, value) = if let Some((s, c)) = from_winner {
                     (*s, c.map_or(0.0, |c| c.rate[k]))
                 } else {
-                    fill_gap(&candidates, k, reference.as_ref(), self.history.back())
+                    fill_gap(
+                        &candidates,
+                        k,
+                        reference.as_ref(),
+                        gap_reference.as_ref(),
+                        self.history.back(),
+                    )
                 };
                 fused.rate[k] = value;
                 fused.chosen[k] = source;
@@ -256,12 +294,7 @@ fn select(
         .filter(|_| gate_by_wheel);
     let mut laser_gated_out = false;
     if let Some((_, Some(laser))) = candidates.first() {
-        laser_gated_out = wheel.is_some_and(|w| {
-            group
-                .iter()
-                .zip(tolerance)
-                .any(|(&k, &tol)| w.available[k] && (laser.rate[k] - w.rate[k]).abs() >= tol)
-        });
+        laser_gated_out = wheel.is_some_and(|w| !within_wheel(&laser.rate, w, group, tolerance));
         if !laser_gated_out
             && group.iter().all(|&k| laser.available[k])
             && group
@@ -296,10 +329,27 @@ fn select(
         .map(|(s, _)| s)
 }
 
+/// True when `rate` lies within `tolerance` of the wheels in every component of `group` that the
+/// wheels determine.
+fn within_wheel(
+    rate: &Twist6,
+    wheel: &SourceRate,
+    group: &[usize; 3],
+    tolerance: &[f64; 3],
+) -> bool {
+    group
+        .iter()
+        .zip(tolerance)
+        .all(|(&k, &tol)| !wheel.available[k] || (rate[k] - wheel.rate[k]).abs() < tol)
+}
+
+/// Component `k` from the available source closest to the reference, else from `gap_reference`
+/// (the reference, rotation decayed), else zero.
 fn fill_gap(
     candidates: &[(Source, Option<&SourceRate>)],
     k: usize,
     reference: Option<&Twist6>,
+    gap_reference: Option<&Twist6>,
     last: Option<&Twist6>,
 ) -> (Source, f64) {
     let target = reference.or(last).map_or(0.0, |r| r[k]);
@@ -307,7 +357,7 @@ fn fill_gap(
         .iter()
         .filter_map(|(s, c)| c.filter(|c| c.available[k]).map(|c| (*s, c.rate[k])))
         .min_by(|a, b| (a.1 - target).abs().total_cmp(&(b.1 - target).abs()));
-    match (best, reference) {
+    match (best, gap_reference) {
         (Some(b), _) => b,
         (None, Some(r)) => (Source::Reference, r[k]),
         (None, None) => (Source::Zero, 0.0),
@@ -436,6 +486,61 @@ mod tests {
             );
         }
         assert!((off.wheel_scale() - 1.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn a_rotation_no_source_determines_decays_to_zero_and_translation_holds() {
+        // Laser only: the laser saw a yaw rate of 0.05 rad/s for ten frames, then loses yaw (and
+        // x) between two planes. Holding the reference integrated that rate for the rest of the
+        // pass; the default takes zero for the rotation and keeps the speed.
+        let turning = [0.0, 0.0, 0.05, 0.3, 0.0, 0.0];
+        let mut blind = rate([0.0; 6]);
+        blind.available = [true, true, false, false, true, true];
+        let run = |decay: f64| {
+            let mut f = Fusion::new(FusionConfig {
+                use_wheel: false,
+                rotation_gap_decay: decay,
+                ..FusionConfig::default()
+            });
+            warm(&mut f, turning);
+            let out = f.fuse(Some(&blind), None, None);
+            assert_eq!(out.chosen[2], Source::Reference);
+            assert_eq!(out.chosen[3], Source::Reference);
+            assert!((out.rate[3] - 0.3).abs() < 1e-12, "{:?}", out.rate);
+            (out.rate[2], f.predict(None, None)[2])
+        };
+        let (held, held_prediction) = run(1.0);
+        assert!((held - 0.05).abs() < 1e-12 && (held_prediction - 0.05).abs() < 1e-12);
+        let (fused, prediction) = run(FusionConfig::default().rotation_gap_decay);
+        assert!(
+            fused.abs() < 1e-12 && prediction.abs() < 1e-12,
+            "{fused} {prediction}"
+        );
+        let (half, _) = run(0.5);
+        assert!((half - 0.025).abs() < 1e-12, "{half}");
+    }
+
+    #[test]
+    fn the_refinement_gate_compares_each_group_with_the_wheels() {
+        let f = Fusion::new(FusionConfig::default());
+        let wheel = SourceRate {
+            rate: [0.0, 0.0, 0.0, 0.3, 0.0, 0.0],
+            available: [false, false, true, true, true, false],
+        };
+        // Roll and z are not the wheels' business; yaw 0.02 rad/s off is.
+        let refined = [0.5, 0.0, 0.02, 0.305, 0.0, 0.1];
+        assert_eq!(f.agrees_with_wheel(&refined, Some(&wheel)), [false, true]);
+        let refined = [0.5, 0.0, 0.005, 0.35, 0.0, 0.1];
+        assert_eq!(f.agrees_with_wheel(&refined, Some(&wheel)), [true, false]);
+        assert_eq!(f.agrees_with_wheel(&refined, None), [true, true]);
+        let ungated = Fusion::new(FusionConfig {
+            gate_laser_by_wheel: false,
+            ..FusionConfig::default()
+        });
+        assert_eq!(
+            ungated.agrees_with_wheel(&refined, Some(&wheel)),
+            [true, true]
+        );
     }
 
     #[test]

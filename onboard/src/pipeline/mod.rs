@@ -52,7 +52,7 @@ use self::fusion::{Fusion, Source, SourceRate};
 use self::geom::{Pose, Twist6, V3, VoxelIndex, norm, voxel_of};
 use self::laser_odometry::{FeatureTarget, GROUND_TAG_BIT};
 use self::map::{CloudAccumulator, FeatureMap};
-use self::registration::{register_joint, register_two_step};
+use self::registration::{keep_components, register_joint, register_two_step, unaided};
 use self::visual_odometry::{VisualOdometry, VisualStep};
 use crate::cloud::Cloud;
 use crate::vlp16::Frame;
@@ -143,6 +143,9 @@ pub struct TrajectoryPoint {
     pub chosen: [Source; 6],
     /// Components the laser odometry could not determine.
     pub laser_degenerate: [bool; 6],
+    /// Components the scan-to-map refinement could not determine or that its wheel gate rejected
+    /// (both keep the fused prediction's value); all false when it did not run.
+    pub refine_rejected: [bool; 6],
 }
 
 /// Counters for the report and the benchmarks.
@@ -164,6 +167,13 @@ pub struct PipelineStats {
     pub planes: usize,
     /// Frames where the laser was degenerate in at least one component.
     pub degenerate_frames: usize,
+    /// Frames where the scan-to-scan laser was degenerate, per component `[rx, ry, rz, tx, ty, tz]`.
+    pub laser_degenerate: [usize; 6],
+    /// Frames where the scan-to-map refinement was degenerate, per component.
+    pub refine_degenerate: [usize; 6],
+    /// Frames where the refinement's rotation / translation group disagreed with the wheels and
+    /// was rejected (`fusion.gate-refinement-by-wheel`).
+    pub refine_gated: [usize; 2],
     /// Frames deskewed with the general twist model.
     pub twist_deskews: usize,
     /// Depth frames received / tracked.
@@ -256,6 +266,36 @@ impl PipelineConfig {
             return Err(PipelineError::InvalidConfig(format!(
                 "map.ground-voxel-m = {}: must be 0 (the output voxel) or a positive number",
                 self.map.ground_voxel_m
+            )));
+        }
+        for (key, v) in [
+            (
+                "laser.degeneracy-eigen-min",
+                self.laser.degeneracy_eigen_min,
+            ),
+            (
+                "laser.degeneracy-rotation-eigen-min-m2",
+                self.laser.degeneracy_rotation_eigen_min_m2,
+            ),
+            (
+                "laser.unaided-degeneracy-eigen-min",
+                self.laser.unaided_degeneracy_eigen_min,
+            ),
+            (
+                "laser.unaided-degeneracy-rotation-eigen-min-m2",
+                self.laser.unaided_degeneracy_rotation_eigen_min_m2,
+            ),
+        ] {
+            if !(v >= 0.0 && v.is_finite()) {
+                return Err(PipelineError::InvalidConfig(format!(
+                    "{key} = {v}: must be 0 or a positive number"
+                )));
+            }
+        }
+        if !(0.0..=1.0).contains(&self.fusion.rotation_gap_decay) {
+            return Err(PipelineError::InvalidConfig(format!(
+                "fusion.rotation-gap-decay = {}: must lie in 0..=1",
+                self.fusion.rotation_gap_decay
             )));
         }
         if !(0.0..=1.0).contains(&self.ground.early_stop_fraction) {
@@ -535,7 +575,7 @@ impl Pipeline {
             .into_iter()
             .map(|(p, _)| p)
             .collect();
-        let (mut world_from_robot, chosen, laser_degenerate) =
+        let (mut world_from_robot, chosen, laser_degenerate, refine_rejected) =
             self.estimate_pose(frame.stamp_s, &feats, &ground_sample);
         if let Some(s) = &split
             && cfg.map.level_with_ground
@@ -577,6 +617,7 @@ impl Pipeline {
             world_from_robot,
             chosen,
             laser_degenerate,
+            refine_rejected,
         });
         self.flush_depth_points(frame.stamp_s);
         self.previous = Some(PreviousFrame {
@@ -597,35 +638,46 @@ impl Pipeline {
         }
     }
 
-    /// Steps 5-7: laser odometry, fusion, scan-to-map.
+    /// Steps 5-7: laser odometry, fusion, scan-to-map. Returns `world_from_robot`, the fused
+    /// components' sources, the laser's degenerate components and the components the refinement
+    /// left at the fused prediction.
     fn estimate_pose(
         &mut self,
         stamp_s: f64,
         feats: &features::Features,
         ground_sample: &[V3],
-    ) -> (Pose, [Source; 6], [bool; 6]) {
+    ) -> (Pose, [Source; 6], [bool; 6], [bool; 6]) {
         let Some(prev) = &self.previous else {
-            return (Pose::IDENTITY, [Source::Zero; 6], [false; 6]);
+            return (Pose::IDENTITY, [Source::Zero; 6], [false; 6], [false; 6]);
         };
         let dt = stamp_s - prev.stamp_s;
+        let prev_world = prev.world_from_robot;
         let wheel = self.wheel_rate(prev.stamp_s, stamp_s);
         let visual = self.visual_rate(prev.stamp_s, stamp_s);
         let predicted = self.fusion.predict(visual.as_ref(), wheel.as_ref());
         let prior = Pose::from_increment(scale_twist(&predicted, dt));
         let mut step1_planes = feats.planes.clone();
         step1_planes.extend_from_slice(ground_sample);
+        // Without a measured prior (no wheel or visual odometry over the interval) the degeneracy
+        // thresholds trade the laser against the constant-velocity guess instead.
+        let laser_config = if wheel.is_none() && visual.is_none() {
+            unaided(&self.config.laser)
+        } else {
+            self.config.laser.clone()
+        };
         let laser = register_two_step(
             &prev.target,
             &step1_planes,
             &feats.planes,
             &feats.corners,
             prior,
-            &self.config.laser,
+            &laser_config,
         );
         let laser_degenerate = laser.degenerate;
         if laser_degenerate.iter().any(|&d| d) {
             self.stats.degenerate_frames += 1;
         }
+        count(&mut self.stats.laser_degenerate, laser_degenerate);
         let laser_rate = SourceRate {
             rate: scale_twist(&laser.pose.to_increment(), 1.0 / dt),
             available: laser_degenerate.map(|d| !d),
@@ -639,21 +691,41 @@ impl Pipeline {
         }
         self.last_rate = fused.rate;
         let increment = Pose::from_increment(scale_twist(&fused.rate, dt));
-        let predicted_world = prev.world_from_robot.compose(&increment);
-        let world = if self.config.map.refine && !self.map.is_empty() {
-            register_joint(
-                self.map.target(),
-                &step1_planes,
-                &feats.corners,
-                predicted_world,
-                self.config.map.iterations,
-                &self.config.laser,
-            )
-            .pose
+        let predicted_world = prev_world.compose(&increment);
+        if !self.config.map.refine || self.map.is_empty() {
+            return (predicted_world, fused.chosen, laser_degenerate, [false; 6]);
+        }
+        let refined = register_joint(
+            self.map.target(),
+            &step1_planes,
+            &feats.corners,
+            predicted_world,
+            self.config.map.iterations,
+            &laser_config,
+        );
+        count(&mut self.stats.refine_degenerate, refined.degenerate);
+        // The refinement's yaw (and x, y) is gated by the wheels like the scan-to-scan laser in
+        // Algorithm 1: the refined increment over the interval must agree with the wheels' rate.
+        let agrees = if self.config.fusion.gate_refinement_by_wheel {
+            let refined_rate = scale_twist(
+                &prev_world.inverse().compose(&refined.pose).to_increment(),
+                1.0 / dt,
+            );
+            self.fusion.agrees_with_wheel(&refined_rate, wheel.as_ref())
         } else {
-            predicted_world
+            [true; 2]
         };
-        (world, fused.chosen, laser_degenerate)
+        for (gated, ok) in self.stats.refine_gated.iter_mut().zip(agrees) {
+            *gated += usize::from(!ok);
+        }
+        let keep: [bool; 6] = std::array::from_fn(|k| agrees[k / 3]);
+        let world = if agrees == [true; 2] {
+            refined.pose
+        } else {
+            keep_components(&refined.pose, &predicted_world, keep)
+        };
+        let rejected = std::array::from_fn(|k| refined.degenerate[k] || !keep[k]);
+        (world, fused.chosen, laser_degenerate, rejected)
     }
 
     /// Wheel odometry's rate over `[a_s, b_s]` (robot frame at `a_s`), if it covers the interval.
@@ -755,6 +827,13 @@ fn level_with_ground(world_from_robot: &Pose, plane: (V3, f64), world: (V3, f64)
 
 fn axis_angle(sin: f64, cos: f64) -> f64 {
     sin.atan2(cos)
+}
+
+/// Add one to the counters of the flagged components.
+fn count(counters: &mut [usize; 6], flags: [bool; 6]) {
+    for (c, f) in counters.iter_mut().zip(flags) {
+        *c += usize::from(f);
+    }
 }
 
 fn scale_twist(t: &Twist6, s: f64) -> Twist6 {

@@ -3,11 +3,37 @@
 //! solution remapping that decides which directions the scan determines.
 //!
 //! **Degeneracy** (Zhang, Kaess and Singh 2016, "solution remapping"): after the solve, the normal
-//! matrix of each step (per residual) is eigen-decomposed; directions whose eigenvalue is below
-//! `degeneracy_eigen_min` are not determined by the scan (under a car: travel along two parallel
-//! planes). In those directions the estimate is replaced by the prior (the fused prediction from
-//! visual and wheel odometry), and the directions are reported so fusion knows which of the laser's
-//! components to distrust.
+//! matrix of each step (per residual) is eigen-decomposed; directions whose eigenvalue is below a
+//! threshold are not determined by the scan (under a car: travel along two parallel planes). In
+//! those directions the estimate is replaced by the prior (the fused prediction from visual and
+//! wheel odometry), and the directions are reported so fusion knows which of the laser's components
+//! to distrust.
+//!
+//! **Two thresholds.** The normal matrix mixes units: its translational block is dimensionless (a
+//! mean of products of unit normal components, at most 1), its rotational block is in m^2 (the
+//! squared lever arm `|q - c|` of each residual about the rotation centre). One threshold for both
+//! (`degeneracy-eigen-min`, 0.3, the only one before) let a weak yaw through: a few tyre or bumper
+//! residuals 2-5 m away give a yaw eigenvalue of 0.3-1 m^2 while the rotation is set by a handful
+//! of points, and the laser-only trajectories diverged in yaw on three of five simulated passes.
+//! So an eigen-direction that is mostly rotation (squared weight of its rotational components
+//! above one half) is tested against `degeneracy-rotation-eigen-min-m2`, the others against
+//! `degeneracy-eigen-min`. Approximation: an eigenvector that mixes rotation and translation (a
+//! yaw about a point away from the centre) is classified by its larger part only.
+//!
+//! **Aided and unaided.** The threshold decides between the scan and the prior, so it depends on
+//! the prior: with wheel or visual odometry over the interval (measured x, y, yaw, and Algorithm
+//! 1's wheel gate behind it) the laser keeps a direction only above `degeneracy-eigen-min` /
+//! `degeneracy-rotation-eigen-min-m2` (0.3 / 0.3 m^2); without them (laser only) the prior is the
+//! constant-velocity guess, and [`unaided`] swaps in `unaided-degeneracy-eigen-min` (0.1: a weak
+//! laser x still beats a guessed speed; at 0.3 the simulated van's laser-only run stood still for
+//! its first 3 s and lost 0.8 m) and `unaided-degeneracy-rotation-eigen-min-m2` (1.0 m^2: a weak
+//! laser yaw is worse than the straight-driving prior, which fusion then fills with zero rate).
+//! Measured on the five simulated passes; see the README's laser odometry section.
+//!
+//! **Gating a registration by another source** ([`keep_components`]): the pipeline may reject
+//! some components of a registration after the fact (the scan-to-map refinement against wheel
+//! odometry, as Algorithm 1 gates the scan-to-scan laser); the rejected components fall back to
+//! the prior exactly as degenerate ones do.
 
 use super::config::LaserOdometryConfig;
 use super::geom::{Pose, V3, symmetric_eigen};
@@ -27,6 +53,45 @@ pub struct Registration {
     pub rms_m: f64,
 }
 
+/// The degeneracy thresholds of one registration: eigenvalues of the per-residual normal matrix.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct DegeneracyThresholds {
+    /// For eigen-directions that are mostly translation (dimensionless).
+    pub translation: f64,
+    /// For eigen-directions that are mostly rotation, m^2.
+    pub rotation_m2: f64,
+}
+
+impl DegeneracyThresholds {
+    /// The thresholds of a laser config.
+    pub fn of(config: &LaserOdometryConfig) -> Self {
+        Self {
+            translation: config.degeneracy_eigen_min,
+            rotation_m2: config.degeneracy_rotation_eigen_min_m2,
+        }
+    }
+
+    /// The threshold for eigenvector `v` (`[rx, ry, rz, tx, ty, tz]`, unit length).
+    fn for_direction(&self, v: &[f64; 6]) -> f64 {
+        let rotational: f64 = v[..3].iter().map(|c| c * c).sum();
+        if rotational > 0.5 {
+            self.rotation_m2
+        } else {
+            self.translation
+        }
+    }
+}
+
+/// `config` with the unaided degeneracy thresholds in place of the aided ones: for intervals
+/// where the prior comes from no measuring source (see the module docs).
+pub fn unaided(config: &LaserOdometryConfig) -> LaserOdometryConfig {
+    LaserOdometryConfig {
+        degeneracy_eigen_min: config.unaided_degeneracy_eigen_min,
+        degeneracy_rotation_eigen_min_m2: config.unaided_degeneracy_rotation_eigen_min_m2,
+        ..config.clone()
+    }
+}
+
 /// Replace the estimate by the prior along the degenerate eigen-directions of `h` (restricted to
 /// `active`); returns the remapped pose and which parameters were mostly taken from the prior.
 fn remap(
@@ -34,7 +99,7 @@ fn remap(
     prior: &Pose,
     h: &[[f64; 6]; 6],
     active: &[usize],
-    eigen_min: f64,
+    thresholds: DegeneracyThresholds,
 ) -> (Pose, [bool; 6]) {
     let mut m = *h;
     for i in 0..6 {
@@ -50,7 +115,7 @@ fn remap(
     let mut bad_weight = [0.0; 6];
     for (e, &value) in values.iter().enumerate() {
         let v: [f64; 6] = std::array::from_fn(|k| vectors[k][e]);
-        if value >= eigen_min {
+        if value >= thresholds.for_direction(&v) {
             let proj: f64 = (0..6).map(|k| v[k] * delta[k]).sum();
             for k in 0..6 {
                 kept[k] += proj * v[k];
@@ -63,6 +128,19 @@ fn remap(
     }
     let degenerate = std::array::from_fn(|k| active.contains(&k) && bad_weight[k] > 0.5);
     (about(centre, &kept).compose(prior), degenerate)
+}
+
+/// `estimate` with the components not in `keep` (`[rx, ry, rz, tx, ty, tz]` of the increment
+/// from `prior`, rotating about the prior's position as the solves do) replaced by the prior's.
+pub fn keep_components(estimate: &Pose, prior: &Pose, keep: [bool; 6]) -> Pose {
+    let centre = prior.translation;
+    let mut delta = increment_about(centre, &estimate.compose(&prior.inverse()));
+    for (d, k) in delta.iter_mut().zip(keep) {
+        if !k {
+            *d = 0.0;
+        }
+    }
+    about(centre, &delta).compose(prior)
 }
 
 /// Register source features to `target` with all six parameters in one LM problem (the scan-to-map
@@ -78,7 +156,7 @@ pub fn register_joint(
     let active = [0, 1, 2, 3, 4, 5];
     let (pose, h, residuals, rms_m) =
         solve(target, planes, corners, prior, &active, iterations, config);
-    let (pose, degenerate) = remap(&pose, &prior, &h, &active, config.degeneracy_eigen_min);
+    let (pose, degenerate) = remap(&pose, &prior, &h, &active, DegeneracyThresholds::of(config));
     Registration {
         pose,
         degenerate,
@@ -108,7 +186,13 @@ pub fn register_two_step(
         config.iterations,
         config,
     );
-    let (pose1, deg1) = remap(&pose1, &prior, &h1, &step1, config.degeneracy_eigen_min);
+    let (pose1, deg1) = remap(
+        &pose1,
+        &prior,
+        &h1,
+        &step1,
+        DegeneracyThresholds::of(config),
+    );
     let step2 = [2, 3, 4];
     let (pose2, h2, n2, rms_m) = solve(
         target,
@@ -119,7 +203,13 @@ pub fn register_two_step(
         config.iterations,
         config,
     );
-    let (pose, deg2) = remap(&pose2, &pose1, &h2, &step2, config.degeneracy_eigen_min);
+    let (pose, deg2) = remap(
+        &pose2,
+        &pose1,
+        &h2,
+        &step2,
+        DegeneracyThresholds::of(config),
+    );
     Registration {
         pose,
         degenerate: std::array::from_fn(|k| deg1[k] || deg2[k]),
@@ -143,6 +233,7 @@ mod tests {
         // the default (which is tuned to hand x, y and yaw to wheel odometry under real cars).
         let config = LaserOdometryConfig {
             degeneracy_eigen_min: 0.01,
+            degeneracy_rotation_eigen_min_m2: 0.01,
             ..LaserOdometryConfig::default()
         };
         for reg in [
@@ -184,6 +275,91 @@ mod tests {
                 "{near_err:?} {far_err:?}"
             );
         }
+    }
+
+    /// Step 2's normal matrix of a scan between two parallel planes with a few tyre residuals:
+    /// x and y well determined, yaw weakly (0.6 m^2 per residual, from a handful of points 2 m
+    /// away).
+    fn weak_yaw_normal_matrix() -> [[f64; 6]; 6] {
+        let mut h = [[0.0; 6]; 6];
+        h[2][2] = 0.6;
+        h[3][3] = 0.5;
+        h[4][4] = 0.2;
+        h
+    }
+
+    #[test]
+    fn a_weak_yaw_is_degenerate_without_a_measured_prior() {
+        let h = weak_yaw_normal_matrix();
+        let prior = Pose::from_xyz_rpy([0.03, 0.0, 0.0], [0.0; 3]);
+        let estimate = Pose::from_xyz_rpy([0.032, 0.001, 0.0], [0.0, 0.0, 0.004]);
+        let step2 = [2, 3, 4];
+        // The former single threshold (0.3 for rotations in m^2 and translations alike) keeps
+        // the weak yaw and drops the y that the tyres do determine.
+        let single = DegeneracyThresholds {
+            translation: 0.3,
+            rotation_m2: 0.3,
+        };
+        let (_, degenerate) = remap(&estimate, &prior, &h, &step2, single);
+        assert_eq!(degenerate, [false, false, false, false, true, false]);
+        // Unaided (laser only) thresholds: yaw to the prior, x and y from the scan.
+        let config = unaided(&LaserOdometryConfig::default());
+        let (pose, degenerate) = remap(
+            &estimate,
+            &prior,
+            &h,
+            &step2,
+            DegeneracyThresholds::of(&config),
+        );
+        assert_eq!(degenerate, [false, false, true, false, false, false]);
+        let rpy = pose.rpy();
+        assert!(rpy[2].abs() < 1e-12, "{rpy:?}");
+        assert!((pose.translation[0] - 0.032).abs() < 1e-6, "{pose:?}");
+        assert!((pose.translation[1] - 0.001).abs() < 1e-6, "{pose:?}");
+        // With wheel or visual odometry behind the prior the aided thresholds apply (0.3 / 0.3).
+        let aided = DegeneracyThresholds::of(&LaserOdometryConfig::default());
+        assert_eq!(aided, single);
+    }
+
+    #[test]
+    fn rotation_and_translation_eigen_directions_get_their_own_threshold() {
+        let h = weak_yaw_normal_matrix();
+        let (prior, estimate) = (Pose::IDENTITY, Pose::IDENTITY);
+        let only = |translation, rotation_m2| {
+            remap(
+                &estimate,
+                &prior,
+                &h,
+                &[2, 3, 4],
+                DegeneracyThresholds {
+                    translation,
+                    rotation_m2,
+                },
+            )
+            .1
+        };
+        // Raising the rotation threshold never touches x and y, and the other way round.
+        assert_eq!(only(0.0, 0.7), [false, false, true, false, false, false]);
+        assert_eq!(only(0.6, 0.0), [false, false, false, true, true, false]);
+        assert_eq!(only(0.3, 0.0), [false, false, false, false, true, false]);
+    }
+
+    #[test]
+    fn keep_components_takes_the_rejected_ones_from_the_prior() {
+        let prior = Pose::from_xyz_rpy([5.0, 1.0, 0.0], [0.0, 0.0, 0.3]);
+        let correction = Pose::from_xyz_rpy([0.01, -0.02, 0.003], [0.001, 0.002, 0.02]);
+        let estimate = about(prior.translation, &correction.to_increment()).compose(&prior);
+        let yaw_rejected = [true, true, false, true, true, true];
+        let kept = keep_components(&estimate, &prior, yaw_rejected);
+        let delta = increment_about(prior.translation, &kept.compose(&prior.inverse()));
+        let want = correction.to_increment();
+        for k in 0..6 {
+            let expected = if k == 2 { 0.0 } else { want[k] };
+            assert!((delta[k] - expected).abs() < 1e-9, "{delta:?} vs {want:?}");
+        }
+        let all = keep_components(&estimate, &prior, [true; 6]);
+        let diff = all.compose(&estimate.inverse()).to_increment();
+        assert!(diff.iter().all(|d| d.abs() < 1e-12), "{diff:?}");
     }
 
     #[test]
