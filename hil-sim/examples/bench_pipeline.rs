@@ -3,13 +3,17 @@
 //! lidar frame, for the configurations of the paper's Figure 14 ablation.
 //!
 //! Run: `cargo run --release -p hil-sim --example bench_pipeline -- [SEEDS] [--ablation | --peer]
-//! [--no-depth] [--only NAME] [--duration-s S] [--no-refine] [--eigen-min E] [--export DIR]`
+//! [--no-depth] [--only NAME] [--duration-s S] [--no-refine] [--eigen-min E] [--export DIR]
+//! [--save-clouds DIR]`
 //! (defaults: 10 seeds, laser + wheel and the full configuration). `--ablation` adds wheel only,
 //! laser only, laser + visual, without ground removal and without outlier removal, on the first
 //! seed of every scenario. `--peer` runs exactly the two configurations of the KISS-ICP
 //! comparison, laser only and laser + wheel (no depth). `--export DIR` writes each run's lidar
 //! frames, the true poses and our estimated trajectories for the peer run
-//! (`bench/pipeline_peer.sh`; layout at [`export_frames`]).
+//! (`bench/pipeline_peer.sh`; layout at [`export_frames`]). `--save-clouds DIR` writes the
+//! cloud the angle figures were computed from, with the true angles and the trajectory, for
+//! re-running the angle calculator without the pipeline (layout at [`save_cloud`]; reader:
+//! `cargo run --release -p onboard --example accuracy_angles -- saved DIR`).
 //!
 //! Inputs per run (all from `hil_sim`, all seeded): the VLP-16 packets decoded by
 //! `onboard::vlp16::FrameAssembler`, the D435 depth frames (every 3rd, i.e. 10 Hz), and wheel
@@ -23,7 +27,8 @@
 //! - cloud error: distance of each built point to the nearest true surface (ground, tyres, body
 //!   prisms, parts): median and 95th percentile, metres.
 //! - angles: `onboard::angles::compute_angles` on the built cloud (moved into the vehicle frame by
-//!   the true start pose) against `hil_sim::truth::true_angles`, degrees.
+//!   the true start pose, with the estimated trajectory as the scan's path, as the robot would
+//!   give it) against `hil_sim::truth::true_angles`, degrees.
 //! - time: wall time of `Pipeline` calls per lidar frame (decode and simulation excluded), ms,
 //!   and the thread's CPU time over the same calls (`/proc/thread-self/schedstat`; the pipeline
 //!   is single-threaded), which other processes' load on a shared machine does not inflate.
@@ -39,6 +44,7 @@ use hil_sim::trajectory::{StraightRun, Trajectory};
 use hil_sim::truth::{TruthOptions, true_angles};
 use hil_sim::world::{Scene, SurfaceId, SurfaceKind};
 use onboard::angles::{AnglesConfig, compute_angles};
+use onboard::cloud::{Cloud, PlyEncoding, write_ply};
 use onboard::pipeline::geom::{Pose, rpy_of};
 use onboard::pipeline::{
     BuiltCloud, DepthFrame, LidarFrame, Pipeline, PipelineConfig, WheelOdometry,
@@ -243,6 +249,16 @@ fn run_pipeline(
     (built, timing)
 }
 
+/// The estimated robot positions, moved into the vehicle frame like the cloud (by the true start
+/// pose `t0`): the scan's path for the angle calculator's coverage check.
+fn path_in_vehicle(built: &BuiltCloud, t0: &Pose) -> Vec<[f64; 3]> {
+    built
+        .trajectory
+        .iter()
+        .map(|tp| t0.apply(tp.world_from_robot.translation))
+        .collect()
+}
+
 /// Distance from `p` (vehicle frame) to the nearest true surface.
 fn surface_distance(scene: &Scene, p: [f64; 3]) -> f64 {
     let v = Vec3::new(p[0], p[1], p[2]);
@@ -322,7 +338,11 @@ fn evaluate(scenario: &Scenario, scene: &Scene, built: &BuiltCloud, time: &Timin
         true_a.breakover.angle_rad,
         true_a.departure.angle_rad,
     ];
-    let angle_error_deg = match compute_angles(&in_vehicle, &AnglesConfig::default()) {
+    let config = AnglesConfig {
+        scan_path_in_cloud: path_in_vehicle(built, &t0),
+        ..AnglesConfig::default()
+    };
+    let angle_error_deg = match compute_angles(&in_vehicle, &config) {
         Ok(r) => {
             let m = [&r.approach, &r.breakover, &r.departure]
                 .map(|a| a.as_ref().map_or(f64::NAN, |a| a.angle_rad));
@@ -483,6 +503,80 @@ fn export_trajectory(
     Ok(())
 }
 
+/// The cloud the angle figures come from, for the angle calculator alone
+/// (`onboard/examples/accuracy_angles.rs`, mode `saved`), under `DIR/`:
+/// - `NAME-SEED-SLUG.ply`: the built cloud in the vehicle frame (moved by the true start pose,
+///   exactly what `evaluate` gives the calculator), binary PLY, doubles.
+/// - `NAME-SEED-SLUG.truth`: one line `approach breakover departure`, the true angles in degrees
+///   (`nan` where the geometry has none).
+/// - `NAME-SEED-SLUG.path`: the scan's path as the calculator got it (estimated robot positions
+///   in the vehicle frame), `x y z` per line.
+/// - `NAME-SEED-SLUG.traj.tsv`: per frame the stamp, the estimated `x y z roll pitch yaw` of
+///   `world_from_robot` and the true one (both relative to the first frame; metres, degrees), so a
+///   spread can be traced to a pose error.
+fn save_cloud(
+    dir: &Path,
+    run: &str,
+    variant: &str,
+    scenario: &Scenario,
+    built: &BuiltCloud,
+) -> anyhow::Result<()> {
+    std::fs::create_dir_all(dir)?;
+    let slug: String = variant
+        .chars()
+        .map(|c| if c.is_ascii_alphanumeric() { c } else { '_' })
+        .collect();
+    let stem = dir.join(format!("{run}-{slug}"));
+    let truth = |t: f64| pose_of(&scenario.run.pose_at(t).to_isometry());
+    let t0 = truth(built.trajectory.first().map_or(0.0, |t| t.stamp_s));
+    let cloud = Cloud {
+        points_m: built.points_in_world.iter().map(|&p| t0.apply(p)).collect(),
+    };
+    let file = std::fs::File::create(stem.with_extension("ply"))?;
+    write_ply(
+        std::io::BufWriter::new(file),
+        &cloud,
+        PlyEncoding::BinaryLittleEndian,
+    )?;
+    let a = true_angles(&scenario.vehicle, &TruthOptions::default());
+    std::fs::write(
+        stem.with_extension("truth"),
+        format!(
+            "{} {} {}\n",
+            a.approach.angle_rad.to_degrees(),
+            a.breakover.angle_rad.to_degrees(),
+            a.departure.angle_rad.to_degrees()
+        ),
+    )?;
+    let mut text = String::from(
+        "# stamp_s est_x_m est_y_m est_z_m est_roll_deg est_pitch_deg est_yaw_deg true_x_m true_y_m true_z_m true_roll_deg true_pitch_deg true_yaw_deg\n",
+    );
+    let six = |p: &Pose| {
+        let r = p.rpy().map(f64::to_degrees);
+        format!(
+            "{} {} {} {} {} {}",
+            p.translation[0], p.translation[1], p.translation[2], r[0], r[1], r[2]
+        )
+    };
+    for tp in &built.trajectory {
+        let rel = t0.inverse().compose(&truth(tp.stamp_s));
+        writeln!(
+            text,
+            "{} {} {}",
+            tp.stamp_s,
+            six(&tp.world_from_robot),
+            six(&rel)
+        )?;
+    }
+    std::fs::write(stem.with_extension("traj.tsv"), text)?;
+    let mut path = String::new();
+    for p in path_in_vehicle(built, &t0) {
+        writeln!(path, "{} {} {}", p[0], p[1], p[2])?;
+    }
+    std::fs::write(stem.with_extension("path"), path)?;
+    Ok(())
+}
+
 // The argument parsing and the two tables are one straight script.
 #[allow(clippy::too_many_lines)]
 fn main() -> anyhow::Result<()> {
@@ -503,6 +597,11 @@ fn main() -> anyhow::Result<()> {
     let export_dir = args
         .iter()
         .position(|a| a == "--export")
+        .and_then(|i| args.get(i + 1))
+        .map(PathBuf::from);
+    let save_dir = args
+        .iter()
+        .position(|a| a == "--save-clouds")
         .and_then(|i| args.get(i + 1))
         .map(PathBuf::from);
     let only = args
@@ -595,6 +694,9 @@ fn main() -> anyhow::Result<()> {
                 }
                 if v.name == stats_of {
                     errors.push(f.angle_error_deg);
+                    if let Some(dir) = &save_dir {
+                        save_cloud(dir, &format!("{name}-{seed}"), v.name, &scenario, &built)?;
+                    }
                 }
                 println!(
                     "| {name} | {seed} | {} | {:.4} | {:.2} | {:.1} | {:.1} | {:+.2} | {:+.2} | {:+.2} | {:.1} | {:.1} | {} |",

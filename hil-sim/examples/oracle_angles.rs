@@ -4,18 +4,29 @@
 //! sensor coverage plus the calculator.
 //!
 //! Run: `cargo run --release -p hil-sim --example oracle_angles [EVERY_NTH_PACKET]
-//! [DEPTH_EVERY_NTH_FRAME] [noiseless]` (defaults 4, 0 = no D435 points, the scenario's noise).
-//! Prints one line per shipped scenario.
+//! [DEPTH_EVERY_NTH_FRAME] [noiseless] [--seeds N] [--only NAME] [--duration-s S]
+//! [--voxel-m V] [--save-clouds DIR]` (defaults 4, 0 = no D435 points, the scenario's noise, the
+//! scenario's own seed). Prints one line per shipped scenario and seed.
+//!
+//! `--seeds N` runs seeds 1..=N (the seeds of `bench_pipeline`, so the sensor noise is the same);
+//! `--voxel-m V` keeps one centroid per V-metre voxel, as the pipeline's output does (its default
+//! is 0.005); `--save-clouds DIR` writes each cloud as `DIR/NAME-SEED-oracle.ply` with the true
+//! angles in `.truth` beside it, the layout of `bench_pipeline --save-clouds`, for
+//! `accuracy_angles saved DIR`.
 
-use std::path::PathBuf;
+use std::collections::HashMap;
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
 
 use hil_sim::d435::{D435Sim, Intrinsics};
 use hil_sim::geometry::Vec3;
 use hil_sim::scenario::Scenario;
+use hil_sim::trajectory::Trajectory;
 use hil_sim::truth::{TruthOptions, true_angles};
 use hil_sim::vlp16::{FiringTruth, Vlp16Sim};
 use hil_sim::world::Scene;
 use onboard::angles::{AnglesConfig, compute_angles};
+use onboard::cloud::{Cloud, PlyEncoding, write_ply};
 
 fn lidar_cloud(scenario: &Scenario, scene: &Scene, every: u64) -> Vec<[f64; 3]> {
     let sim = Vlp16Sim::new(
@@ -80,8 +91,107 @@ fn depth_cloud(scenario: &Scenario, scene: &Scene, every: u64) -> Vec<[f64; 3]> 
     cloud
 }
 
+/// One centroid per occupied `voxel_m` cube (the pipeline's output reduction).
+fn voxel_centroids(cloud: &[[f64; 3]], voxel_m: f64) -> Vec<[f64; 3]> {
+    let mut cells: HashMap<[i64; 3], ([f64; 3], u32)> = HashMap::new();
+    for p in cloud {
+        let key = p.map(|v| (v / voxel_m).floor() as i64);
+        let e = cells.entry(key).or_insert(([0.0; 3], 0));
+        for (sum, v) in e.0.iter_mut().zip(p) {
+            *sum += v;
+        }
+        e.1 += 1;
+    }
+    let mut out: Vec<[f64; 3]> = cells
+        .into_values()
+        .map(|(s, n)| s.map(|v| v / f64::from(n)))
+        .collect();
+    // HashMap order is random per process: sort so the calculator's input is reproducible.
+    out.sort_by(|a, b| {
+        a.iter()
+            .zip(b)
+            .map(|(x, y)| x.total_cmp(y))
+            .find(|o| o.is_ne())
+            .unwrap_or(std::cmp::Ordering::Equal)
+    });
+    out
+}
+
+/// The robot's true positions every 0.1 s (vehicle frame): the scan's path.
+fn true_path(scenario: &Scenario) -> Vec<[f64; 3]> {
+    (0..=(scenario.duration_s * 10.0) as u32)
+        .map(|i| {
+            let t = scenario
+                .run
+                .pose_at(f64::from(i) * 0.1)
+                .to_isometry()
+                .translation;
+            [t.x, t.y, t.z]
+        })
+        .collect()
+}
+
+/// `DIR/STEM.ply`, `DIR/STEM.truth` (approach, breakover, departure, degrees) and `DIR/STEM.path`
+/// (the true path, `x y z` per line).
+fn save(
+    dir: &Path,
+    stem: &str,
+    cloud: &[[f64; 3]],
+    truth_deg: [f64; 3],
+    path: &[[f64; 3]],
+) -> anyhow::Result<()> {
+    std::fs::create_dir_all(dir)?;
+    let file = std::fs::File::create(dir.join(format!("{stem}.ply")))?;
+    let cloud = Cloud {
+        points_m: cloud.to_vec(),
+    };
+    write_ply(
+        std::io::BufWriter::new(file),
+        &cloud,
+        PlyEncoding::BinaryLittleEndian,
+    )?;
+    std::fs::write(
+        dir.join(format!("{stem}.truth")),
+        format!("{} {} {}\n", truth_deg[0], truth_deg[1], truth_deg[2]),
+    )?;
+    let mut text = String::new();
+    for p in path {
+        writeln!(text, "{} {} {}", p[0], p[1], p[2])?;
+    }
+    std::fs::write(dir.join(format!("{stem}.path")), text)?;
+    Ok(())
+}
+
+/// The value after `--name`, parsed.
+fn flag<T: std::str::FromStr>(args: &[String], name: &str) -> anyhow::Result<Option<T>>
+where
+    T::Err: std::error::Error + Send + Sync + 'static,
+{
+    match args.iter().position(|a| a == name) {
+        None => Ok(None),
+        Some(i) => {
+            let v = args
+                .get(i + 1)
+                .ok_or_else(|| anyhow::anyhow!("{name} needs a value"))?;
+            Ok(Some(
+                v.parse()
+                    .map_err(|e| anyhow::anyhow!("{name} '{v}': {e}"))?,
+            ))
+        }
+    }
+}
+
+// The argument parsing and the per-run report are one straight script.
+#[allow(clippy::too_many_lines)]
 fn main() -> anyhow::Result<()> {
-    let mut args = std::env::args().skip(1);
+    let all: Vec<String> = std::env::args().skip(1).collect();
+    let seeds: Option<u64> = flag(&all, "--seeds")?;
+    let only: Option<String> = flag(&all, "--only")?;
+    let duration_s: Option<f64> = flag(&all, "--duration-s")?;
+    let voxel_m: Option<f64> = flag(&all, "--voxel-m")?;
+    let save_dir: Option<PathBuf> = flag(&all, "--save-clouds")?;
+    // Positional arguments are the ones before the first flag.
+    let mut args = all.iter().take_while(|a| !a.starts_with("--"));
     let every: u64 = args.next().map_or(Ok(4), |s| s.parse())?;
     let depth_every: u64 = args.next().map_or(Ok(0), |s| s.parse())?;
     let noiseless = args.next().is_some_and(|s| s == "noiseless");
@@ -89,13 +199,32 @@ fn main() -> anyhow::Result<()> {
     let mut paths: Vec<PathBuf> = std::fs::read_dir(&dir)?
         .filter_map(|e| e.ok().map(|e| e.path()))
         .filter(|p| p.extension().is_some_and(|e| e == "toml"))
+        .filter(|p| {
+            only.as_ref()
+                .is_none_or(|o| p.to_string_lossy().contains(o.as_str()))
+        })
         .collect();
     paths.sort();
     println!(
         "true vs onboard::angles on oracle clouds (true poses), degrees: approach / breakover / departure"
     );
-    for path in &paths {
-        let mut scenario = Scenario::load(path)?;
+    let runs: Vec<(&PathBuf, Option<u64>)> = paths
+        .iter()
+        .flat_map(|p| match seeds {
+            None => vec![(p, None)],
+            Some(n) => (1..=n).map(|s| (p, Some(s))).collect(),
+        })
+        .collect();
+    for (path, seed) in runs {
+        let base = Scenario::load(path)?;
+        let mut file = base.file.clone();
+        if let Some(s) = seed {
+            file.seed = s;
+        }
+        if let Some(d) = duration_s {
+            file.duration_s = Some(d);
+        }
+        let mut scenario = Scenario::from_parts(path, file, base.vehicle.clone())?;
         if noiseless {
             scenario.file.lidar.range_noise_sigma_m = 0.0;
             scenario.file.lidar.dropout_probability = 0.0;
@@ -108,16 +237,31 @@ fn main() -> anyhow::Result<()> {
         if depth_every > 0 {
             cloud.extend(depth_cloud(&scenario, &scene, depth_every));
         }
-        let name = path
+        if let Some(v) = voxel_m {
+            cloud = voxel_centroids(&cloud, v);
+        }
+        let stem = path
             .file_stem()
             .map_or_else(String::new, |s| s.to_string_lossy().into_owned());
+        let name = match seed {
+            Some(s) => format!("{stem}-{s}"),
+            None => stem,
+        };
+        let path = true_path(&scenario);
         let t = [
             truth.approach.angle_rad,
             truth.breakover.angle_rad,
             truth.departure.angle_rad,
         ]
         .map(f64::to_degrees);
-        match compute_angles(&cloud, &AnglesConfig::default()) {
+        if let Some(dir) = &save_dir {
+            save(dir, &format!("{name}-oracle"), &cloud, t, &path)?;
+        }
+        let config = AnglesConfig {
+            scan_path_in_cloud: path,
+            ..AnglesConfig::default()
+        };
+        match compute_angles(&cloud, &config) {
             Ok(r) => {
                 let m = [&r.approach, &r.breakover, &r.departure]
                     .map(|a| a.as_ref().map_or(f64::NAN, |a| a.angle_rad.to_degrees()));

@@ -256,20 +256,20 @@ fn truth_matches_hand_checks() {
 }
 
 #[test]
-fn a_scan_that_stops_short_is_flagged_and_a_hitch_end_is_not() {
+fn a_scan_that_stops_short_is_refused_and_a_hitch_end_is_not() {
     let v = synth::sedan();
-    // Drop everything ahead of x = 2.0 m: the bumper's front face is never seen.
+    // Drop everything ahead of x = 2.0 m: the bumper's front face is never seen, nor the ground
+    // beyond it.
     let cut: Vec<[f64; 3]> = synth::sample(&v, Scan::noiseless(0.005))
         .into_iter()
         .filter(|p| p[0] < 2.0)
         .collect();
-    let r = compute_angles(&cut, &AnglesConfig::default()).unwrap();
+    let err = compute_angles(&cut, &AnglesConfig::default()).unwrap_err();
+    assert!(matches!(err, AnglesError::Incomplete(_)), "{err}");
     assert!(
-        r.warnings
-            .iter()
-            .any(|w| w.starts_with("approach: the limiting point is at the end")),
-        "{:?}",
-        r.warnings
+        err.to_string()
+            .contains("approach: the front overhang may extend beyond the cloud"),
+        "{err}"
     );
     let hitch = run(
         &synth::pickup_with_hitch(),
@@ -282,4 +282,86 @@ fn a_scan_that_stops_short_is_flagged_and_a_hitch_end_is_not() {
         "{:?}",
         hitch.warnings
     );
+}
+
+/// A robot path along the centre line, 12 cm up, from `from_x` to `to_x` (vehicle frame), moved
+/// by `pose` like the cloud.
+fn path(from_x: f64, to_x: f64, pose: Pose) -> Vec<[f64; 3]> {
+    (0..=100)
+        .map(|i| {
+            let t = f64::from(i) / 100.0;
+            pose.apply([from_x + (to_x - from_x) * t, 0.0, 0.12])
+        })
+        .collect()
+}
+
+#[test]
+fn a_scan_path_that_stops_short_of_an_end_or_an_axle_is_refused() {
+    let v = synth::sedan();
+    let t = synth::truth(&v, false);
+    let cloud: Vec<[f64; 3]> = synth::sample(&v, Scan::noiseless(0.005))
+        .into_iter()
+        .map(|p| TILTED.apply(p))
+        .collect();
+    let (front_end, rear_end) = v
+        .profile
+        .iter()
+        .fold((f64::MIN, f64::MAX), |a, p| (a.0.max(p.0), a.1.min(p.0)));
+    let with_path = |from_x: f64, to_x: f64| {
+        let config = AnglesConfig {
+            scan_path_in_cloud: path(from_x, to_x, TILTED),
+            ..AnglesConfig::default()
+        };
+        compute_angles(&cloud, &config)
+    };
+    // Driven from 1 m ahead of the front end to 1 m behind the rear end: measured.
+    let full = with_path(front_end + 1.0, rear_end - 1.0).unwrap();
+    check(&v, &full, t, 0.05, "full path");
+    // Stopped 0.2 m short of the rear end: the steep rings see that far; still measured.
+    assert!(with_path(front_end + 1.0, rear_end + 0.2).is_ok());
+    // Stopped 1 m short of the rear end: the rear overhang was not seen from below.
+    let err = with_path(front_end + 1.0, rear_end + 1.0).unwrap_err();
+    assert!(matches!(err, AnglesError::Incomplete(_)), "{err}");
+    assert!(
+        err.to_string()
+            .contains("departure: the rear overhang was not seen from below"),
+        "{err}"
+    );
+    // Started 0.7 m behind the front end (entered from the side, say): the front overhang.
+    let err = with_path(front_end - 0.7, rear_end - 1.0).unwrap_err();
+    assert!(
+        err.to_string()
+            .contains("approach: the front overhang was not seen from below"),
+        "{err}"
+    );
+    // Stopped between the axles: the rear tyres were seen only from afar.
+    let err = with_path(front_end + 1.0, 0.0).unwrap_err();
+    assert!(
+        err.to_string()
+            .contains("the underside between the axles was not covered"),
+        "{err}"
+    );
+}
+
+#[test]
+fn a_gap_in_the_underside_between_the_axles_is_refused() {
+    let v = synth::sedan();
+    // No body points from x -0.3 to +0.3 m (a stretch the scan missed); the ground stays.
+    let holed: Vec<[f64; 3]> = synth::sample(&v, Scan::noiseless(0.005))
+        .into_iter()
+        .filter(|p| p[2] < 0.03 || p[0].abs() > 0.3)
+        .collect();
+    let err = compute_angles(&holed, &AnglesConfig::default()).unwrap_err();
+    assert!(matches!(err, AnglesError::Incomplete(_)), "{err}");
+    assert!(
+        err.to_string()
+            .contains("the underside between the axles is not covered from x -0.3"),
+        "{err}"
+    );
+    // A 0.2 m hole is within what the check tolerates.
+    let small: Vec<[f64; 3]> = synth::sample(&v, Scan::noiseless(0.005))
+        .into_iter()
+        .filter(|p| p[2] < 0.03 || (p[0] - 0.5).abs() > 0.1)
+        .collect();
+    assert!(compute_angles(&small, &AnglesConfig::default()).is_ok());
 }

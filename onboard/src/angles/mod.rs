@@ -25,6 +25,13 @@
 //!    between the axles of `a_front + a_rear` (the supplement of the crest angle). Samples inside a
 //!    tyre's side-view disc cannot be touched by a tangent plane and are skipped.
 //!
+//! 6. **Coverage** ([`check_coverage`]): a partial scan gives wrong angles, not missing ones (the
+//!    underside the robot has not reached yet is seen only by the lidar's flat rings, so the
+//!    envelope simply ends early). The calculator refuses with [`AnglesError::Incomplete`], naming
+//!    what is missing, when the underside between the axles has a gap, when the scan's path (if
+//!    given, [`AnglesConfig::scan_path_in_cloud`]) stops short of an end of the underside or of an
+//!    axle, or, without a path, when the cloud itself ends at an end of the underside.
+//!
 //! Every angle comes with its witness (the limiting envelope sample) in the vehicle and the cloud
 //! frame and the number of points supporting it; the result also carries the tyre fits, the
 //! envelope (for the side-view report, [`side_view_svg`]), point counts and warnings.
@@ -115,6 +122,11 @@ pub struct AnglesConfig {
     pub min_support: usize,
     /// RANSAC seed.
     pub seed: u64,
+    /// Where the sensor was during the scan (robot positions along the pipeline's trajectory),
+    /// cloud coordinates, metres; empty: unknown. With it, the calculator refuses a scan whose
+    /// path does not reach both axles and within [`PATH_REACH_M`] of both ends of the underside
+    /// (see [`check_coverage`]).
+    pub scan_path_in_cloud: Vec<V3>,
 }
 
 impl Default for AnglesConfig {
@@ -134,6 +146,7 @@ impl Default for AnglesConfig {
             noise_m: None,
             min_support: 5,
             seed: 0x5eed,
+            scan_path_in_cloud: Vec::new(),
         }
     }
 }
@@ -158,6 +171,9 @@ pub enum AnglesError {
     /// The tyres could not be found; the message says what was seen.
     #[error("tyres not found: {0}")]
     Tyres(String),
+    /// The scan does not cover the vehicle (a partial scan); the message names what is missing.
+    #[error("incomplete scan: {0}")]
+    Incomplete(String),
 }
 
 /// Tyre position on the vehicle.
@@ -414,6 +430,13 @@ pub fn compute_angles(
             "{detached} envelope samples lie beyond a gap of more than {DETACHED_GAP_M} m ahead of or behind the vehicle's body and were ignored (ground noise, kerbs or other objects)"
         ));
     }
+    check_coverage(
+        &body.samples,
+        (front, rear),
+        &frame,
+        &settled.in_frame,
+        config,
+    )?;
     let findings = find_angles(&body.samples, front, rear, config.zone, &frame);
     let plane = settled.plane;
     let heading = frame.x_axis_in_cloud;
@@ -876,6 +899,122 @@ fn auto_bin(points: &[V3], min_support: usize) -> f64 {
 /// Largest gap along x inside the vehicle's side-view envelope ahead of the front axle or behind
 /// the rear one (metres); the first step from the axle may add the tyre's free radius.
 const DETACHED_GAP_M: f64 = 0.5;
+
+/// How far (metres) an end of the scanned underside may lie beyond the end of the scan's path.
+/// The VLP-16's steepest rings (+11..+15 degrees) see an underside 0.1-0.15 m above the sensor
+/// from 0.4-0.7 m away; what lies further beyond the robot's last position is seen only by the
+/// flat rings, at grazing angles and in stripes, and ends where their reach ends rather than where
+/// the vehicle does (measured: a van pass stopped after 12 s saw its rear underside to 2.7 m
+/// behind the robot, 0.43 m short of the rear end, and read the departure 10 degrees high).
+pub const PATH_REACH_M: f64 = 0.5;
+
+/// Largest gap (metres, along x) between envelope samples between the axles (between the tyres'
+/// treads) that still counts as covered: nothing hides in less (full passes: at most 0.05 m).
+pub const MAX_UNDERSIDE_GAP_M: f64 = 0.3;
+
+/// Without a scan path, the cloud must show ground at least this far (metres) beyond each end of
+/// the underside: a cloud that ends where the underside ends was cut, not scanned past the end.
+pub const GROUND_BEYOND_M: f64 = 0.3;
+
+/// Refuse a scan that does not cover the vehicle (module doc, step 6). `samples` is the envelope
+/// after [`drop_detached`], sorted by x; `in_frame` every usable point in the vehicle frame.
+fn check_coverage(
+    samples: &[EnvelopeSample],
+    (front, rear): (Axle, Axle),
+    frame: &VehicleFrame,
+    in_frame: &[V3],
+    config: &AnglesConfig,
+) -> Result<(), AnglesError> {
+    let incomplete = |s: String| Err(AnglesError::Incomplete(s));
+    // Between the tyres' treads: the breakover's zone.
+    let (lo, hi) = (
+        rear.x_m + rear.free_radius_m,
+        front.x_m - front.free_radius_m,
+    );
+    let between: Vec<f64> = samples
+        .iter()
+        .map(|s| s.x_m)
+        .filter(|x| *x > lo && *x < hi)
+        .collect();
+    if between.is_empty() {
+        return incomplete(format!(
+            "the underside between the axles was not seen (no body points between x {lo:.2} and {hi:.2} m, vehicle frame)"
+        ));
+    }
+    if let Some(w) = between
+        .windows(2)
+        .max_by(|a, b| (a[1] - a[0]).total_cmp(&(b[1] - b[0])))
+        .filter(|w| w[1] - w[0] > MAX_UNDERSIDE_GAP_M)
+    {
+        return incomplete(format!(
+            "the underside between the axles is not covered from x {:.2} to {:.2} m (vehicle frame; a gap of {:.2} m, at most {MAX_UNDERSIDE_GAP_M} m allowed)",
+            w[0],
+            w[1],
+            w[1] - w[0]
+        ));
+    }
+    let (Some(rear_end), Some(front_end)) = (samples.first(), samples.last()) else {
+        return Ok(());
+    };
+    let (rear_end, front_end) = (rear_end.x_m, front_end.x_m);
+    if config.scan_path_in_cloud.is_empty() {
+        return check_ground_beyond(in_frame, rear_end, front_end, config.ground_threshold_m);
+    }
+    let xs = config
+        .scan_path_in_cloud
+        .iter()
+        .map(|p| frame.vehicle_from_cloud(*p)[0]);
+    let (path_lo, path_hi) = xs.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), x| {
+        (a.min(x), b.max(x))
+    });
+    let path =
+        format!("the scan's path runs from x {path_lo:.2} to {path_hi:.2} m (vehicle frame)");
+    if path_lo > rear.x_m || path_hi < front.x_m {
+        return incomplete(format!(
+            "the underside between the axles was not covered: {path}, the axles are at x {:.2} and {:.2} m; a tyre pair seen only from afar is not measured",
+            rear.x_m, front.x_m
+        ));
+    }
+    if front_end > path_hi + PATH_REACH_M {
+        return incomplete(format!(
+            "approach: the front overhang was not seen from below: {path}, the scanned underside reaches x {front_end:.2} m, more than {PATH_REACH_M} m beyond the path"
+        ));
+    }
+    if rear_end < path_lo - PATH_REACH_M {
+        return incomplete(format!(
+            "departure: the rear overhang was not seen from below: {path}, the scanned underside reaches x {rear_end:.2} m, more than {PATH_REACH_M} m beyond the path"
+        ));
+    }
+    Ok(())
+}
+
+/// Without a path: ground must be seen [`GROUND_BEYOND_M`] beyond each end of the underside.
+fn check_ground_beyond(
+    in_frame: &[V3],
+    rear_end: f64,
+    front_end: f64,
+    ground_threshold_m: f64,
+) -> Result<(), AnglesError> {
+    let ground_x = in_frame
+        .iter()
+        .filter(|p| p[2].abs() < ground_threshold_m)
+        .map(|p| p[0]);
+    let (g_lo, g_hi) = ground_x.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), x| {
+        (a.min(x), b.max(x))
+    });
+    for (name, end, beyond) in [
+        ("approach: the front", front_end, g_hi - front_end),
+        ("departure: the rear", rear_end, rear_end - g_lo),
+    ] {
+        if beyond < GROUND_BEYOND_M {
+            return Err(AnglesError::Incomplete(format!(
+                "{name} overhang may extend beyond the cloud: the cloud ends {:.2} m beyond the underside's end at x {end:.2} m (vehicle frame; at least {GROUND_BEYOND_M} m of ground beyond it expected)",
+                beyond.max(0.0)
+            )));
+        }
+    }
+    Ok(())
+}
 
 /// Drop the envelope samples that are not connected to the vehicle: walking out from each axle,
 /// the envelope ends at the first gap along x wider than [`DETACHED_GAP_M`] (the first step from
