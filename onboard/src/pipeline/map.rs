@@ -64,11 +64,69 @@ impl FeatureMap {
     }
 }
 
+/// Voxels per block edge, as a power of two: blocks of 8 x 8 x 8 voxels (4 cm at the default
+/// 5 mm output voxel).
+const BLOCK_BITS: u32 = 3;
+
+/// Voxels per block.
+const BLOCK_VOXELS: usize = 1 << (3 * BLOCK_BITS);
+
+/// Points buffered before they are sorted into the blocks (about one 10 Hz VLP-16 frame).
+const BATCH: usize = 16_384;
+
+/// The voxels of one block that hold points: `slots` maps a voxel's index within the block to
+/// 1 + its cell's index in `cells` (0: empty), so a block's cells sit together in memory.
+#[derive(Debug, Clone)]
+struct Block {
+    slots: Box<[u16; BLOCK_VOXELS]>,
+    /// Per occupied voxel: the sum of its points and their count.
+    cells: Vec<(V3, u32)>,
+}
+
+impl Block {
+    fn new() -> Self {
+        Self {
+            slots: Box::new([0; BLOCK_VOXELS]),
+            cells: Vec::new(),
+        }
+    }
+
+    /// Add `p` to the voxel at `local`; true when that voxel was empty.
+    fn add(&mut self, local: usize, p: V3) -> bool {
+        let slot = &mut self.slots[local];
+        let new = *slot == 0;
+        if new {
+            self.cells.push(([0.0; 3], 0));
+            // At most BLOCK_VOXELS (512) cells per block: fits u16.
+            *slot = self.cells.len() as u16;
+        }
+        let cell = &mut self.cells[usize::from(*slot) - 1];
+        cell.0 = add(cell.0, p);
+        cell.1 += 1;
+        new
+    }
+}
+
 /// One centroid per voxel of everything added.
+///
+/// Layout: voxels are grouped into blocks of 8 x 8 x 8; a hash map finds the block, an array in
+/// the block finds the voxel, and a block's cells are contiguous. Points are buffered and added
+/// a batch at a time, grouped by block, so each block is looked up once per batch and its memory
+/// is touched in one go. The former layout (one hash map entry per voxel, points added in
+/// firing order) spent about an eighth of the pipeline's time on a cache and TLB miss per point in
+/// a table of a million voxels.
+///
+/// The grouping is stable and batches are added in order, so every voxel's sum is formed in the
+/// order its points were added: the centroids are bit-for-bit those of one hash map entry per
+/// voxel (test `blocks_give_the_centroids_and_order_of_one_map_entry_per_voxel`).
 #[derive(Debug, Clone)]
 pub struct CloudAccumulator {
     voxel_m: f64,
-    cells: VoxelMap<(V3, u32)>,
+    blocks: VoxelMap<Block>,
+    /// Occupied voxels in `blocks`.
+    len: usize,
+    /// Points added since the last batch went into `blocks`, in order.
+    pending: Vec<V3>,
 }
 
 impl CloudAccumulator {
@@ -76,39 +134,139 @@ impl CloudAccumulator {
     pub fn new(voxel_m: f64) -> Self {
         Self {
             voxel_m,
-            cells: VoxelMap::default(),
+            blocks: VoxelMap::default(),
+            len: 0,
+            pending: Vec::new(),
         }
     }
 
     /// Add a world-frame point.
     pub fn add(&mut self, p: V3) {
-        let cell = self
-            .cells
-            .entry(voxel_of(p, self.voxel_m))
-            .or_insert(([0.0; 3], 0));
-        cell.0 = add(cell.0, p);
-        cell.1 += 1;
+        self.pending.push(p);
+        if self.pending.len() >= BATCH {
+            self.len += add_grouped(&mut self.blocks, None, &self.pending, self.voxel_m);
+            self.pending.clear();
+        }
+    }
+
+    /// The blocks the pending points fall in, copied from `blocks` (or new) with the pending
+    /// points added, and how many voxels they add.
+    fn pending_overlay(&self) -> (VoxelMap<Block>, usize) {
+        let mut overlay = VoxelMap::default();
+        let added = add_grouped(
+            &mut overlay,
+            Some(&self.blocks),
+            &self.pending,
+            self.voxel_m,
+        );
+        (overlay, added)
     }
 
     /// Number of occupied voxels.
     pub fn len(&self) -> usize {
-        self.cells.len()
+        if self.pending.is_empty() {
+            self.len
+        } else {
+            self.len + self.pending_overlay().1
+        }
     }
 
     /// True when empty.
     pub fn is_empty(&self) -> bool {
-        self.cells.is_empty()
+        self.len == 0 && self.pending.is_empty()
     }
 
     /// The centroids, sorted by voxel so the output does not depend on hash order.
     pub fn points(&self) -> Vec<V3> {
-        let mut cells: Vec<(&[i32; 3], &(V3, u32))> = self.cells.iter().collect();
-        cells.sort_unstable_by_key(|(k, _)| **k);
-        cells
-            .into_iter()
-            .map(|(_, (sum, n))| scale(*sum, 1.0 / f64::from(*n)))
-            .collect()
+        let (overlay, added) = self.pending_overlay();
+        let mut cells: Vec<([i32; 3], V3)> = Vec::with_capacity(self.len + added);
+        let flushed = self
+            .blocks
+            .iter()
+            .filter(|(k, _)| !overlay.contains_key(*k));
+        for (block_key, block) in flushed.chain(&overlay) {
+            for (local, &slot) in block.slots.iter().enumerate() {
+                if slot != 0 {
+                    let (sum, n) = block.cells[usize::from(slot) - 1];
+                    let voxel = voxel_of_local(*block_key, local);
+                    cells.push((voxel, scale(sum, 1.0 / f64::from(n))));
+                }
+            }
+        }
+        cells.sort_unstable_by_key(|(voxel, _)| *voxel);
+        cells.into_iter().map(|(_, p)| p).collect()
     }
+}
+
+/// Add `points` (in order within each voxel) to `blocks`, block by block; a block not yet in
+/// `blocks` starts as a copy of the one in `base`, if any, else empty. Returns the number of
+/// voxels that were empty before.
+fn add_grouped(
+    blocks: &mut VoxelMap<Block>,
+    base: Option<&VoxelMap<Block>>,
+    points: &[V3],
+    voxel_m: f64,
+) -> usize {
+    // Counting sort of the points by block, stable (first-seen block order).
+    let mut group_of_block: VoxelMap<u32> = VoxelMap::default();
+    let mut block_keys: Vec<[i32; 3]> = Vec::new();
+    let mut starts: Vec<usize> = Vec::new();
+    let mut voxels = Vec::with_capacity(points.len());
+    let mut groups = Vec::with_capacity(points.len());
+    for &p in points {
+        let voxel = voxel_of(p, voxel_m);
+        let key = voxel.map(|c| c >> BLOCK_BITS);
+        let group = *group_of_block.entry(key).or_insert_with(|| {
+            block_keys.push(key);
+            starts.push(0);
+            (block_keys.len() - 1) as u32
+        }) as usize;
+        starts[group] += 1;
+        voxels.push(voxel);
+        groups.push(group);
+    }
+    let mut next = 0;
+    for start in &mut starts {
+        let count = *start;
+        *start = next;
+        next += count;
+    }
+    let mut order = vec![0; points.len()];
+    let mut fill = starts.clone();
+    for (i, &group) in groups.iter().enumerate() {
+        order[fill[group]] = i;
+        fill[group] += 1;
+    }
+    starts.push(points.len());
+    let mut added = 0;
+    for (group, key) in block_keys.iter().enumerate() {
+        let block = blocks.entry(*key).or_insert_with(|| {
+            base.and_then(|b| b.get(key))
+                .cloned()
+                .unwrap_or_else(Block::new)
+        });
+        for &i in &order[starts[group]..starts[group + 1]] {
+            added += usize::from(block.add(local_index(voxels[i]), points[i]));
+        }
+    }
+    added
+}
+
+/// Index of `voxel` within its block, x-major.
+fn local_index(voxel: [i32; 3]) -> usize {
+    let mask = (1 << BLOCK_BITS) - 1;
+    voxel
+        .iter()
+        .fold(0, |acc, &c| (acc << BLOCK_BITS) | (c & mask) as usize)
+}
+
+/// The voxel at index `local` (see [`local_index`]) of block `block_key`.
+fn voxel_of_local(block_key: [i32; 3], local: usize) -> [i32; 3] {
+    let mask = (1 << BLOCK_BITS) - 1;
+    std::array::from_fn(|k| {
+        let shift = BLOCK_BITS * (2 - k as u32);
+        (block_key[k] << BLOCK_BITS) | ((local >> shift) & mask) as i32
+    })
 }
 
 #[cfg(test)]
@@ -146,6 +304,65 @@ mod tests {
         assert!((pts[1][0] - 0.03).abs() < 1e-12, "{pts:?}");
         assert!((pts[2][0] - 0.32).abs() < 1e-12, "{pts:?}");
         assert!(CloudAccumulator::new(0.1).is_empty());
+    }
+
+    #[test]
+    fn blocks_give_the_centroids_and_order_of_one_map_entry_per_voxel() {
+        use rand::{Rng, SeedableRng};
+        // The reference: one hash map entry per voxel (the former layout), points added in
+        // order. Dense voxels (tens of points each) make any change of the summation order show
+        // in the last bits; 20 000 points cross a batch boundary.
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
+        let voxel_m = 0.005;
+        let mut acc = CloudAccumulator::new(voxel_m);
+        let mut reference: VoxelMap<(V3, u32)> = VoxelMap::default();
+        let expected = |reference: &VoxelMap<(V3, u32)>| -> Vec<V3> {
+            let mut cells: Vec<_> = reference.iter().collect();
+            cells.sort_unstable_by_key(|(k, _)| **k);
+            cells
+                .into_iter()
+                .map(|(_, (sum, n))| scale(*sum, 1.0 / f64::from(*n)))
+                .collect()
+        };
+        for i in 0..20_000 {
+            // Around the origin (negative voxels, block edges) and a few far out.
+            let spread = match i % 100 {
+                0 => 50.0,
+                k if k % 2 == 0 => 0.03,
+                _ => 0.1,
+            };
+            let p: V3 = std::array::from_fn(|_| rng.random_range(-spread..spread));
+            acc.add(p);
+            let cell = reference
+                .entry(voxel_of(p, voxel_m))
+                .or_insert(([0.0; 3], 0));
+            cell.0 = add(cell.0, p);
+            cell.1 += 1;
+            if i == 1000 || i == BATCH - 1 || i == BATCH {
+                // Before the first batch, at it and just after: pending points count.
+                assert_eq!(acc.len(), reference.len(), "after {i} points");
+                assert_eq!(acc.points(), expected(&reference), "after {i} points");
+            }
+        }
+        let expected = expected(&reference);
+        assert!(expected.len() > 5000 && expected.len() < 15_000);
+        assert_eq!(acc.len(), expected.len());
+        assert_eq!(acc.points(), expected);
+    }
+
+    #[test]
+    fn local_index_round_trips_for_negative_and_extreme_voxels() {
+        for voxel in [
+            [0, 0, 0],
+            [-1, -8, 7],
+            [9, -9, 1000],
+            [i32::MIN, i32::MAX, -1],
+        ] {
+            let block = voxel.map(|c| c >> BLOCK_BITS);
+            let local = local_index(voxel);
+            assert!(local < BLOCK_VOXELS);
+            assert_eq!(voxel_of_local(block, local), voxel);
+        }
     }
 
     #[test]
