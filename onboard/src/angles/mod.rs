@@ -25,7 +25,7 @@
 //!    between the axles of `a_front + a_rear` (the supplement of the crest angle). Samples inside a
 //!    tyre's side-view disc cannot be touched by a tangent plane and are skipped.
 //!
-//! 6. **Coverage** ([`check_coverage`]): a partial scan gives wrong angles, not missing ones (the
+//! 6. **Coverage** (`check_coverage`): a partial scan gives wrong angles, not missing ones (the
 //!    underside the robot has not reached yet is seen only by the lidar's flat rings, so the
 //!    envelope simply ends early). The calculator refuses with [`AnglesError::Incomplete`], naming
 //!    what is missing, when the underside between the axles has a gap, when the scan's path (if
@@ -125,7 +125,7 @@ pub struct AnglesConfig {
     /// Where the sensor was during the scan (robot positions along the pipeline's trajectory),
     /// cloud coordinates, metres; empty: unknown. With it, the calculator refuses a scan whose
     /// path does not reach both axles and within [`PATH_REACH_M`] of both ends of the underside
-    /// (see [`check_coverage`]).
+    /// (see `check_coverage`).
     pub scan_path_in_cloud: Vec<V3>,
 }
 
