@@ -608,9 +608,12 @@ fn classify(
     counts: &mut PointCounts,
 ) -> Body {
     let tyre_tol = (3.0 * noise_sigma_m).max(0.01);
+    // A noisy floor (a smeared cloud: 1 cm sigma) reaches above the 3 cm threshold; its points
+    // are not underside. At most 4 sigma of the ground and tyre fits.
+    let ground_cut_m = config.ground_threshold_m.max(4.0 * noise_sigma_m);
     let mut band_points = Vec::new();
     for p in in_frame {
-        if p[2] < config.ground_threshold_m {
+        if p[2] < ground_cut_m {
             counts.ground += 1;
         } else if fits.iter().any(|(_, f)| is_tyre_point(*p, f, tyre_tol)) {
             counts.tyre += 1;
