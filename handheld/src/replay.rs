@@ -131,6 +131,12 @@ fn report(
             "-x" => false,
             other => bail!("--front {other}: expected +x or -x"),
         },
+        // The robot's path: a scan that did not cover the vehicle is refused, not measured.
+        scan_path_in_cloud: built
+            .trajectory
+            .iter()
+            .map(|t| t.world_from_robot.translation)
+            .collect(),
         ..AnglesConfig::default()
     };
     match compute_angles(&built.points_in_world, &config) {

@@ -26,6 +26,7 @@ use serde::Deserialize;
 use crate::angles::{self, AnglesConfig, AnglesResult, Zone, compute_angles, side_view_svg};
 use crate::cloud::Cloud;
 use crate::mcu_clock::McuClockMap;
+use crate::pipeline::geom::V3;
 use crate::pipeline::{
     BuiltCloud, DepthFrame, LidarFrame, Pipeline, PipelineConfig, WheelOdometry,
 };
@@ -134,9 +135,12 @@ impl LiveRun for LivePipeline {
     }
 
     fn finish(self: Box<Self>, input: &ProcessInput) -> Result<Processed, String> {
-        let (cloud, counts) = self.builder.finish()?;
+        let min_points = self.builder.min_cloud_points;
+        let (built, counts) = self.builder.finish_built()?;
+        let (cloud, path) = cloud_and_path(built, min_points)?;
         let mut p = angles_of(
             cloud,
+            path,
             counts,
             &self.config,
             input.params.zone,
@@ -435,6 +439,20 @@ impl RunBuilder {
     }
 }
 
+/// The cloud (if it has at least `min_points`) and the robot's path in it (the positions of the
+/// trajectory), for the angle calculator's coverage check.
+fn cloud_and_path(built: BuiltCloud, min_points: usize) -> Result<(Cloud, Vec<V3>), String> {
+    let path = built
+        .trajectory
+        .iter()
+        .map(|t| t.world_from_robot.translation)
+        .collect();
+    let cloud = Cloud {
+        points_m: built.points_in_world,
+    };
+    Ok((enough_points(cloud, min_points)?, path))
+}
+
 fn enough_points(cloud: Cloud, min_points: usize) -> Result<Cloud, String> {
     if cloud.points_m.len() < min_points {
         return Err(format!(
@@ -491,6 +509,7 @@ pub fn build_run(dir: &Path, config: &ProcessConfig) -> Result<(BuiltCloud, Read
 /// the caller).
 fn angles_of(
     cloud: Cloud,
+    scan_path_in_cloud: Vec<V3>,
     counts: ReadCounts,
     config: &ProcessConfig,
     zone: WireZone,
@@ -502,6 +521,7 @@ fn angles_of(
             WireZone::Tyre => Zone::Tyre,
             WireZone::Axle => Zone::Axle,
         },
+        scan_path_in_cloud,
         ..AnglesConfig::default()
     };
     let found =
@@ -532,8 +552,9 @@ pub fn process_run(
     short_run: bool,
 ) -> Result<(Processed, ReadCounts), String> {
     let rec = Recording::open(dir).map_err(|e| e.to_string())?;
-    let (cloud, counts) = build_cloud(dir, config)?;
-    let mut processed = angles_of(cloud, counts, config, zone, short_run)?;
+    let (built, counts) = build_run(dir, config)?;
+    let (cloud, path) = cloud_and_path(built, config.min_cloud_points)?;
+    let mut processed = angles_of(cloud, path, counts, config, zone, short_run)?;
     processed.result.vehicle_id = Text::truncated(&rec.meta.vehicle_id);
     processed.result.run_id = rec.meta.run_id;
     Ok((processed, counts))
