@@ -29,6 +29,7 @@ use super::geom::{
     Pose, Twist6, V3, VoxelIndex, add, centroid_covariance, cross, dist2, dot, mat_vec, norm,
     scale, solve_spd, sub, symmetric_eigen,
 };
+use super::registration::{DegeneracyThresholds, determined_projection};
 
 /// The target of a registration: feature points indexed for nearest-neighbour search.
 #[derive(Debug, Clone)]
@@ -398,7 +399,31 @@ pub(crate) fn solve_counted(
     iterations: u32,
     config: &LaserOdometryConfig,
 ) -> (Solution, SolveStats) {
+    solve_with(
+        target,
+        (planes, corners),
+        init,
+        active,
+        iterations,
+        config,
+        None,
+    )
+}
+
+/// [`solve_counted`]; with `hold`, every step is projected onto the eigen-directions that the
+/// first iteration's normal matrix determines under those thresholds (the others stay at `init`
+/// during the solve, LOAM's in-solve solution remapping).
+pub(crate) fn solve_with(
+    target: &FeatureTarget,
+    (planes, corners): (&[V3], &[V3]),
+    init: Pose,
+    active: &[usize],
+    iterations: u32,
+    config: &LaserOdometryConfig,
+    hold: Option<DegeneracyThresholds>,
+) -> (Solution, SolveStats) {
     let k = config.huber_m;
+    let mut projection: Option<[[f64; 6]; 6]> = None;
     let radius_m = config.max_correspondence_m;
     let research_m = RESEARCH_FRACTION * radius_m;
     let centre = init.translation;
@@ -434,6 +459,10 @@ pub(crate) fn solve_counted(
         let (h, g) = normal_equations(&corr, &pose, centre, k);
         last_h = h;
         last_n = corr.len();
+        if let (Some(thresholds), None) = (hold, projection) {
+            let per_residual = h.map(|row| row.map(|v| v / last_n as f64));
+            projection = Some(determined_projection(&per_residual, active, thresholds).0);
+        }
         let before = cost(&corr, &pose, k);
         rms = (2.0 * before / corr.len() as f64).sqrt();
         stats.iterations += 1;
@@ -441,7 +470,7 @@ pub(crate) fn solve_counted(
             &corr,
             &pose,
             (&h, &g),
-            active,
+            (active, projection.as_ref()),
             &mut lambda,
             before,
             centre,
@@ -479,7 +508,7 @@ fn lm_step(
     corr: &[Correspondence],
     pose: &Pose,
     (h, g): (&[[f64; 6]; 6], &[f64; 6]),
-    active: &[usize],
+    (active, projection): (&[usize], Option<&[[f64; 6]; 6]>),
     lambda: &mut f64,
     before: f64,
     centre: V3,
@@ -502,6 +531,9 @@ fn lm_step(
         let mut d = [0.0; 6];
         for (i, &pi) in active.iter().enumerate() {
             d[pi] = x[i];
+        }
+        if let Some(p) = projection {
+            d = std::array::from_fn(|a| (0..6).map(|b| p[a][b] * d[b]).sum());
         }
         let candidate = apply_increment(pose, &d, centre);
         if cost(corr, &candidate, k) < before {
