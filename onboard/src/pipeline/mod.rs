@@ -665,27 +665,29 @@ impl Pipeline {
         } else {
             self.config.laser.clone()
         };
-        let laser = register_two_step(
-            &prev.target,
-            &step1_planes,
-            &feats.planes,
-            &feats.corners,
-            prior,
-            &laser_config,
-        );
-        let laser_degenerate = laser.degenerate;
+        // Without the laser in fusion (e.g. the demo's wheel-only pipeline) it is not registered.
+        let laser = self.config.fusion.use_laser.then(|| {
+            register_two_step(
+                &prev.target,
+                &step1_planes,
+                &feats.planes,
+                &feats.corners,
+                prior,
+                &laser_config,
+            )
+        });
+        let laser_degenerate = laser.map_or([false; 6], |l| l.degenerate);
         if laser_degenerate.iter().any(|&d| d) {
             self.stats.degenerate_frames += 1;
         }
         count(&mut self.stats.laser_degenerate, laser_degenerate);
-        let laser_rate = SourceRate {
-            rate: scale_twist(&laser.pose.to_increment(), 1.0 / dt),
+        let laser_rate = laser.map(|l| SourceRate {
+            rate: scale_twist(&l.pose.to_increment(), 1.0 / dt),
             available: laser_degenerate.map(|d| !d),
-        };
-        let laser_rate = Some(&laser_rate).filter(|_| self.config.fusion.use_laser);
+        });
         let fused = self
             .fusion
-            .fuse(laser_rate, visual.as_ref(), wheel.as_ref());
+            .fuse(laser_rate.as_ref(), visual.as_ref(), wheel.as_ref());
         for s in fused.chosen {
             self.stats.chosen[s as usize] += 1;
         }
