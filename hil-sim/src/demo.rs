@@ -250,16 +250,15 @@ fn camera_thread(
     }
 }
 
-/// The demo's `[processing.pipeline]` overrides: the cloud is built from wheel odometry alone (the
-/// firmware's encoders, which the simulated robot's straight constant-speed run makes reliable),
-/// without laser odometry and scan-to-map refinement, because on the demo's recordings the fused
-/// laser + wheel cloud reads the sedan's departure 0.5-0.7 degree further off than wheel odometry
-/// alone (README, "Laser odometry"). Revisit when laser odometry beats the wheels here. The output voxel (5 mm) and the
-/// bilateral filter (off) are the pipeline's defaults: see `onboard::pipeline::PipelineConfig`.
-/// The depth camera's frames are tracked (visual odometry runs) but neither fused nor added to
-/// the cloud: the demo's camera is a quarter-resolution stand-in, and its mount differs from the
-/// pipeline's default (`mounts.camera-*`).
-const DEMO_PIPELINE: &str = "[processing.pipeline.fusion]\nuse-laser = false\nuse-visual = false\n[processing.pipeline.map]\nrefine = false\n[processing.pipeline.visual]\nadd-to-cloud = false\n";
+/// The demo's `[processing.pipeline]` overrides: the product's laser + wheel pipeline (laser
+/// odometry, fusion, scan-to-map refinement) without the depth camera, whose frames are tracked
+/// (visual odometry runs) but neither fused nor added to the cloud: the demo's camera is a
+/// quarter-resolution stand-in, and its mount differs from the pipeline's default
+/// (`mounts.camera-*`). Until 2026-11-22 the demo used wheel odometry alone; on the pickup's
+/// real-time recordings that read the approach up to 2.6 degrees high (its front end seen by a
+/// few points from the standstill start), where laser + wheel reads +0.4..+0.5 (README, "Demo").
+/// The output voxel (5 mm) and the bilateral filter (off) are the pipeline's defaults.
+const DEMO_PIPELINE: &str = "[processing.pipeline.fusion]\nuse-visual = false\n[processing.pipeline.visual]\nadd-to-cloud = false\n";
 
 /// Runs the demo; prints progress to stderr unless `quiet`.
 // The wiring reads top to bottom as the diagram in the module docs; `{:?}` quotes paths for TOML.

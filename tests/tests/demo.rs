@@ -8,11 +8,11 @@
 //! turns ([`ONE_AT_A_TIME`]): two real-time demos competing for two cores would both fall behind.
 //!
 //! Measured (2026-11-22, 20 % radio loss and 5 % corruption, radio seed 1, errors approach /
-//! departure / breakover in degrees), one session run and the CI run: sedan -0.11 / +0.59 / +0.01
-//! (departure +0.57 to +0.88 over five runs), pickup +0.72 / +0.11 / +0.03 and +0.57 / +0.19 /
-//! -1.25, van -0.19 / +0.27 / +0.01 and -0.29 / +0.29 / +0.01, off-roader +0.07 / -0.35 / +0.02,
-//! SUV -0.66 / -0.53 / +0.02 and +0.43 / -0.64 / -0.22 (its 3 % slip and 2 degree crab, wheel
-//! odometry only). `scripts/test.sh` runs them.
+//! departure / breakover in degrees, laser + wheel odometry as on the robot): sedan -0.11 / +1.06 /
+//! -0.05, pickup +0.40 / +0.03 / +0.04, van -0.01 / +0.27 / +0.04, off-roader +0.68 / +0.09 /
+//! +0.01, SUV -0.42 / -0.37 / +0.08. With wheel odometry alone (the demo's pipeline until then)
+//! the pickup read its approach +2.61 in one of nine runs and its breakover -1.19 and -1.25 in
+//! two (README, "Demo"). `scripts/test.sh` runs them.
 
 use std::sync::Mutex;
 
