@@ -4,8 +4,10 @@
 //! of the heights is found: the lowest window of height `2 w` that holds at least `min_support`
 //! points, then re-centred on the mean of the points within `w` of it until it stops moving (a
 //! flat-kernel mean shift that climbs from the noise tail to the surface; a peak with more than
-//! twice its points in the next `2 w` above it is a tail fluctuation, and the climb goes on). `w` is 2.5 x the noise sigma (at least 1 mm), so on a noisy flat surface the mode is
-//! the surface itself, not its low noise tail; a lone low outlier (fewer than `min_support` points
+//! twice its points in the next `2 w` above it, counted at its own lateral positions, is a tail
+//! fluctuation, and the climb goes on; a narrow part under a wide surface is not a tail of it).
+//! `w` is 2.5 x the noise sigma (at least 1 mm), so on a noisy flat surface the mode is the
+//! surface itself, not its low noise tail; a lone low outlier (fewer than `min_support` points
 //! within `2 w`) never forms a mode and is counted in `outliers_below`.
 //!
 //! The mode's points get a least-squares line `z = a + b (x - x_mean)`; the bin contributes two
@@ -117,12 +119,12 @@ pub(crate) fn lower_envelope(points: &[[f64; 3]], params: EnvelopeParams) -> Env
         match bin_mode(&bin, params) {
             Some((lo, hi)) => {
                 env.outliers_below += lo;
-                let mean_z = bin[lo..hi].iter().map(|p| p[2]).sum::<f64>() / (hi - lo) as f64;
+                let mode = &bin[lo..hi];
                 modes.push((
                     key,
-                    hi - lo,
-                    mean_z,
-                    line_samples(&bin[lo..hi], params.noise_m),
+                    mode.len(),
+                    mean_z(mode),
+                    line_samples(mode, params.noise_m),
                 ));
             }
             None => env.unsupported_bins += 1,
@@ -215,9 +217,16 @@ fn bin_mode(bin: &[[f64; 3]], params: EnvelopeParams) -> Option<(usize, usize)> 
             (lo, hi) = (nlo, nhi);
         }
         // A peak in the noise tail of a denser surface just above it is not a surface of its
-        // own: if the next 2 w above hold more than twice its points, keep climbing.
+        // own: if the next 2 w above hold more than twice its points at its own lateral
+        // positions, keep climbing. (Counted across the whole band, a floor 1.3 m wide outnumbered
+        // the sedan's 12 cm wide silencer 2-3 cm below it, and every other bin of the silencer's
+        // last 2 cm took the floor.)
         let mean = mean_z(&bin[lo..hi]);
-        let above = bin.partition_point(|p| p[2] <= mean + 3.0 * w) - hi;
+        let (y_lo, y_hi) = y_range(&bin[lo..hi]);
+        let above = bin[hi..bin.partition_point(|p| p[2] <= mean + 3.0 * w)]
+            .iter()
+            .filter(|p| p[1] >= y_lo && p[1] <= y_hi)
+            .count();
         if above <= 2 * (hi - lo) {
             break;
         }
@@ -228,6 +237,13 @@ fn bin_mode(bin: &[[f64; 3]], params: EnvelopeParams) -> Option<(usize, usize)> 
         (lo, hi) = (nlo, nhi);
     }
     Some((lo, hi))
+}
+
+/// Lowest and highest y of `points`.
+fn y_range(points: &[[f64; 3]]) -> (f64, f64) {
+    points.iter().fold((f64::MAX, f64::MIN), |(lo, hi), p| {
+        (lo.min(p[1]), hi.max(p[1]))
+    })
 }
 
 fn mean_z(points: &[[f64; 3]]) -> f64 {
@@ -341,5 +357,32 @@ mod tests {
         let env = lower_envelope(&pts, P);
         assert!(env.samples.is_empty());
         assert_eq!(env.unsupported_bins, 1);
+    }
+
+    /// A narrow part (a pipe 10 cm wide) 2 w below a surface across the whole band: the surface
+    /// outnumbers the part's points in the bin, but not at the part's lateral positions, so the
+    /// part is the bin's lowest mode, not a noise tail of the surface (the old rule counted the
+    /// surface's points across the whole band and climbed to it).
+    #[test]
+    fn narrow_part_under_wide_surface_is_not_a_tail() {
+        let w = 0.004;
+        let mut pts: Vec<[f64; 3]> = (0..20)
+            .map(|i| {
+                let jitter = if i % 2 == 0 { 0.001 } else { -0.001 };
+                [0.005, 0.40 + f64::from(i) * 0.005, 0.20 + jitter]
+            })
+            .collect();
+        pts.extend((0..240).map(|i| [0.005, -0.6 + f64::from(i) * 0.005, 0.20 + 2.0 * w]));
+        let env = lower_envelope(
+            &pts,
+            EnvelopeParams {
+                half_window_m: w,
+                ..P
+            },
+        );
+        assert!(!env.samples.is_empty());
+        for s in &env.samples {
+            assert!((s.z_m - 0.20).abs() < 0.0015, "{s:?}");
+        }
     }
 }
