@@ -71,11 +71,6 @@ impl McuClockMap {
         host
     }
 
-    /// The current offset `host - mcu`, microseconds (`None` before the first report).
-    pub fn offset_us(&self) -> Option<i128> {
-        self.offset_us
-    }
-
     /// How many times the MCU's clock went backwards (reboots) and the map started over.
     pub fn resets(&self) -> u32 {
         self.resets

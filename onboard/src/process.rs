@@ -3,15 +3,17 @@
 //! [`RunBuilder`] is the one path from recorded data to the fused cloud. The service feeds it
 //! during the drive, item by item as the recorder writes them ([`Processor::start_live`]), so
 //! that when the robot stops only the last [`REORDER_WINDOW_S`], the filter and the angles are
-//! left; [`build_cloud`] feeds it a run directory (complete or marked `INCOMPLETE`), which is
+//! left; [`build_run`] feeds it a run directory (complete or marked `INCOMPLETE`), which is
 //! what `passangle replay` and the service's fallback (live processing fell behind) run:
 //! 1. `lidar.pcap` through the VLP-16 frame assembler (malformed packets are counted and
 //!    skipped), `odometry.csv` and the depth frames of `depth/`.
-//! 2. Every stamp on one clock: seconds since the first complete lidar frame's host stamp (all
-//!    streams are stamped on the host's wall clock by the recorder).
+//! 2. Every stamp on one clock: seconds since the first complete lidar frame's host stamp (the
+//!    recorder stamps every stream on the host's wall clock; odometry reports are placed at their
+//!    MCU stamps mapped onto it, [`McuClockMap`]).
 //! 3. Everything, in time order, into [`Pipeline`]; `finish` gives the fused cloud in the robot
 //!    frame of the first lidar frame (x forward, z up, ground at z = 0 below the robot).
-//! 4. [`compute_angles`] on the cloud, with the zone of the start command; the side-view SVG.
+//! 4. [`compute_angles`] on the cloud with the robot's path (its coverage check), the zone of the
+//!    start command; the side-view SVG.
 //!
 //! The two feeds give the same cloud (tests/tests/live_processing.rs).
 
@@ -424,7 +426,7 @@ impl RunBuilder {
     pub fn finish(self) -> Result<(Cloud, ReadCounts), String> {
         let min_points = self.min_cloud_points;
         let (built, counts) = self.finish_built()?;
-        Ok((enough_points(built.to_cloud(), min_points)?, counts))
+        Ok((cloud_and_path(built, min_points)?.0, counts))
     }
 
     /// Everything left through the pipeline; the pipeline's whole result (cloud, trajectory,
@@ -447,29 +449,22 @@ fn cloud_and_path(built: BuiltCloud, min_points: usize) -> Result<(Cloud, Vec<V3
         .iter()
         .map(|t| t.world_from_robot.translation)
         .collect();
+    if built.points_in_world.len() < min_points {
+        return Err(format!(
+            "the fused cloud has {} points, fewer than {min_points}",
+            built.points_in_world.len(),
+        ));
+    }
     let cloud = Cloud {
         points_m: built.points_in_world,
     };
-    Ok((enough_points(cloud, min_points)?, path))
-}
-
-fn enough_points(cloud: Cloud, min_points: usize) -> Result<Cloud, String> {
-    if cloud.points_m.len() < min_points {
-        return Err(format!(
-            "the fused cloud has {} points, fewer than {min_points}",
-            cloud.points_m.len(),
-        ));
-    }
-    Ok(cloud)
+    Ok((cloud, path))
 }
 
 /// Reads a run directory and builds its fused cloud (vehicle-agnostic: no angles yet).
 pub fn build_cloud(dir: &Path, config: &ProcessConfig) -> Result<(Cloud, ReadCounts), String> {
     let (built, counts) = build_run(dir, config)?;
-    Ok((
-        enough_points(built.to_cloud(), config.min_cloud_points)?,
-        counts,
-    ))
+    Ok((cloud_and_path(built, config.min_cloud_points)?.0, counts))
 }
 
 /// Reads a run directory through a [`RunBuilder`]: the pipeline's whole result (cloud,

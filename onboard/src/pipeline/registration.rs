@@ -201,6 +201,7 @@ pub fn register_two_step(
     prior: Pose,
     config: &LaserOdometryConfig,
 ) -> Registration {
+    let thresholds = DegeneracyThresholds::of(config);
     let step1 = [0, 1, 5];
     let (pose1, h1, n1, _) = solve(
         target,
@@ -211,13 +212,7 @@ pub fn register_two_step(
         config.iterations,
         config,
     );
-    let (pose1, deg1) = remap(
-        &pose1,
-        &prior,
-        &h1,
-        &step1,
-        DegeneracyThresholds::of(config),
-    );
+    let (pose1, deg1) = remap(&pose1, &prior, &h1, &step1, thresholds);
     let step2 = [2, 3, 4];
     let (pose2, h2, n2, rms_m) = solve(
         target,
@@ -228,13 +223,7 @@ pub fn register_two_step(
         config.iterations,
         config,
     );
-    let (pose, deg2) = remap(
-        &pose2,
-        &pose1,
-        &h2,
-        &step2,
-        DegeneracyThresholds::of(config),
-    );
+    let (pose, deg2) = remap(&pose2, &pose1, &h2, &step2, thresholds);
     Registration {
         pose,
         degenerate: std::array::from_fn(|k| deg1[k] || deg2[k]),
