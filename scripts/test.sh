@@ -28,6 +28,15 @@ rustup component add rustfmt clippy >/dev/null
 rustup target add thumbv7em-none-eabihf >/dev/null
 cargo --version
 
+# A cold build of every tier writes about 4 GB under target/. When the disk runs out mid-link, lld
+# dies of SIGBUS ("ld terminated with signal 7 [Bus error]"), which names nothing; say it up front.
+mkdir -p target
+free_kb=$(df -Pk target | awk 'NR == 2 { print $4 }')
+if [[ -n "$free_kb" && "$free_kb" -lt $((6 * 1024 * 1024)) ]]; then
+    echo "WARNING: only $((free_kb / 1024)) MB free on the disk of $(pwd)/target; a cold build of all" \
+        "tiers needs about 4 GB. A link that fails with 'signal 7 [Bus error]' means the disk filled." >&2
+fi
+
 step "format"
 cargo fmt --all -- --check
 
