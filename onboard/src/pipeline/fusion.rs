@@ -34,15 +34,27 @@
 //! Until the reference holds `reference_frames` rates, the laser is used wherever it is determined.
 //!
 //! **Wheel scale (slip)**: wheels that slip report more distance than the robot travels, by a
-//! nearly constant factor on one floor. Over the last `wheel_scale_frames` intervals where the
-//! laser determined a translation component that the wheels also report (and the robot moved
-//! faster than [`MIN_SCALE_SPEED_MPS`] along it), the least-squares factor
-//! `s = sum(laser * wheel) / sum(wheel^2)` is estimated and the wheels' translation is multiplied
-//! by it in selection and gap filling (not in the prediction, see [`Fusion::predict`]). So where
-//! the lidar sees the tyres or
-//! bumpers it calibrates the wheels, and where it is degenerate (between two planes) the calibrated
-//! wheels fill in. The factor is clamped to [`WHEEL_SCALE_RANGE`]; pairs that disagree by more than
-//! that range are outliers and are skipped.
+//! nearly constant factor on one floor. The wheels' translation is multiplied by the factor
+//! [`Fusion::wheel_scale`] in selection and gap filling (not in the prediction, see
+//! [`Fusion::predict`]), so where the laser is degenerate (between two planes) the calibrated
+//! wheels fill in. The evidence comes from one of two places:
+//! - **Long baseline** (the default, `wheel-scale-baseline-m` > 0): `(laser, wheel)` distance
+//!   pairs over 0.25 m of travel from [`super::slip::SlipMeter`], via
+//!   [`Fusion::add_scale_measurement`]. The factor is the least-squares
+//!   `s = sum(laser * wheel) / sum(wheel^2)` over the last [`MAX_SCALE_MEASUREMENTS`] pairs, and
+//!   it is applied only when it is **significant**: at least [`MIN_SCALE_MEASUREMENTS`] pairs,
+//!   and `|s - 1|` above both `wheel-scale-min-slip` and three standard errors of `s` (from the
+//!   pairs' scatter about the fit). Otherwise it is 1: a slip-free run keeps its exact wheels
+//!   instead of taking the measurement's noise as a correction.
+//! - **Per frame** (`wheel-scale-frames` > 0, off by default; it takes precedence): the same
+//!   least-squares factor over the last `wheel-scale-frames` intervals where the scan-to-scan
+//!   laser determined a translation component that the wheels also report (and the robot moved
+//!   faster than [`MIN_SCALE_SPEED_MPS`] along it), applied as it is. Over one frame the laser's
+//!   x is too noisy and biased for a few per cent (see [`super::slip`]): it found slip on the
+//!   slip-free simulated passes.
+//!
+//! The factor is clamped to [`WHEEL_SCALE_RANGE`]; pairs that disagree by more than that range are
+//! outliers and are skipped.
 
 use std::collections::VecDeque;
 
@@ -88,16 +100,26 @@ pub const MIN_SCALE_SPEED_MPS: f64 = 0.05;
 /// The wheel scale factor is clamped to this range (a robot slipping more than 20 % is stuck).
 pub const WHEEL_SCALE_RANGE: (f64, f64) = (0.8, 1.2);
 
-/// Fewer laser-wheel pairs than this: the wheel scale stays 1.
+/// Fewer per-frame laser-wheel pairs than this: the per-frame wheel scale stays 1.
 const MIN_SCALE_PAIRS: usize = 30;
+
+/// Fewer long-baseline measurements than this: the wheel scale stays 1.
+pub const MIN_SCALE_MEASUREMENTS: usize = 4;
+
+/// The long-baseline factor is estimated over at most this many of the latest measurements
+/// (about 10 m of travel at the default 0.25 m baseline, keyframes a quarter baseline apart).
+pub const MAX_SCALE_MEASUREMENTS: usize = 160;
 
 /// The fusion state: the history of fused rates and the wheel-scale evidence.
 #[derive(Debug, Clone)]
 pub struct Fusion {
     config: FusionConfig,
     history: VecDeque<Twist6>,
-    /// `(laser, wheel)` translation rates of recent intervals where both determined a component.
+    /// `(laser, wheel)` translation rates of recent intervals where both determined a component
+    /// (the per-frame estimator).
     scale_pairs: VecDeque<(f64, f64)>,
+    /// `(laser, wheel)` distances of the latest long-baseline measurements.
+    scale_measurements: VecDeque<(f64, f64)>,
 }
 
 impl Fusion {
@@ -107,20 +129,55 @@ impl Fusion {
             config,
             history: VecDeque::new(),
             scale_pairs: VecDeque::new(),
+            scale_measurements: VecDeque::new(),
         }
     }
 
-    /// The current wheel scale factor: laser distance over wheel distance (1 until there is
-    /// enough evidence, or when `wheel_scale_frames` is 0).
+    /// The current wheel scale factor: laser distance over wheel distance. 1 until there is
+    /// enough evidence, while the long-baseline estimate is not significant, and when both
+    /// estimators are off (see the module docs).
     pub fn wheel_scale(&self) -> f64 {
-        if self.scale_pairs.len() < MIN_SCALE_PAIRS {
+        if self.config.wheel_scale_frames > 0 {
+            if self.scale_pairs.len() < MIN_SCALE_PAIRS {
+                return 1.0;
+            }
+            let (s, _) = least_squares_scale(&self.scale_pairs);
+            return s.clamp(WHEEL_SCALE_RANGE.0, WHEEL_SCALE_RANGE.1);
+        }
+        if self.scale_measurements.len() < MIN_SCALE_MEASUREMENTS {
             return 1.0;
         }
-        let (lw, ww) = self
-            .scale_pairs
-            .iter()
-            .fold((0.0, 0.0), |(lw, ww), &(l, w)| (lw + l * w, ww + w * w));
-        (lw / ww).clamp(WHEEL_SCALE_RANGE.0, WHEEL_SCALE_RANGE.1)
+        let (s, standard_error) = least_squares_scale(&self.scale_measurements);
+        let significant =
+            (s - 1.0).abs() > self.config.wheel_scale_min_slip.max(3.0 * standard_error);
+        if significant {
+            s.clamp(WHEEL_SCALE_RANGE.0, WHEEL_SCALE_RANGE.1)
+        } else {
+            1.0
+        }
+    }
+
+    /// Long-baseline measurements kept for the wheel scale.
+    pub fn scale_measurements(&self) -> usize {
+        self.scale_measurements.len()
+    }
+
+    /// Add one long-baseline measurement ([`super::slip::SlipMeter`]): the distance along one
+    /// translation component by the laser and by the (raw) wheels. Ignored when the long-baseline
+    /// estimator is off, the wheels barely moved, or the ratio is outside [`WHEEL_SCALE_RANGE`].
+    pub fn add_scale_measurement(&mut self, laser_m: f64, wheel_m: f64) {
+        let ratio = laser_m / wheel_m;
+        let usable = self.config.wheel_scale_baseline_m > 0.0
+            && wheel_m.abs() > 1e-3
+            && ratio > WHEEL_SCALE_RANGE.0
+            && ratio < WHEEL_SCALE_RANGE.1;
+        if !usable {
+            return;
+        }
+        self.scale_measurements.push_back((laser_m, wheel_m));
+        while self.scale_measurements.len() > MAX_SCALE_MEASUREMENTS {
+            self.scale_measurements.pop_front();
+        }
     }
 
     /// `wheel` with its translation multiplied by the wheel scale.
@@ -274,6 +331,21 @@ impl Fusion {
         }
         fused
     }
+}
+
+/// The least-squares factor `s` of `laser = s * wheel` over `pairs`, and its standard error from
+/// the pairs' scatter about the fit (infinite with fewer than two pairs).
+fn least_squares_scale(pairs: &VecDeque<(f64, f64)>) -> (f64, f64) {
+    let (lw, ww) = pairs
+        .iter()
+        .fold((0.0, 0.0), |(lw, ww), &(l, w)| (lw + l * w, ww + w * w));
+    let s = lw / ww;
+    if pairs.len() < 2 {
+        return (s, f64::INFINITY);
+    }
+    let scatter: f64 = pairs.iter().map(|&(l, w)| (l - s * w).powi(2)).sum();
+    let sigma = (scatter / (pairs.len() - 1) as f64).sqrt();
+    (s, sigma / ww.sqrt())
 }
 
 /// Algorithm 1 for one group: the laser if it is within tolerance everywhere (and determines the
@@ -486,6 +558,66 @@ mod tests {
             );
         }
         assert!((off.wheel_scale() - 1.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn a_significant_long_baseline_slip_scales_the_wheels_and_noise_does_not() {
+        use rand::{Rng, SeedableRng};
+        use rand_chacha::ChaCha8Rng;
+        // `n` measurements over 0.25 m reading `ratio` of the wheels' distance, 1 % noise.
+        let measured = |ratio: f64, n: usize| {
+            let mut f = Fusion::new(FusionConfig::default());
+            let mut rng = ChaCha8Rng::seed_from_u64(3);
+            for _ in 0..n {
+                let noise = 0.01 * 3.0_f64.sqrt() * (2.0 * rng.random::<f64>() - 1.0);
+                f.add_scale_measurement(0.25 * ratio * (1.0 + noise), 0.25);
+            }
+            f
+        };
+        // 3 % slip is found to within its noise and applied where the wheels fill in.
+        let f = measured(0.97, 20);
+        assert!(
+            (f.wheel_scale() - 0.97).abs() < 0.005,
+            "{}",
+            f.wheel_scale()
+        );
+        let mut f = f;
+        warm(&mut f, [0.0, 0.0, 0.0, 0.3, 0.0, 0.0]);
+        let wheel = SourceRate {
+            rate: [0.0, 0.0, 0.0, 0.3, 0.0, 0.0],
+            available: [false, false, true, true, true, false],
+        };
+        let mut blind = rate([0.0; 6]);
+        blind.available[3] = false;
+        let out = f.fuse(Some(&blind), None, Some(&wheel));
+        assert_eq!(out.chosen[3], Source::Wheel);
+        assert!(
+            (out.rate[3] - 0.3 * f.wheel_scale()).abs() < 1e-12,
+            "{:?}",
+            out.rate
+        );
+        // Too few measurements: 1.
+        assert!((measured(0.97, MIN_SCALE_MEASUREMENTS - 1).wheel_scale() - 1.0).abs() < 1e-15);
+        // A slip-free run whose measurements read 0.5 % or even 2 % short (the registration's
+        // bias approaching a car on the simulated off-roader) keeps its exact wheels.
+        assert!((measured(0.995, 40).wheel_scale() - 1.0).abs() < 1e-15);
+        assert!((measured(0.98, 40).wheel_scale() - 1.0).abs() < 1e-15);
+        // 1.5 % off but within three standard errors (few, noisy measurements): 1.
+        let mut noisy = Fusion::new(FusionConfig::default());
+        for l in [0.27, 0.23, 0.26, 0.225] {
+            noisy.add_scale_measurement(l, 0.25);
+        }
+        assert!((noisy.wheel_scale() - 1.0).abs() < 1e-15);
+        // Off: nothing is collected.
+        let mut off = Fusion::new(FusionConfig {
+            wheel_scale_baseline_m: 0.0,
+            ..FusionConfig::default()
+        });
+        for _ in 0..20 {
+            off.add_scale_measurement(0.97 * 0.25, 0.25);
+        }
+        assert_eq!(off.scale_measurements(), 0);
+        assert!((off.wheel_scale() - 1.0).abs() < 1e-15);
     }
 
     #[test]

@@ -13,7 +13,8 @@
 //! 5. [`laser_odometry`]: two-step LM against frame `k - 1`, starting from the fused prediction of
 //!    the other sources; degenerate directions fall back to that prediction;
 //! 6. [`fusion`]: Algorithm 1 over laser, [`visual_odometry`] (depth frames, tracked as they arrive)
-//!    and wheel odometry, under the ten-frame constant-velocity reference (eqs. 6-7);
+//!    and wheel odometry, under the ten-frame constant-velocity reference (eqs. 6-7), with the
+//!    wheels' slip scale measured by the laser over a long baseline ([`slip`]);
 //! 7. [`map`]: scan-to-map refinement against the local feature map (3.5), then the frame's points
 //!    (and the depth points in its interval) are fused into the output cloud; at
 //!    [`Pipeline::finish`] the [`filter`] (bilateral) runs once over the fused cloud.
@@ -37,6 +38,7 @@ pub mod ground;
 pub mod laser_odometry;
 pub mod map;
 pub mod registration;
+pub mod slip;
 pub mod visual_odometry;
 
 use std::collections::VecDeque;
@@ -53,6 +55,7 @@ use self::geom::{Pose, Twist6, V3, VoxelIndex, norm, voxel_of};
 use self::laser_odometry::{FeatureTarget, GROUND_TAG_BIT};
 use self::map::{CloudAccumulator, FeatureMap};
 use self::registration::{keep_components, register_joint, register_two_step, unaided};
+use self::slip::{Scan, SlipMeter};
 use self::visual_odometry::{VisualOdometry, VisualStep};
 use crate::cloud::Cloud;
 use crate::vlp16::Frame;
@@ -184,6 +187,10 @@ pub struct PipelineStats {
     pub wheel_messages: usize,
     /// Fused components taken from [laser, visual, wheel, reference, zero].
     pub chosen: [usize; 5],
+    /// Long-baseline slip measurements (per translation component) fusion accepted.
+    pub scale_measurements: usize,
+    /// The wheel scale factor fusion applied in the last frame (1: no significant slip).
+    pub wheel_scale: f64,
 }
 
 /// The run's result.
@@ -292,6 +299,20 @@ impl PipelineConfig {
                 )));
             }
         }
+        if !(self.fusion.wheel_scale_baseline_m >= 0.0
+            && self.fusion.wheel_scale_baseline_m.is_finite())
+        {
+            return Err(PipelineError::InvalidConfig(format!(
+                "fusion.wheel-scale-baseline-m = {}: must be 0 (off) or a positive number",
+                self.fusion.wheel_scale_baseline_m
+            )));
+        }
+        if !(0.0..0.2).contains(&self.fusion.wheel_scale_min_slip) {
+            return Err(PipelineError::InvalidConfig(format!(
+                "fusion.wheel-scale-min-slip = {}: must lie in 0..0.2 (a fraction of the distance)",
+                self.fusion.wheel_scale_min_slip
+            )));
+        }
         if !(0.0..=1.0).contains(&self.fusion.rotation_gap_decay) {
             return Err(PipelineError::InvalidConfig(format!(
                 "fusion.rotation-gap-decay = {}: must lie in 0..=1",
@@ -340,6 +361,7 @@ pub struct Pipeline {
     robot_from_camera: Pose,
     fusion: Fusion,
     previous: Option<PreviousFrame>,
+    slip: SlipMeter,
     last_rate: Twist6,
     map: FeatureMap,
     cloud: CloudAccumulator,
@@ -372,6 +394,11 @@ impl Pipeline {
             robot_from_camera,
             fusion: Fusion::new(config.fusion.clone()),
             previous: None,
+            slip: SlipMeter::new(if config.fusion.use_laser && config.fusion.use_wheel {
+                config.fusion.wheel_scale_baseline_m
+            } else {
+                0.0
+            }),
             last_rate: [0.0; 6],
             map: FeatureMap::new(config.map.feature_voxel_m, config.map.points_per_voxel),
             cloud: CloudAccumulator::new(config.map.output_voxel_m),
@@ -620,14 +647,64 @@ impl Pipeline {
             refine_rejected,
         });
         self.flush_depth_points(frame.stamp_s);
+        let target = FeatureTarget {
+            corners: tagged_index(corner_candidates, self.config.laser.max_correspondence_m),
+            planes: tagged_index(plane_candidates, self.config.laser.max_correspondence_m),
+        };
+        let scan = (&feats, ground_sample.as_slice());
+        self.track_slip(frame.stamp_s, scan, world_from_robot, target);
+    }
+
+    /// Step 6b's slip evidence ([`slip`]): register the frame against a keyframe a baseline
+    /// behind it and hand the laser and wheel distances to fusion, then keep the frame as a
+    /// keyframe if the meter wants one; the frame (its feature `target`) becomes the next
+    /// scan-to-scan target. Records the wheel scale fusion applied to this frame.
+    fn track_slip(
+        &mut self,
+        stamp_s: f64,
+        (feats, ground_sample): (&features::Features, &[V3]),
+        world_from_robot: Pose,
+        target: FeatureTarget,
+    ) {
+        self.stats.wheel_scale = self.fusion.wheel_scale();
+        if let Some(wheel) = wheel_pose_at(&self.wheel, stamp_s) {
+            self.measure_slip(&wheel, (feats, ground_sample), &world_from_robot);
+            if self.slip.wants_keyframe(&wheel) {
+                self.slip
+                    .add_keyframe(wheel, world_from_robot, target.clone());
+            }
+        }
         self.previous = Some(PreviousFrame {
-            stamp_s: frame.stamp_s,
-            target: FeatureTarget {
-                corners: tagged_index(corner_candidates, self.config.laser.max_correspondence_m),
-                planes: tagged_index(plane_candidates, self.config.laser.max_correspondence_m),
-            },
+            stamp_s,
+            target,
             world_from_robot,
         });
+    }
+
+    /// Register the frame against the keyframe a baseline behind it, if any, and hand the
+    /// distance pairs to fusion.
+    fn measure_slip(
+        &mut self,
+        wheel: &Pose,
+        (feats, ground_sample): (&features::Features, &[V3]),
+        world_from_robot: &Pose,
+    ) {
+        if self.slip.is_due(wheel) {
+            let mut step1_planes = feats.planes.clone();
+            step1_planes.extend_from_slice(ground_sample);
+            let scan = Scan {
+                step1_planes: &step1_planes,
+                planes: &feats.planes,
+                corners: &feats.corners,
+            };
+            let pairs = self
+                .slip
+                .measure(wheel, world_from_robot, scan, &self.config.laser);
+            for (laser_m, wheel_m) in pairs {
+                self.fusion.add_scale_measurement(laser_m, wheel_m);
+            }
+            self.stats.scale_measurements = self.fusion.scale_measurements();
+        }
     }
 
     /// A point of the output cloud, world frame; ground points go to their own voxels if set.

@@ -157,6 +157,42 @@ fn laser_and_wheel_track_the_run_and_beat_slipping_wheels() {
 }
 
 #[test]
+fn long_baseline_slip_measurements_calibrate_slipping_wheels_and_leave_exact_ones_alone() {
+    let (_, built) = run(PipelineConfig::default(), 30, Some(0.05));
+    assert!(
+        built.stats.scale_measurements >= fusion::MIN_SCALE_MEASUREMENTS,
+        "{:?}",
+        built.stats
+    );
+    let truth = 1.0 / 1.05;
+    assert!(
+        (built.stats.wheel_scale - truth).abs() < 0.01,
+        "wheel scale {} vs {truth}",
+        built.stats.wheel_scale
+    );
+    let (_, exact) = run(PipelineConfig::default(), 30, Some(0.0));
+    assert!(exact.stats.scale_measurements >= fusion::MIN_SCALE_MEASUREMENTS);
+    assert!(
+        (exact.stats.wheel_scale - 1.0).abs() < 1e-15,
+        "{:?}",
+        exact.stats
+    );
+    for (value, key) in [
+        (-0.1, "fusion.wheel-scale-baseline-m"),
+        (f64::NAN, "fusion.wheel-scale-baseline-m"),
+    ] {
+        let mut config = PipelineConfig::default();
+        config.fusion.wheel_scale_baseline_m = value;
+        let e = Pipeline::new(config).unwrap_err().to_string();
+        assert!(e.contains(key), "{e}");
+    }
+    let mut config = PipelineConfig::default();
+    config.fusion.wheel_scale_min_slip = 0.5;
+    let e = Pipeline::new(config).unwrap_err().to_string();
+    assert!(e.contains("fusion.wheel-scale-min-slip"), "{e}");
+}
+
+#[test]
 fn laser_only_tracks_the_run() {
     let mut config = PipelineConfig::default();
     config.fusion.use_wheel = false;
