@@ -79,30 +79,16 @@ pub fn extract(points: &[RingPoint], config: &FeatureConfig) -> Features {
     }
     let mut scored: Vec<Vec<Scored>> = Vec::with_capacity(rings.len());
     let mut windows = 0;
+    let mut scratch = RingScratch::default();
     for ring in &rings {
-        let mut out = Vec::new();
-        for k in n_half..ring.len().saturating_sub(n_half) {
-            let first = &points[ring[k - n_half]];
-            let last = &points[ring[k + n_half]];
-            if azimuth_span(first.azimuth_rad, last.azimuth_rad) >= config.max_window_angle_rad {
-                continue;
-            }
-            windows += 1;
-            let centre = points[ring[k]];
-            let mut sum = [0.0; 3];
-            let mut total_distance = 0.0;
-            for &j in &ring[k - n_half..=k + n_half] {
-                let d = sub(points[j].p, centre.p);
-                sum = [sum[0] + d[0], sum[1] + d[1], sum[2] + d[2]];
-                total_distance += norm(d);
-            }
-            let w = (2 * n_half) as f64;
-            out.push(Scored {
-                index: ring[k],
-                smoothness: norm(sum) / (w * centre.range_m),
-                spread: total_distance / w / centre.range_m,
-            });
-        }
+        let out = score_ring(
+            points,
+            ring,
+            n_half,
+            config.max_window_angle_rad,
+            &mut scratch,
+        );
+        windows += out.len();
         scored.push(out);
     }
     let mut is_outlier = vec![false; points.len()];
@@ -118,6 +104,74 @@ pub fn extract(points: &[RingPoint], config: &FeatureConfig) -> Features {
     }
     features.is_outlier = is_outlier;
     features
+}
+
+/// Buffers reused across the rings of a frame.
+#[derive(Default)]
+struct RingScratch {
+    /// The ring's positions in one contiguous run.
+    pos: Vec<V3>,
+    /// `ahead[i * n_half + d - 1] = |pos[i + d] - pos[i]|`.
+    ahead: Vec<f64>,
+}
+
+/// Eqs. 2-5 for every window of one ring (`ring`: indices into `points`, azimuth order) that
+/// passes the width test.
+///
+/// Each distance between two points at most `n_half` apart is computed once and serves the
+/// windows of both (the direct double loop computed every one twice); the sums add the same
+/// values in the same order as the direct loop, so the scores are identical to it
+/// (`shared_distances_score_like_the_direct_loop`).
+fn score_ring(
+    points: &[RingPoint],
+    ring: &[usize],
+    n_half: usize,
+    max_window_angle_rad: f64,
+    scratch: &mut RingScratch,
+) -> Vec<Scored> {
+    let RingScratch { pos, ahead } = scratch;
+    pos.clear();
+    pos.extend(ring.iter().map(|&i| points[i].p));
+    ahead.clear();
+    ahead.resize(pos.len() * n_half, 0.0);
+    for (i, (row, &p)) in ahead.chunks_exact_mut(n_half).zip(pos.iter()).enumerate() {
+        for (slot, &q) in row.iter_mut().zip(&pos[i + 1..]) {
+            *slot = norm(sub(q, p));
+        }
+    }
+    let mut out = Vec::new();
+    for k in n_half..ring.len().saturating_sub(n_half) {
+        let first = &points[ring[k - n_half]];
+        let last = &points[ring[k + n_half]];
+        if azimuth_span(first.azimuth_rad, last.azimuth_rad) >= max_window_angle_rad {
+            continue;
+        }
+        let centre = pos[k];
+        let mut sum = [0.0; 3];
+        for &q in &pos[k - n_half..=k + n_half] {
+            let d = sub(q, centre);
+            sum = [sum[0] + d[0], sum[1] + d[1], sum[2] + d[2]];
+        }
+        // |p_j - p_k| for j = k - n_half .. k - 1 (stored ahead of p_j, `n_half - 1` apart),
+        // then for j = k + 1 ..= k + n_half (ahead of p_k): the direct loop's order, without
+        // the centre's own zero (adding +0.0 changes nothing). |a - b| = |b - a| exactly.
+        let behind = (k - n_half) * n_half + n_half - 1;
+        let mut total_distance = 0.0;
+        for o in 0..n_half {
+            total_distance += ahead[behind + o * (n_half - 1)];
+        }
+        for &d in &ahead[k * n_half..(k + 1) * n_half] {
+            total_distance += d;
+        }
+        let w = (2 * n_half) as f64;
+        let range_m = points[ring[k]].range_m;
+        out.push(Scored {
+            index: ring[k],
+            smoothness: norm(sum) / (w * range_m),
+            spread: total_distance / w / range_m,
+        });
+    }
+    out
 }
 
 /// Angle between two azimuths, radians in [0, pi].
@@ -260,6 +314,84 @@ mod tests {
         for (p, _) in points.iter().zip(&f.is_outlier).filter(|(_, o)| **o) {
             let near_corner = (p.p[0].abs() - 2.0).abs() < 0.4 && (p.p[1].abs() - 2.0).abs() < 0.4;
             assert!(near_corner, "{p:?}");
+        }
+    }
+
+    /// The direct double loop of eqs. 3-5, every distance computed for each window it is in.
+    fn score_ring_direct(points: &[RingPoint], ring: &[usize], n_half: usize) -> Vec<Scored> {
+        let mut out = Vec::new();
+        for k in n_half..ring.len().saturating_sub(n_half) {
+            let (first, last) = (&points[ring[k - n_half]], &points[ring[k + n_half]]);
+            if azimuth_span(first.azimuth_rad, last.azimuth_rad) >= std::f64::consts::PI / 16.0 {
+                continue;
+            }
+            let centre = points[ring[k]];
+            let mut sum = [0.0; 3];
+            let mut total_distance = 0.0;
+            for &j in &ring[k - n_half..=k + n_half] {
+                let d = sub(points[j].p, centre.p);
+                sum = [sum[0] + d[0], sum[1] + d[1], sum[2] + d[2]];
+                total_distance += norm(d);
+            }
+            let w = (2 * n_half) as f64;
+            out.push(Scored {
+                index: ring[k],
+                smoothness: norm(sum) / (w * centre.range_m),
+                spread: total_distance / w / centre.range_m,
+            });
+        }
+        out
+    }
+
+    #[test]
+    fn shared_distances_score_like_the_direct_loop() {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+        // A noisy ring with gaps (some windows fail the width test), every other point taken.
+        let mut points = Vec::new();
+        let mut azimuth_rad: f64 = 0.0;
+        for _ in 0..2000 {
+            azimuth_rad += if rng.random_bool(0.02) { 0.4 } else { 0.003 };
+            let range_m = rng.random_range(0.3..6.0);
+            let p = [
+                range_m * azimuth_rad.cos(),
+                range_m * azimuth_rad.sin(),
+                rng.random_range(-0.5..0.5),
+            ];
+            points.push(RingPoint {
+                p,
+                range_m,
+                azimuth_rad: azimuth_rad.rem_euclid(std::f64::consts::TAU),
+                ring: 3,
+                is_ground: false,
+            });
+        }
+        let ring: Vec<usize> = (0..points.len()).step_by(2).collect();
+        for n_half in [1, 3, 5, 8] {
+            let direct = score_ring_direct(&points, &ring, n_half);
+            let mut scratch = RingScratch::default();
+            let shared = score_ring(
+                &points,
+                &ring,
+                n_half,
+                std::f64::consts::PI / 16.0,
+                &mut scratch,
+            );
+            assert!(
+                direct.len() > 500 && direct.len() < ring.len() - 2 * n_half,
+                "{}",
+                direct.len()
+            );
+            assert_eq!(direct.len(), shared.len());
+            for (a, b) in direct.iter().zip(&shared) {
+                assert_eq!(a.index, b.index);
+                assert_eq!(
+                    a.smoothness.to_bits(),
+                    b.smoothness.to_bits(),
+                    "n_half {n_half}"
+                );
+                assert_eq!(a.spread.to_bits(), b.spread.to_bits(), "n_half {n_half}");
+            }
         }
     }
 

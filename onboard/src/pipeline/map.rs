@@ -177,24 +177,40 @@ impl CloudAccumulator {
     }
 
     /// The centroids, sorted by voxel so the output does not depend on hash order.
+    ///
+    /// A voxel's coordinate along each axis is `block * 8 + local`, so the voxels' lexicographic
+    /// order is that of (block x, local x, block y, local y, block z, local z): with the blocks
+    /// sorted, the nested walk below emits the voxels in order without sorting them (sorting a
+    /// million voxels was about 8 % of a run's pipeline time).
     pub fn points(&self) -> Vec<V3> {
+        const SIDE: usize = 1 << BLOCK_BITS;
         let (overlay, added) = self.pending_overlay();
-        let mut cells: Vec<([i32; 3], V3)> = Vec::with_capacity(self.len + added);
         let flushed = self
             .blocks
             .iter()
             .filter(|(k, _)| !overlay.contains_key(*k));
-        for (block_key, block) in flushed.chain(&overlay) {
-            for (local, &slot) in block.slots.iter().enumerate() {
-                if slot != 0 {
-                    let (sum, n) = block.cells[usize::from(slot) - 1];
-                    let voxel = voxel_of_local(*block_key, local);
-                    cells.push((voxel, scale(sum, 1.0 / f64::from(n))));
+        let mut blocks: Vec<([i32; 3], &Block)> =
+            flushed.chain(&overlay).map(|(k, b)| (*k, b)).collect();
+        blocks.sort_unstable_by_key(|(key, _)| *key);
+        let mut out = Vec::with_capacity(self.len + added);
+        for slab in blocks.chunk_by(|a, b| a.0[0] == b.0[0]) {
+            for local_x in 0..SIDE {
+                for row in slab.chunk_by(|a, b| a.0[1] == b.0[1]) {
+                    for local_y in 0..SIDE {
+                        let first = (local_x * SIDE + local_y) * SIDE;
+                        for (_, block) in row {
+                            for &slot in &block.slots[first..first + SIDE] {
+                                if slot != 0 {
+                                    let (sum, n) = block.cells[usize::from(slot) - 1];
+                                    out.push(scale(sum, 1.0 / f64::from(n)));
+                                }
+                            }
+                        }
+                    }
                 }
             }
         }
-        cells.sort_unstable_by_key(|(voxel, _)| *voxel);
-        cells.into_iter().map(|(_, p)| p).collect()
+        out
     }
 }
 
@@ -213,14 +229,20 @@ fn add_grouped(
     let mut starts: Vec<usize> = Vec::new();
     let mut voxels = Vec::with_capacity(points.len());
     let mut groups = Vec::with_capacity(points.len());
+    // Consecutive points (one firing's column, neighbours on a ring) often share a block.
+    let mut last: Option<([i32; 3], usize)> = None;
     for &p in points {
         let voxel = voxel_of(p, voxel_m);
         let key = voxel.map(|c| c >> BLOCK_BITS);
-        let group = *group_of_block.entry(key).or_insert_with(|| {
-            block_keys.push(key);
-            starts.push(0);
-            (block_keys.len() - 1) as u32
-        }) as usize;
+        let group = match last {
+            Some((last_key, group)) if last_key == key => group,
+            _ => *group_of_block.entry(key).or_insert_with(|| {
+                block_keys.push(key);
+                starts.push(0);
+                (block_keys.len() - 1) as u32
+            }) as usize,
+        };
+        last = Some((key, group));
         starts[group] += 1;
         voxels.push(voxel);
         groups.push(group);
@@ -260,7 +282,9 @@ fn local_index(voxel: [i32; 3]) -> usize {
         .fold(0, |acc, &c| (acc << BLOCK_BITS) | (c & mask) as usize)
 }
 
-/// The voxel at index `local` (see [`local_index`]) of block `block_key`.
+/// The voxel at index `local` (see [`local_index`]) of block `block_key` (the inverse the
+/// layout's tests check `local_index` against).
+#[cfg(test)]
 fn voxel_of_local(block_key: [i32; 3], local: usize) -> [i32; 3] {
     let mask = (1 << BLOCK_BITS) - 1;
     std::array::from_fn(|k| {
