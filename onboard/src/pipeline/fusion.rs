@@ -29,7 +29,8 @@
 //!    is zero; a factor below 1 decays the held rate towards it frame by frame. Translation keeps
 //!    the reference as it is (the robot does keep driving at its speed).
 //!
-//! The same wheel gate is offered to the scan-to-map refinement ([`Fusion::agrees_with_wheel`]).
+//! The same wheel gate is offered to the scan-to-map refinement ([`Fusion::refinement_gate`]): by
+//! default for its rotation only.
 //!
 //! Until the reference holds `reference_frames` rates, the laser is used wherever it is determined
 //! and, with `gate-laser-by-wheel`, agrees with the wheels (else the wheels). Ungated, the
@@ -249,6 +250,21 @@ impl Fusion {
             ([3, 4, 5], c.translation_tolerance_mps),
         ]
         .map(|(group, tol)| wheel.is_none_or(|w| within_wheel(rate, w, &group, &tol)))
+    }
+
+    /// Which groups (rotation, translation) of the scan-to-map refinement's increment `rate` to
+    /// keep: a group is rejected (the fused prediction's values stay) when its gate is on and it
+    /// disagrees with the wheels ([`Self::agrees_with_wheel`]). The rotation is gated with
+    /// `gate-refinement-rotation-by-wheel` or `gate-refinement-by-wheel`, the translation only
+    /// with the latter: the map's x and y corrections are kept, its weakly determined yaw jumps
+    /// (up to 1-2 degrees a frame on the simulated `suv-offset` pass) are not.
+    pub fn refinement_gate(&self, rate: &Twist6, wheel: Option<&SourceRate>) -> [bool; 2] {
+        let c = &self.config;
+        if !(c.gate_refinement_by_wheel || c.gate_refinement_rotation_by_wheel) {
+            return [true; 2];
+        }
+        let [rotation, translation] = self.agrees_with_wheel(rate, wheel);
+        [rotation, translation || !c.gate_refinement_by_wheel]
     }
 
     /// The best prediction before the laser runs: per component visual, then wheel, then the
@@ -708,6 +724,31 @@ mod tests {
             ungated.agrees_with_wheel(&refined, Some(&wheel)),
             [true, true]
         );
+    }
+
+    #[test]
+    fn the_refinement_keeps_the_maps_translation_but_not_a_yaw_the_wheels_deny() {
+        let wheel = SourceRate {
+            rate: [0.0, 0.0, 0.0, 0.3, 0.0, 0.0],
+            available: [false, false, true, true, true, false],
+        };
+        // A refined increment 0.02 rad/s of yaw and 0.05 m/s of x off the wheels.
+        let refined = [0.0, 0.0, 0.02, 0.35, 0.0, 0.0];
+        let f = Fusion::new(FusionConfig::default());
+        assert_eq!(f.refinement_gate(&refined, Some(&wheel)), [false, true]);
+        assert_eq!(f.refinement_gate(&refined, None), [true, true]);
+        let agreeing = [0.0, 0.0, 0.005, 0.35, 0.0, 0.0];
+        assert_eq!(f.refinement_gate(&agreeing, Some(&wheel)), [true, true]);
+        let both = Fusion::new(FusionConfig {
+            gate_refinement_by_wheel: true,
+            ..FusionConfig::default()
+        });
+        assert_eq!(both.refinement_gate(&refined, Some(&wheel)), [false, false]);
+        let off = Fusion::new(FusionConfig {
+            gate_refinement_rotation_by_wheel: false,
+            ..FusionConfig::default()
+        });
+        assert_eq!(off.refinement_gate(&refined, Some(&wheel)), [true, true]);
     }
 
     #[test]

@@ -783,17 +783,14 @@ impl Pipeline {
             &laser_config,
         );
         count(&mut self.stats.refine_degenerate, refined.degenerate);
-        // The refinement's yaw (and x, y) is gated by the wheels like the scan-to-scan laser in
-        // Algorithm 1: the refined increment over the interval must agree with the wheels' rate.
-        let agrees = if self.config.fusion.gate_refinement_by_wheel {
-            let refined_rate = scale_twist(
-                &prev_world.inverse().compose(&refined.pose).to_increment(),
-                1.0 / dt,
-            );
-            self.fusion.agrees_with_wheel(&refined_rate, wheel.as_ref())
-        } else {
-            [true; 2]
-        };
+        // The refinement's yaw (by default; x, y too with `gate-refinement-by-wheel`) is gated
+        // by the wheels like the scan-to-scan laser in Algorithm 1: the refined increment over
+        // the interval must agree with the wheels' rate.
+        let refined_rate = scale_twist(
+            &prev_world.inverse().compose(&refined.pose).to_increment(),
+            1.0 / dt,
+        );
+        let agrees = self.fusion.refinement_gate(&refined_rate, wheel.as_ref());
         for (gated, ok) in self.stats.refine_gated.iter_mut().zip(agrees) {
             *gated += usize::from(!ok);
         }
