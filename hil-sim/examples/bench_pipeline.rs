@@ -4,8 +4,9 @@
 //!
 //! Run: `cargo run --release -p hil-sim --example bench_pipeline -- [SEEDS] [--ablation | --peer]
 //! [--no-depth] [--only NAME] [--duration-s S] [--no-refine] [--eigen-min E] [--export DIR]
-//! [--save-clouds DIR]`
-//! (defaults: 10 seeds, laser + wheel and the full configuration). `--ablation` adds wheel only,
+//! [--save-clouds DIR] [--config FILE]`
+//! (defaults: 10 seeds, laser + wheel and the full configuration; `--config FILE` starts every
+//! variant from the pipeline settings in FILE, a TOML table like the service's `[pipeline]`). `--ablation` adds wheel only,
 //! laser only, laser + visual, without ground removal and without outlier removal, on the first
 //! seed of every scenario. `--peer` runs exactly the two configurations of the KISS-ICP
 //! comparison, laser only and laser + wheel (no depth). `--export DIR` writes each run's lidar
@@ -34,6 +35,8 @@
 //!   is single-threaded), which other processes' load on a shared machine does not inflate.
 
 use std::fmt::Write as _;
+
+use anyhow::Context as _;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -70,8 +73,8 @@ enum Mode {
 
 /// The configurations of `mode`. Without `depth`, the two "no ..." rows of the ablation leave
 /// their stage out of laser + wheel instead of the full configuration (and say so in the name).
-fn variants(mode: Mode, depth: bool) -> Vec<Variant> {
-    let full = PipelineConfig::default();
+fn variants(mode: Mode, depth: bool, base: &PipelineConfig) -> Vec<Variant> {
+    let full = base.clone();
     let mut wheel_only = full.clone();
     wheel_only.fusion.use_laser = false;
     wheel_only.fusion.use_visual = false;
@@ -623,6 +626,20 @@ fn main() -> anyhow::Result<()> {
         .and_then(|i| args.get(i + 1))
         .map(|s| s.parse())
         .transpose()?;
+    // `--config FILE`: a `[pipeline]`-style TOML table (kebab-case keys, the service's) that
+    // replaces the defaults every variant starts from.
+    let base_config = match args.iter().position(|a| a == "--config") {
+        Some(i) => {
+            let path = args
+                .get(i + 1)
+                .ok_or_else(|| anyhow::anyhow!("--config needs a file"))?;
+            let text = std::fs::read_to_string(path).with_context(|| path.clone())?;
+            let config: PipelineConfig = toml::from_str(&text).with_context(|| path.clone())?;
+            config.validate().with_context(|| path.clone())?;
+            config
+        }
+        None => PipelineConfig::default(),
+    };
     let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("scenarios");
     let mut paths: Vec<PathBuf> = std::fs::read_dir(&dir)?
         .filter_map(|e| e.ok().map(|e| e.path()))
@@ -662,7 +679,7 @@ fn main() -> anyhow::Result<()> {
             } else {
                 mode
             };
-            let mut vs = variants(mode, !no_depth);
+            let mut vs = variants(mode, !no_depth, &base_config);
             if no_depth {
                 vs.retain(|v| !v.depth);
             }
