@@ -196,11 +196,12 @@ mod saved {
         );
         for t in &r.tyres {
             println!(
-                "    tyre {} centre ({:.3}, {:.3}, {:.4}) free r {:.4} width {:.3} rms {:.1} mm, {} pts",
+                "    tyre {} centre ({:.3}, {:.3}, {:.4}) in cloud x {:.4} free r {:.4} width {:.3} rms {:.1} mm, {} pts",
                 t.position.label(),
                 t.centre_in_vehicle[0],
                 t.centre_in_vehicle[1],
                 t.centre_in_vehicle[2],
+                t.centre_in_cloud[0],
                 t.free_radius_m,
                 t.width_m,
                 t.residual_rms_m * 1e3,
@@ -209,6 +210,26 @@ mod saved {
         }
         for w in &r.warnings {
             println!("    warning: {w}");
+        }
+        if std::env::var_os("DEBUG_ENDS").is_some() {
+            for (name, f) in [("approach", &r.approach), ("departure", &r.departure)] {
+                let Some(f) = f else { continue };
+                let x = f.witness_in_vehicle[0];
+                let near: Vec<String> = r
+                    .envelope
+                    .iter()
+                    .filter(|s| (s.x_m - x).abs() < 0.06)
+                    .map(|s| format!("{:.4}:{:.4}/{}", s.x_m, s.z_m, s.support))
+                    .collect();
+                let c = f.witness_in_cloud;
+                println!(
+                    "    {name} witness in cloud ({:.4}, {:.4}, {:.4}); envelope near it: {}",
+                    c[0],
+                    c[1],
+                    c[2],
+                    near.join(" ")
+                );
+            }
         }
         let (f, b) = (r.front_axle, r.rear_axle);
         let gap = |lo: f64, hi: f64| {

@@ -16,7 +16,9 @@
 //!    midway between the axles, on the centreline between the inner tyre faces. Steps 2-3 iterate.
 //! 4. **Body** = points above the ground threshold that are not tyre (and not in an exclusion box).
 //!    Those inside the lateral band (default: between the inner tyre faces) are projected onto the
-//!    median plane and reduced to a robust lower envelope ([`envelope`]).
+//!    median plane and reduced to a robust lower envelope ([`envelope`]); its front and rear
+//!    ends are placed by counting the surface's points beyond a reference, not by the last bin
+//!    that reaches a support threshold ([`edge`]).
 //! 5. **Angles**: for an envelope sample at horizontal distance `d` from a wheel centre and height `z`,
 //!    with static loaded radius `r`, the plane through it tangent to the tyre rises at
 //!    `a = asin(r / hypot(d, r - z)) - atan2(r - z, d)` ([`tangent_slope`]). Approach = min `a`
@@ -36,6 +38,7 @@
 //! frame and the number of points supporting it; the result also carries the tyre fits, the
 //! envelope (for the side-view report, [`side_view_svg`]), point counts and warnings.
 
+mod edge;
 mod envelope;
 mod geom;
 mod ground;
@@ -430,6 +433,7 @@ pub fn compute_angles(
             "{detached} envelope samples lie beyond a gap of more than {DETACHED_GAP_M} m ahead of or behind the vehicle's body and were ignored (ground noise, kerbs or other objects)"
         ));
     }
+    refine_ends(&mut body, front, rear, config.zone);
     check_coverage(
         &body.samples,
         (front, rear),
@@ -591,6 +595,8 @@ fn settle_frame(
 /// The body's envelope and the figures that shaped it.
 struct Body {
     samples: Vec<EnvelopeSample>,
+    /// The band's body points (vehicle frame), the envelope's input.
+    band_points: Vec<V3>,
     /// Per end of the band's points (rear, front): x of the end and the highest z within 3 cm of it.
     ends: [(f64, f64); 2],
     noise_sigma_m: f64,
@@ -648,11 +654,38 @@ fn classify(
     samples.sort_by(|a, b| a.x_m.total_cmp(&b.x_m));
     Body {
         samples,
+        band_points,
         ends,
         noise_sigma_m,
         bin_m,
         // Fringe bins are the expected smear of a surface's edge, not missing data: not warned.
         unsupported_bins: env.unsupported_bins,
+    }
+}
+
+/// The approach and departure zones' limits along x: (front, rear).
+fn zone_limits(front: Axle, rear: Axle, zone: Zone) -> (f64, f64) {
+    match zone {
+        Zone::Tyre => (
+            front.x_m + front.free_radius_m,
+            rear.x_m - rear.free_radius_m,
+        ),
+        Zone::Axle => (front.x_m, rear.x_m),
+    }
+}
+
+/// Replace the last bins at the body's front and rear ends by an edge estimate ([`edge`]).
+fn refine_ends(body: &mut Body, front: Axle, rear: Axle, zone: Zone) {
+    let (front_limit, rear_limit) = zone_limits(front, rear, zone);
+    for (outward, limit) in [(1.0, front_limit), (-1.0, rear_limit)] {
+        edge::refine_end(
+            &mut body.samples,
+            &body.band_points,
+            outward,
+            limit,
+            body.noise_sigma_m,
+            body.bin_m,
+        );
     }
 }
 
@@ -1059,13 +1092,7 @@ fn find_angles(
     zone: Zone,
     frame: &VehicleFrame,
 ) -> Findings {
-    let (front_limit, rear_limit) = match zone {
-        Zone::Tyre => (
-            front.x_m + front.free_radius_m,
-            rear.x_m - rear.free_radius_m,
-        ),
-        Zone::Axle => (front.x_m, rear.x_m),
-    };
+    let (front_limit, rear_limit) = zone_limits(front, rear, zone);
     let finding = |s: &EnvelopeSample, angle_rad: f64, parts_rad: Option<(f64, f64)>| {
         let w = [s.x_m, s.y_m, s.z_m];
         AngleFinding {
