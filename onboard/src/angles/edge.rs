@@ -368,17 +368,13 @@ fn fit_line(pairs: &[(f64, f64)]) -> Option<(f64, f64)> {
 
 #[cfg(test)]
 mod tests {
-    use rand::{Rng, SeedableRng};
+    use rand::SeedableRng;
     use rand_chacha::ChaCha8Rng;
 
     use super::*;
     use crate::angles::envelope::{EnvelopeParams, lower_envelope};
 
-    fn gaussian(rng: &mut ChaCha8Rng) -> f64 {
-        let u1: f64 = rng.random_range(f64::EPSILON..1.0);
-        let u2: f64 = rng.random_range(0.0..1.0);
-        (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
-    }
+    use crate::angles::tyres::tests::gauss as gaussian;
 
     /// A flat surface at 0.40 m ending at x = 0.30 m, seen by grazing rays: 8 mm of noise along x,
     /// 1 mm along z. The envelope's last bin ends more than 2 mm off the edge (which of the

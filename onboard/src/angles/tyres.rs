@@ -387,11 +387,11 @@ fn lateral_faces(points: &[V3], seed: &Seed, c: Circle, params: TyreParams) -> (
 }
 
 #[cfg(test)]
-mod tests {
+pub(super) mod tests {
     use super::*;
 
-    /// Gaussian sample by Box-Muller (no extra dependency).
-    fn gauss(rng: &mut ChaCha8Rng) -> f64 {
+    /// Gaussian sample by Box-Muller (no extra dependency); the angle tests' one.
+    pub(in crate::angles) fn gauss(rng: &mut ChaCha8Rng) -> f64 {
         let u1: f64 = rng.random_range(f64::EPSILON..1.0);
         let u2: f64 = rng.random_range(0.0..1.0);
         (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
