@@ -669,9 +669,10 @@ impl Pipeline {
         self.stats.wheel_scale = self.fusion.wheel_scale();
         if let Some(wheel) = wheel_pose_at(&self.wheel, stamp_s) {
             self.measure_slip(&wheel, (feats, ground_sample), &world_from_robot);
-            if self.slip.wants_keyframe(&wheel) {
+            let frame = self.stats.frames as u64;
+            if self.slip.wants_keyframe(frame, &wheel) {
                 self.slip
-                    .add_keyframe(wheel, world_from_robot, target.clone());
+                    .add_keyframe(frame, wheel, world_from_robot, target.clone());
             }
         }
         self.previous = Some(PreviousFrame {

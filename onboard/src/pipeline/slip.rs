@@ -24,8 +24,12 @@
 //! where it is significant.
 //!
 //! A keyframe is kept every quarter baseline, so the measurements overlap in time but no two share
-//! a scan pair (a quarter of the wait for the first ones). Cost: one extra registration every
-//! quarter baseline (every 2-3 frames at 10 Hz and 0.25 m/s) and up to five kept scan targets.
+//! a scan pair (a quarter of the wait for the first ones), and at most every second frame. Cost:
+//! one extra registration per keyframe (every 2-3 frames at 10 Hz and 0.25-0.3 m/s) and up to
+//! five kept scan targets. The frame rule is a CPU budget for slow lidar rates: at 5 Hz and
+//! 0.35 m/s a frame moves 7 cm, more than a quarter baseline, and the meter registered every
+//! frame (the simulated pickup pass, no slip: 9.4-9.8 ms of CPU per frame, 8.0-8.6 with the rule,
+//! the same output; the 10 and 20 Hz passes keep every keyframe they had).
 
 use std::collections::VecDeque;
 
@@ -37,9 +41,15 @@ use super::registration::register_two_step;
 /// Keyframes kept per baseline: one every `baseline / KEYFRAMES_PER_BASELINE`.
 const KEYFRAMES_PER_BASELINE: f64 = 4.0;
 
+/// Fewest frames from one keyframe to the next (so at most one extra registration per this many
+/// frames).
+const MIN_FRAMES_BETWEEN_KEYFRAMES: u64 = 2;
+
 /// A scan kept as the far end of later measurements.
 #[derive(Debug, Clone)]
 struct Keyframe {
+    /// The scan's frame index.
+    frame: u64,
     /// Wheel odometry's pose at the scan's start.
     wheel: Pose,
     /// The estimated pose at the scan's start.
@@ -121,18 +131,27 @@ impl SlipMeter {
             .is_some_and(|k| travelled(&k.wheel, wheel) >= self.baseline_m)
     }
 
-    /// True when a scan with wheel pose `wheel` should become a keyframe: none is kept yet, or
-    /// the newest is a quarter baseline behind. Never when the meter is off.
-    pub fn wants_keyframe(&self, wheel: &Pose) -> bool {
+    /// True when scan number `frame` with wheel pose `wheel` should become a keyframe: none is
+    /// kept yet, or the newest is a quarter baseline and [`MIN_FRAMES_BETWEEN_KEYFRAMES`] frames
+    /// behind. Never when the meter is off.
+    pub fn wants_keyframe(&self, frame: u64, wheel: &Pose) -> bool {
         self.baseline_m > 0.0
             && self.keyframes.back().is_none_or(|k| {
-                travelled(&k.wheel, wheel) >= self.baseline_m / KEYFRAMES_PER_BASELINE
+                frame >= k.frame + MIN_FRAMES_BETWEEN_KEYFRAMES
+                    && travelled(&k.wheel, wheel) >= self.baseline_m / KEYFRAMES_PER_BASELINE
             })
     }
 
-    /// Keep a scan as a keyframe (see [`Self::wants_keyframe`]).
-    pub fn add_keyframe(&mut self, wheel: Pose, world_from_robot: Pose, target: FeatureTarget) {
+    /// Keep scan number `frame` as a keyframe (see [`Self::wants_keyframe`]).
+    pub fn add_keyframe(
+        &mut self,
+        frame: u64,
+        wheel: Pose,
+        world_from_robot: Pose,
+        target: FeatureTarget,
+    ) {
         self.keyframes.push_back(Keyframe {
+            frame,
             wheel,
             world_from_robot,
             target,
@@ -169,11 +188,13 @@ mod tests {
     fn a_scan_a_baseline_on_measures_the_distance_slipping_wheels_overstate() {
         let (planes, corners) = scene(true);
         let mut meter = SlipMeter::new(0.25);
-        assert!(meter.wants_keyframe(&at(0.0)));
-        meter.add_keyframe(at(0.0), at(0.0), target_of(&planes, &corners));
-        // The next keyframe is due a quarter baseline on.
-        assert!(!meter.wants_keyframe(&at(0.05)));
-        assert!(meter.wants_keyframe(&at(0.07)));
+        assert!(meter.wants_keyframe(0, &at(0.0)));
+        meter.add_keyframe(0, at(0.0), at(0.0), target_of(&planes, &corners));
+        // The next keyframe is due a quarter baseline and two frames on.
+        assert!(!meter.wants_keyframe(5, &at(0.05)));
+        assert!(meter.wants_keyframe(5, &at(0.07)));
+        assert!(!meter.wants_keyframe(1, &at(0.07)), "one frame on");
+        assert!(meter.wants_keyframe(2, &at(0.07)));
         // Short of the baseline nothing is measured.
         let truth = at(0.2);
         let (sp, sc) = (moved(&planes, &truth), moved(&corners, &truth));
@@ -214,7 +235,7 @@ mod tests {
         // (the wheels' own distance) and must not count as a measurement.
         let (planes, corners) = scene(false);
         let mut meter = SlipMeter::new(0.25);
-        meter.add_keyframe(at(0.0), at(0.0), target_of(&planes, &corners));
+        meter.add_keyframe(0, at(0.0), at(0.0), target_of(&planes, &corners));
         let truth = at(0.26);
         let (sp, sc) = (moved(&planes, &truth), moved(&corners, &truth));
         let scan = Scan {
@@ -225,6 +246,6 @@ mod tests {
         let wheel = at(0.273);
         assert!(meter.measure(&wheel, &wheel, scan, &config()).is_empty());
         // Off: no keyframes at all.
-        assert!(!SlipMeter::new(0.0).wants_keyframe(&at(1.0)));
+        assert!(!SlipMeter::new(0.0).wants_keyframe(0, &at(1.0)));
     }
 }
