@@ -652,7 +652,7 @@ impl Pipeline {
             planes: tagged_index(plane_candidates, self.config.laser.max_correspondence_m),
         };
         let scan = (&feats, ground_sample.as_slice());
-        self.track_slip(frame.stamp_s, scan, world_from_robot, target);
+        self.track_slip(frame_index, frame.stamp_s, scan, world_from_robot, target);
     }
 
     /// Step 6b's slip evidence ([`slip`]): register the frame against a keyframe a baseline
@@ -661,6 +661,7 @@ impl Pipeline {
     /// scan-to-scan target. Records the wheel scale fusion applied to this frame.
     fn track_slip(
         &mut self,
+        frame_index: u64,
         stamp_s: f64,
         (feats, ground_sample): (&features::Features, &[V3]),
         world_from_robot: Pose,
@@ -669,10 +670,9 @@ impl Pipeline {
         self.stats.wheel_scale = self.fusion.wheel_scale();
         if let Some(wheel) = wheel_pose_at(&self.wheel, stamp_s) {
             self.measure_slip(&wheel, (feats, ground_sample), &world_from_robot);
-            let frame = self.stats.frames as u64;
-            if self.slip.wants_keyframe(frame, &wheel) {
+            if self.slip.wants_keyframe(frame_index, &wheel) {
                 self.slip
-                    .add_keyframe(frame, wheel, world_from_robot, target.clone());
+                    .add_keyframe(frame_index, wheel, world_from_robot, target.clone());
             }
         }
         self.previous = Some(PreviousFrame {
