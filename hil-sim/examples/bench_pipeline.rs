@@ -4,7 +4,7 @@
 //!
 //! Run: `cargo run --release -p hil-sim --example bench_pipeline -- [SEEDS] [--ablation | --peer]
 //! [--no-depth] [--only NAME] [--duration-s S] [--no-refine] [--eigen-min E] [--export DIR]
-//! [--save-clouds DIR] [--config FILE]`
+//! [--save-clouds DIR] [--config FILE] [--wheel-noise]`
 //! (defaults: 10 seeds, laser + wheel and the full configuration; `--config FILE` starts every
 //! variant from the pipeline settings in FILE, a TOML table like the service's `[pipeline]`). `--ablation` adds wheel only,
 //! laser only, laser + visual, without ground removal and without outlier removal, on the first
@@ -19,8 +19,11 @@
 //! Inputs per run (all from `hil_sim`, all seeded): the VLP-16 packets decoded by
 //! `onboard::vlp16::FrameAssembler`, the D435 depth frames (every 3rd, i.e. 10 Hz), and wheel
 //! odometry at 100 Hz from the scenario's wheel distance (which includes the scenario's slip: the
-//! wheels overestimate the distance exactly as a slipping robot's would). Stamps are simulation
-//! time (the sensor clocks of the shipped scenarios have zero offset).
+//! wheels overestimate the distance exactly as a slipping robot's would) with the scenario's
+//! `[wheel_odometry]` errors (`hil_sim::wheel_odometry`; none in the shipped scenarios, so exact
+//! but for the slip; `--wheel-noise` applies `WheelNoise::TYPICAL_MECANUM`, an assumption, where
+//! a scenario sets none). Stamps are simulation time (the sensor clocks of the shipped scenarios
+//! have zero offset).
 //!
 //! Figures:
 //! - ATE: RMS over frames of the translation error of `world_from_robot` against the truth (both
@@ -43,8 +46,9 @@ use std::time::Instant;
 use hil_sim::d435::D435Sim;
 use hil_sim::geometry::{Isometry, Vec3};
 use hil_sim::scenario::Scenario;
-use hil_sim::trajectory::{StraightRun, Trajectory};
+use hil_sim::trajectory::Trajectory;
 use hil_sim::truth::{TruthOptions, true_angles};
+use hil_sim::wheel_odometry::WheelNoise;
 use hil_sim::world::{Scene, SurfaceId, SurfaceKind};
 use onboard::angles::{AnglesConfig, compute_angles};
 use onboard::cloud::{Cloud, PlyEncoding, write_ply};
@@ -172,29 +176,6 @@ fn depth_frames(scenario: &Scenario, scene: &Scene) -> Vec<DepthFrame> {
                 intrinsics_px: [k.fx_px, k.fy_px, k.cx_px, k.cy_px],
                 depth_scale_m: 0.001,
                 depth: f.depth_mm,
-            }
-        })
-        .collect()
-}
-
-/// Wheel odometry at 100 Hz: the wheel distance along the body's direction of travel (a crabbing
-/// robot's body frame sees its travel at minus the yaw misalignment), yaw constant.
-fn wheel_odometry(run: &StraightRun, duration_s: f64) -> Vec<WheelOdometry> {
-    let (s, c) = (-run.yaw_misalignment_rad).sin_cos();
-    (0..=(duration_s * 100.0) as u32)
-        .map(|i| {
-            let t = f64::from(i) * 0.01;
-            let d = run.wheel_distance_at(t);
-            let v = (run.wheel_distance_at(t + 0.005) - run.wheel_distance_at(t - 0.005).max(0.0))
-                / 0.01;
-            WheelOdometry {
-                stamp_s: t,
-                x_m: d * c,
-                y_m: d * s,
-                yaw_rad: 0.0,
-                vx_mps: v * c,
-                vy_mps: v * s,
-                wz_radps: 0.0,
             }
         })
         .collect()
@@ -619,6 +600,7 @@ fn main() -> anyhow::Result<()> {
         .map(|s| s.parse())
         .transpose()?;
     let no_depth = args.iter().any(|a| a == "--no-depth");
+    let wheel_noise = args.iter().any(|a| a == "--wheel-noise");
     let no_refine = args.iter().any(|a| a == "--no-refine");
     let eigen_min: Option<f64> = args
         .iter()
@@ -667,13 +649,19 @@ fn main() -> anyhow::Result<()> {
             if let Some(d) = duration_s {
                 file.duration_s = Some(d);
             }
-            let scenario = Scenario::from_parts(path, file, base.vehicle.clone())?;
+            let mut scenario = Scenario::from_parts(path, file, base.vehicle.clone())?;
             let scene = Scene::from_vehicle(&scenario.vehicle);
             let lidar = scenario.decoded_lidar_frames(&scene);
             if let Some(dir) = &export_dir {
                 export_frames(dir, &format!("{name}-{seed}"), &scenario, &scene, &lidar)?;
             }
-            let wheel = wheel_odometry(&scenario.run, scenario.duration_s + 0.2);
+            if wheel_noise && scenario.file.wheel_odometry.is_exact() {
+                // `--wheel-noise`: the assumed mecanum errors where the scenario sets none.
+                let mut file = scenario.file.clone();
+                file.wheel_odometry = WheelNoise::TYPICAL_MECANUM;
+                scenario = Scenario::from_parts(path, file, base.vehicle.clone())?;
+            }
+            let wheel = scenario.wheel_odometry(0.2);
             let mode = if mode == Mode::Ablation && seed > 1 {
                 Mode::Default
             } else {

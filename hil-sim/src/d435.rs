@@ -296,7 +296,7 @@ impl<'a, T: Trajectory> D435Sim<'a, T> {
 }
 
 /// A standard normal draw (Box-Muller).
-fn gaussian(rng: &mut ChaCha8Rng) -> f64 {
+pub(crate) fn gaussian(rng: &mut ChaCha8Rng) -> f64 {
     let bits: u64 = rng.random();
     let u1 = ((bits >> 32) as f64 + 0.5) / 4_294_967_296.0;
     let u2 = ((bits & 0xffff_ffff) as f64) / 4_294_967_296.0;

@@ -11,6 +11,7 @@
 //! - [`scenario`]: the scenario TOML format (vehicle, robot run, sensors, seed).
 //! - [`vlp16`]: the VLP-16 sensor model (firing timing, noise, dropouts) producing packets.
 //! - [`d435`]: the D435 depth camera model producing Z16 frames.
+//! - [`wheel_odometry`]: the wheel odometry the firmware would report, with a mecanum error model.
 //!
 //! Firmware in the loop (README, "Firmware in the loop"): [`esc_model`] (C620 + M3508 with injectable faults),
 //! [`robot`] (mecanum chassis dynamics with slip; its [`robot::PoseHistory`] is the odometry
@@ -36,4 +37,5 @@ pub mod trajectory;
 pub mod truth;
 pub mod vehicle;
 pub mod vlp16;
+pub mod wheel_odometry;
 pub mod world;

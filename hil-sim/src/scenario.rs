@@ -26,11 +26,21 @@
 //!
 //! [depth]                    # crate::d435::D435Config, every key optional
 //! fps = 30
+//!
+//! [wheel_odometry]           # crate::wheel_odometry::WheelNoise, every key optional; default exact
+//! scale_sigma = 0.01         # relative scale error (Gauss-Markov), on top of `slip`
+//! scale_tau_s = 1.0
+//! lateral_sigma_mps = 0.003
+//! lateral_tau_s = 0.5
+//! yaw_rate_bias_sigma_degps = 0.1   # a constant per run, drawn from the seed
+//! yaw_rate_sigma_degps = 0.2
+//! yaw_rate_tau_s = 0.3
 //! ```
 //!
 //! # Seeds
 //! `seed` feeds independent streams: vibration = `derive_seed(seed, 1)`, lidar = `derive_seed(seed, 2)`,
-//! depth = `derive_seed(seed, 3)`; changing one sensor's settings never changes another's noise.
+//! depth = `derive_seed(seed, 3)`, wheel odometry = `derive_seed(seed, 4)`; changing one sensor's
+//! settings never changes another's noise.
 
 use std::path::{Path, PathBuf};
 
@@ -41,6 +51,7 @@ use crate::geometry::Vec3;
 use crate::trajectory::{StraightRun, Vibration};
 use crate::vehicle::{Vehicle, VehicleError};
 use crate::vlp16::Vlp16Config;
+use crate::wheel_odometry::WheelNoise;
 use crate::world::{Scene, SurfaceKind};
 
 /// The scenario file as written.
@@ -65,6 +76,9 @@ pub struct ScenarioFile {
     /// D435 settings.
     #[serde(default)]
     pub depth: D435Config,
+    /// Wheel odometry's error model (default: exact wheels but for `robot.slip`).
+    #[serde(default)]
+    pub wheel_odometry: WheelNoise,
 }
 
 /// The `[robot]` table.
@@ -262,6 +276,7 @@ impl Scenario {
         validate_run(&file).map_err(invalid)?;
         file.lidar.validate().map_err(invalid)?;
         file.depth.validate().map_err(invalid)?;
+        file.wheel_odometry.validate().map_err(invalid)?;
         let r = &file.robot;
         let run = StraightRun {
             start_m: Vec3::new(r.start_x_m, r.lateral_offset_m, 0.0),
@@ -298,6 +313,23 @@ impl Scenario {
     /// Seed of the D435's noise.
     pub fn depth_seed(&self) -> u64 {
         derive_seed(self.file.seed, 3)
+    }
+
+    /// Seed of the wheel odometry's errors.
+    pub fn wheel_seed(&self) -> u64 {
+        derive_seed(self.file.seed, 4)
+    }
+
+    /// The wheel odometry the firmware would report over the run (and `extra_s` beyond it) at
+    /// 100 Hz, with the scenario's `[wheel_odometry]` errors, stamped in simulation time.
+    pub fn wheel_odometry(&self, extra_s: f64) -> Vec<onboard::pipeline::WheelOdometry> {
+        crate::wheel_odometry::simulate(
+            &self.run,
+            &self.file.wheel_odometry,
+            self.wheel_seed(),
+            self.duration_s + extra_s,
+            100.0,
+        )
     }
 }
 
@@ -475,5 +507,30 @@ fps = 15
             .expect_err("unknown key")
             .to_string();
         assert!(e.contains("exposure") && e.contains("line"), "{e}");
+        let e = parse(&format!("{SCENARIO}[wheel_odometry]\nscale_sigma = -0.1\n"))
+            .expect_err("negative sigma")
+            .to_string();
+        assert!(e.contains("wheel_odometry.scale_sigma"), "{e}");
+        let e = parse(&format!("{SCENARIO}[wheel_odometry]\nyaw_rate_tau_s = 0\n"))
+            .expect_err("zero tau")
+            .to_string();
+        assert!(e.contains("wheel_odometry.yaw_rate_tau_s"), "{e}");
+    }
+
+    #[test]
+    fn wheel_odometry_is_exact_by_default_and_noisy_when_asked() {
+        let exact = parse(SCENARIO).expect("valid");
+        assert!(exact.file.wheel_odometry.is_exact());
+        let noisy = parse(&format!(
+            "{SCENARIO}[wheel_odometry]\nyaw_rate_bias_sigma_degps = 0.1\nyaw_rate_sigma_degps = 0.2\n"
+        ))
+        .expect("valid");
+        let (a, b) = (exact.wheel_odometry(0.0), noisy.wheel_odometry(0.0));
+        assert_eq!(a.len(), b.len());
+        assert!(a.iter().all(|w| w.yaw_rad == 0.0));
+        assert!(b.last().is_some_and(|w| w.yaw_rad != 0.0));
+        // The wheel stream has its own seed: the lidar's and the depth's are untouched.
+        assert_eq!(exact.lidar_seed(), noisy.lidar_seed());
+        assert_ne!(noisy.wheel_seed(), noisy.lidar_seed());
     }
 }
