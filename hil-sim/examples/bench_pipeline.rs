@@ -304,7 +304,12 @@ fn evaluate(scenario: &Scenario, scene: &Scene, built: &BuiltCloud, time: &Timin
         final_err = d.iter().map(|v| v * v).sum::<f64>().sqrt();
         sq += final_err * final_err;
     }
-    eprintln!("max |error| roll/pitch/yaw deg {max_rpy_err:.3?}, x/y/z m {max_xyz_err:.4?}");
+    eprintln!(
+        "max |error| roll/pitch/yaw deg {max_rpy_err:.3?}, x/y/z m {max_xyz_err:.4?}; wheel scale {:.4}, yaw bias {:+.3} deg/s ({} yaw measurements)",
+        built.stats.wheel_scale,
+        built.stats.wheel_yaw_bias_radps.to_degrees(),
+        built.stats.yaw_measurements
+    );
     let n = built.trajectory.len() as f64;
     let last = built.trajectory.last().map_or(0.0, |l| l.stamp_s);
     let t_last = t0.inverse().compose(&truth(last)).translation;

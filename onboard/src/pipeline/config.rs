@@ -318,6 +318,21 @@ pub struct FusionConfig {
     /// rates differ from the wheels' (yaw; the wheels know no roll or pitch) by a tolerance or more
     /// keeps the fused prediction's rotation, and its x, y stay the map's.
     pub gate_refinement_rotation_by_wheel: bool,
+    /// The wheel odometry's velocity error (along and across, each), m/s: the standard deviation
+    /// the scan-to-map refinement's wheel prior (`map.wheel-prior`) gives a frame's wheel
+    /// translation, times the frame's duration. Default 0.003: the simulator's assumed mecanum
+    /// model (`hil_sim::wheel_odometry::WheelNoise::TYPICAL_MECANUM`: 1 % of 0.3 m/s along,
+    /// 3 mm/s across), not measured on the robot; set it from a real run.
+    pub wheel_speed_sigma_mps: f64,
+    /// The wheel odometry's yaw-rate error, rad/s, for the same prior. Default 0.004 (0.22
+    /// deg/s: the assumed model's 0.1 deg/s bias and 0.2 deg/s wander together).
+    pub wheel_yaw_rate_sigma_radps: f64,
+    /// Measure the wheels' yaw-rate bias with the slip meter's long-baseline registrations (the
+    /// wheels' turn against the laser's where the laser determines the yaw) and take it off the
+    /// wheels' yaw rate once it is significant (three standard errors, at least four
+    /// measurements), as the slip scale is taken off their distance. Needs
+    /// `wheel-scale-baseline-m` > 0.
+    pub wheel_yaw_bias: bool,
 }
 
 impl Default for FusionConfig {
@@ -347,11 +362,16 @@ impl Default for FusionConfig {
             // determined it weakly (suv-offset leaving the car); seeds 1-3 of all five passes,
             // ATE equal or lower, largest yaw error suv-offset 1.2-2.3 -> 0.3-0.7 degrees.
             gate_refinement_rotation_by_wheel: true,
+            wheel_speed_sigma_mps: 0.003,
+            wheel_yaw_rate_sigma_radps: 0.004,
+            wheel_yaw_bias: false,
         }
     }
 }
 
 /// Scan-to-map refinement and the output cloud.
+// Independent on/off switches of a config file, not a state machine.
+#[allow(clippy::struct_excessive_bools)]
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields, rename_all = "kebab-case", default)]
 pub struct MapConfig {
@@ -395,6 +415,16 @@ pub struct MapConfig {
     /// Set each frame's roll, pitch and height from its RANSAC ground plane against the first
     /// frame's (a flat floor is an absolute reference; removes z, roll and pitch drift).
     pub level_with_ground: bool,
+    /// Weigh the refinement's x, y and yaw against the wheels instead of taking them from the map
+    /// wherever the map determines them: the fused prediction enters the solve as a Gaussian
+    /// prior on x, y and yaw with the wheels' errors (`fusion.wheel-speed-sigma-mps`,
+    /// `fusion.wheel-yaw-rate-sigma-radps`, times the frame's duration) against map residuals
+    /// of `residual-sigma-m`. Only over intervals the wheels cover.
+    pub wheel_prior: bool,
+    /// The map residuals' noise for the wheel prior's weighting, metres. The solve counts its
+    /// residuals as independent, which they are not (many points on few surfaces), so this is a
+    /// tuning value rather than the lidar's range noise.
+    pub residual_sigma_m: f64,
 }
 
 impl Default for MapConfig {
@@ -409,6 +439,8 @@ impl Default for MapConfig {
             keep_ground: true,
             ground_voxel_m: 0.02,
             level_with_ground: true,
+            wheel_prior: false,
+            residual_sigma_m: 0.02,
         }
     }
 }

@@ -406,13 +406,37 @@ pub(crate) fn solve_counted(
         active,
         iterations,
         config,
-        None,
+        &SolveGuides::default(),
     )
 }
 
-/// [`solve_counted`]; with `hold`, every step is projected onto the eigen-directions that the
-/// first iteration's normal matrix determines under those thresholds (the others stay at `init`
-/// during the solve, LOAM's in-solve solution remapping).
+/// What a solve is held to besides the scan ([`solve_with`]).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub(crate) struct SolveGuides {
+    /// Project every step onto the eigen-directions that the first iteration's normal matrix
+    /// determines under these thresholds (the others stay at `init` during the solve, LOAM's
+    /// in-solve solution remapping).
+    pub hold: Option<DegeneracyThresholds>,
+    /// A Gaussian prior on the pose: the information matrix `L` of the increment from `init`
+    /// (`[rx, ry, rz, tx, ty, tz]`, rotations about `init`'s position, as the solve's steps), in
+    /// the residuals' units (squared residual noise over the prior's covariance). The solve then
+    /// minimises the residuals' cost plus `0.5 d^T L d`, and the normal matrix it returns
+    /// includes `L`.
+    pub prior_information: Option<[[f64; 6]; 6]>,
+}
+
+/// The prior's cost `0.5 d^T L d` and gradient `L d` at `pose`, `d` its increment from `init`.
+fn prior_terms(information: &[[f64; 6]; 6], init: &Pose, pose: &Pose) -> (f64, Twist6) {
+    let d = increment_about(init.translation, &pose.compose(&init.inverse()));
+    let g: Twist6 = std::array::from_fn(|a| (0..6).map(|b| information[a][b] * d[b]).sum());
+    let cost = 0.5 * (0..6).map(|a| d[a] * g[a]).sum::<f64>();
+    (cost, g)
+}
+
+/// A prior's information matrix and the pose it is centred on.
+type PriorRef<'a> = (&'a [[f64; 6]; 6], &'a Pose);
+
+/// [`solve_counted`] with `guides` (a hold on the undetermined directions, a prior).
 pub(crate) fn solve_with(
     target: &FeatureTarget,
     (planes, corners): (&[V3], &[V3]),
@@ -420,7 +444,7 @@ pub(crate) fn solve_with(
     active: &[usize],
     iterations: u32,
     config: &LaserOdometryConfig,
-    hold: Option<DegeneracyThresholds>,
+    guides: &SolveGuides,
 ) -> (Solution, SolveStats) {
     let k = config.huber_m;
     let mut projection: Option<[[f64; 6]; 6]> = None;
@@ -456,19 +480,30 @@ pub(crate) fn solve_with(
         if corr.len() < active.len() {
             break;
         }
-        let (h, g) = normal_equations(&corr, &pose, centre, k);
+        let (mut h, mut g) = normal_equations(&corr, &pose, centre, k);
+        let data_cost = cost(&corr, &pose, k);
+        let mut before = data_cost;
+        if let Some(l) = &guides.prior_information {
+            let (prior_cost, prior_g) = prior_terms(l, &init, &pose);
+            before += prior_cost;
+            for a in 0..6 {
+                g[a] += prior_g[a];
+                for b in 0..6 {
+                    h[a][b] += l[a][b];
+                }
+            }
+        }
         last_h = h;
         last_n = corr.len();
-        if let (Some(thresholds), None) = (hold, projection) {
+        if let (Some(thresholds), None) = (guides.hold, projection) {
             let per_residual = h.map(|row| row.map(|v| v / last_n as f64));
             projection = Some(determined_projection(&per_residual, active, thresholds).0);
         }
-        let before = cost(&corr, &pose, k);
-        rms = (2.0 * before / corr.len() as f64).sqrt();
+        rms = (2.0 * data_cost / corr.len() as f64).sqrt();
         stats.iterations += 1;
         let step = lm_step(
             &corr,
-            &pose,
+            (&pose, guides.prior_information.as_ref().map(|l| (l, &init))),
             (&h, &g),
             (active, projection.as_ref()),
             &mut lambda,
@@ -500,13 +535,13 @@ pub(crate) fn solve_with(
     ((pose, h, last_n, rms), stats)
 }
 
-/// One Levenberg-Marquardt step over `active` on a fixed correspondence set: up to four
-/// dampings, the first whose pose lowers the cost wins (the damping then shrinks). Returns the
+/// One Levenberg-Marquardt step over `active` on a fixed correspondence set (and the prior's
+/// cost, with its information matrix and `init`, when there is one): up to four dampings, the first whose pose lowers the cost wins (the damping then shrinks). Returns the
 /// new pose and its increment, or `None` when no damping improved the cost.
 #[allow(clippy::too_many_arguments)] // One step's state; a struct would only rename it.
 fn lm_step(
     corr: &[Correspondence],
-    pose: &Pose,
+    (pose, prior): (&Pose, Option<PriorRef<'_>>),
     (h, g): (&[[f64; 6]; 6], &[f64; 6]),
     (active, projection): (&[usize], Option<&[[f64; 6]; 6]>),
     lambda: &mut f64,
@@ -536,7 +571,8 @@ fn lm_step(
             d = std::array::from_fn(|a| (0..6).map(|b| p[a][b] * d[b]).sum());
         }
         let candidate = apply_increment(pose, &d, centre);
-        if cost(corr, &candidate, k) < before {
+        let prior_cost = prior.map_or(0.0, |(l, init)| prior_terms(l, init, &candidate).0);
+        if cost(corr, &candidate, k) + prior_cost < before {
             *lambda = (*lambda * 0.3).max(1e-7);
             return Some((candidate, d));
         }

@@ -191,6 +191,10 @@ pub struct PipelineStats {
     pub scale_measurements: usize,
     /// The wheel scale factor fusion applied in the last frame (1: no significant slip).
     pub wheel_scale: f64,
+    /// Long-baseline yaw measurements fusion kept (`fusion.wheel-yaw-bias`).
+    pub yaw_measurements: usize,
+    /// The wheel yaw-rate bias fusion took off in the last frame, rad/s (0: none significant).
+    pub wheel_yaw_bias_radps: f64,
 }
 
 /// The run's result.
@@ -235,10 +239,13 @@ pub enum PipelineError {
     BadDepthFrame(String),
 }
 
+/// How many keys [`PipelineConfig::positive_values`] checks.
+const POSITIVE_KEYS: usize = 16;
+
 impl PipelineConfig {
-    /// Check every value the stages divide by or loop on; the error names the key.
-    pub fn validate(&self) -> Result<(), PipelineError> {
-        let positive = [
+    /// The values that must be positive numbers, by key.
+    fn positive_values(&self) -> [(&'static str, f64); POSITIVE_KEYS] {
+        [
             (
                 "ground.distance-threshold-m",
                 self.ground.distance_threshold_m,
@@ -258,10 +265,24 @@ impl PipelineConfig {
             ("map.feature-voxel-m", self.map.feature_voxel_m),
             ("map.output-voxel-m", self.map.output_voxel_m),
             ("map.output-max-range-m", self.map.output_max_range_m),
+            ("map.residual-sigma-m", self.map.residual_sigma_m),
+            (
+                "fusion.wheel-speed-sigma-mps",
+                self.fusion.wheel_speed_sigma_mps,
+            ),
+            (
+                "fusion.wheel-yaw-rate-sigma-radps",
+                self.fusion.wheel_yaw_rate_sigma_radps,
+            ),
             ("filter.radius-m", self.filter.radius_m),
             ("filter.sigma-spatial-m", self.filter.sigma_spatial_m),
             ("filter.sigma-normal-m", self.filter.sigma_normal_m),
-        ];
+        ]
+    }
+
+    /// Check every value the stages divide by or loop on; the error names the key.
+    pub fn validate(&self) -> Result<(), PipelineError> {
+        let positive = self.positive_values();
         for (key, v) in positive {
             if !(v > 0.0 && v.is_finite()) {
                 return Err(PipelineError::InvalidConfig(format!(
@@ -668,11 +689,16 @@ impl Pipeline {
         target: FeatureTarget,
     ) {
         self.stats.wheel_scale = self.fusion.wheel_scale();
+        self.stats.wheel_yaw_bias_radps = self.fusion.wheel_yaw_bias_radps();
         if let Some(wheel) = wheel_pose_at(&self.wheel, stamp_s) {
-            self.measure_slip(&wheel, (feats, ground_sample), &world_from_robot);
+            self.measure_slip((stamp_s, &wheel), (feats, ground_sample), &world_from_robot);
             if self.slip.wants_keyframe(frame_index, &wheel) {
-                self.slip
-                    .add_keyframe(frame_index, wheel, world_from_robot, target.clone());
+                self.slip.add_keyframe(
+                    (frame_index, stamp_s),
+                    wheel,
+                    world_from_robot,
+                    target.clone(),
+                );
             }
         }
         self.previous = Some(PreviousFrame {
@@ -683,10 +709,10 @@ impl Pipeline {
     }
 
     /// Register the frame against the keyframe a baseline behind it, if any, and hand the
-    /// distance pairs to fusion.
+    /// distance pairs and the yaw evidence to fusion.
     fn measure_slip(
         &mut self,
-        wheel: &Pose,
+        (stamp_s, wheel): (f64, &Pose),
         (feats, ground_sample): (&features::Features, &[V3]),
         world_from_robot: &Pose,
     ) {
@@ -698,13 +724,17 @@ impl Pipeline {
                 planes: &feats.planes,
                 corners: &feats.corners,
             };
-            let pairs = self
-                .slip
-                .measure(wheel, world_from_robot, scan, &self.config.laser);
-            for (laser_m, wheel_m) in pairs {
+            let measured =
+                self.slip
+                    .measure((stamp_s, wheel), world_from_robot, scan, &self.config.laser);
+            for (laser_m, wheel_m) in measured.distances {
                 self.fusion.add_scale_measurement(laser_m, wheel_m);
             }
+            if let Some((excess_rad, dt_s)) = measured.yaw {
+                self.fusion.add_yaw_measurement(excess_rad, dt_s);
+            }
             self.stats.scale_measurements = self.fusion.scale_measurements();
+            self.stats.yaw_measurements = self.fusion.yaw_measurements();
         }
     }
 
@@ -775,11 +805,13 @@ impl Pipeline {
         if !self.config.map.refine || self.map.is_empty() {
             return (predicted_world, fused.chosen, laser_degenerate, [false; 6]);
         }
+        let prior_information = (self.config.map.wheel_prior && wheel.is_some())
+            .then(|| self.wheel_prior_information(dt));
         let refined = register_joint(
             self.map.target(),
-            &step1_planes,
-            &feats.corners,
+            (&step1_planes, &feats.corners),
             predicted_world,
+            prior_information,
             self.config.map.iterations,
             &laser_config,
         );
@@ -803,6 +835,21 @@ impl Pipeline {
         };
         let rejected = std::array::from_fn(|k| refined.degenerate[k] || !keep[k]);
         (world, fused.chosen, laser_degenerate, rejected)
+    }
+
+    /// The refinement's wheel prior over a frame of `dt_s` (`map.wheel-prior`): information on
+    /// yaw, x and y, in the map residuals' units (`residual-sigma-m` squared over the wheels'
+    /// variance over the frame). Approximation: the wheels' errors are correlated over about a
+    /// second, and a per-frame prior treats them as independent from frame to frame.
+    fn wheel_prior_information(&self, dt_s: f64) -> [[f64; 6]; 6] {
+        let r2 = self.config.map.residual_sigma_m.powi(2);
+        let f = &self.config.fusion;
+        let mut l = [[0.0; 6]; 6];
+        l[2][2] = r2 / (f.wheel_yaw_rate_sigma_radps * dt_s).powi(2);
+        for k in [3, 4] {
+            l[k][k] = r2 / (f.wheel_speed_sigma_mps * dt_s).powi(2);
+        }
+        l
     }
 
     /// Wheel odometry's rate over `[a_s, b_s]` (robot frame at `a_s`), if it covers the interval.

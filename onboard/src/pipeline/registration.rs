@@ -37,7 +37,9 @@
 
 use super::config::LaserOdometryConfig;
 use super::geom::{Pose, V3, symmetric_eigen};
-use super::laser_odometry::{FeatureTarget, about, increment_about, solve, solve_with};
+use super::laser_odometry::{
+    FeatureTarget, SolveGuides, about, increment_about, solve, solve_with,
+};
 
 /// How a registration went.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -158,11 +160,16 @@ pub fn keep_components(estimate: &Pose, prior: &Pose, keep: [bool; 6]) -> Pose {
 
 /// Register source features to `target` with all six parameters in one LM problem (the scan-to-map
 /// refinement), starting from and falling back to `prior` = `target_from_source`.
+///
+/// `prior_information`: the prior as a Gaussian too (see [`SolveGuides::prior_information`]):
+/// the solve weighs the scan against it, and a direction counts as determined when the scan and
+/// the prior together determine it, so the hard split below (scan or prior) applies only to the
+/// directions the prior leaves free.
 pub fn register_joint(
     target: &FeatureTarget,
-    planes: &[V3],
-    corners: &[V3],
+    (planes, corners): (&[V3], &[V3]),
     prior: Pose,
+    prior_information: Option<[[f64; 6]; 6]>,
     iterations: u32,
     config: &LaserOdometryConfig,
 ) -> Registration {
@@ -179,7 +186,10 @@ pub fn register_joint(
         &active,
         iterations,
         config,
-        Some(thresholds),
+        &SolveGuides {
+            hold: Some(thresholds),
+            prior_information,
+        },
     );
     let (pose, degenerate) = remap(&pose, &prior, &h, &active, thresholds);
     Registration {
@@ -253,7 +263,7 @@ mod tests {
         };
         for reg in [
             register_two_step(&target, &sp, &sp, &sc, Pose::IDENTITY, &config),
-            register_joint(&target, &sp, &sc, Pose::IDENTITY, 10, &config),
+            register_joint(&target, (&sp, &sc), Pose::IDENTITY, None, 10, &config),
         ] {
             let err = reg.pose.compose(&truth.inverse()).to_increment();
             assert!(err.iter().all(|e| e.abs() < 3e-3), "{err:?} {reg:?}");
@@ -274,7 +284,7 @@ mod tests {
             let shifted =
                 |v: &[V3]| -> Vec<V3> { v.iter().map(|&p| world_from_target.apply(p)).collect() };
             let target = target_of(&shifted(&planes), &shifted(&corners));
-            let reg = register_joint(&target, &sp, &sc, world_from_target, 10, &config);
+            let reg = register_joint(&target, (&sp, &sc), world_from_target, None, 10, &config);
             let in_target = world_from_target.inverse().compose(&reg.pose);
             (
                 reg.degenerate,
@@ -397,8 +407,18 @@ mod tests {
         let active = [0, 1, 2, 3, 4, 5];
         let thresholds = DegeneracyThresholds::of(&config);
         let run = |hold| {
-            let ((pose, ..), stats) =
-                solve_with(&target, (&sp, &[]), prior, &active, 6, &config, hold);
+            let ((pose, ..), stats) = solve_with(
+                &target,
+                (&sp, &[]),
+                prior,
+                &active,
+                6,
+                &config,
+                &SolveGuides {
+                    hold,
+                    prior_information: None,
+                },
+            );
             let d = increment_about(prior.translation, &pose.compose(&prior.inverse()));
             (d, stats)
         };
@@ -415,6 +435,54 @@ mod tests {
             held_stats.iterations <= free_stats.iterations,
             "{held_stats:?} {free_stats:?}"
         );
+    }
+
+    #[test]
+    fn a_gaussian_prior_is_weighed_against_the_scan_by_information() {
+        // The scan determines x fully (tyres); the truth is 5 cm, the prior 3 cm. No prior: the
+        // scan's 5 cm. A prior carrying as much information on x as the scan: halfway, 4 cm (the
+        // product of two Gaussians). An overwhelming prior: 3 cm. The prior holds only x.
+        let (planes, corners) = scene(true);
+        let target = target_of(&planes, &corners);
+        let truth = Pose::from_xyz_rpy([0.05, 0.0, 0.0], [0.0; 3]);
+        let (sp, sc) = (moved(&planes, &truth), moved(&corners, &truth));
+        let prior = Pose::from_xyz_rpy([0.03, 0.0, 0.0], [0.0; 3]);
+        let config = LaserOdometryConfig {
+            degeneracy_eigen_min: 0.01,
+            degeneracy_rotation_eigen_min_m2: 0.01,
+            ..LaserOdometryConfig::default()
+        };
+        let x_with = |information_x: Option<f64>| {
+            let l = information_x.map(|v| {
+                let mut l = [[0.0; 6]; 6];
+                l[3][3] = v;
+                l
+            });
+            register_joint(&target, (&sp, &sc), prior, l, 20, &config)
+                .pose
+                .translation[0]
+        };
+        let free = x_with(None);
+        assert!((free - 0.05).abs() < 1e-3, "{free}");
+        // The scan's information on x: its normal matrix per residual times the residuals, at
+        // the truth.
+        let ((_, h, n_h, _), _) = solve_with(
+            &target,
+            (&sp, &sc),
+            truth,
+            &[0, 1, 2, 3, 4, 5],
+            1,
+            &config,
+            &SolveGuides::default(),
+        );
+        let scan_information = h[3][3] * n_h as f64;
+        let equal = x_with(Some(scan_information));
+        assert!((equal - 0.04).abs() < 1.5e-3, "{equal}");
+        let strong = x_with(Some(scan_information * 1e6));
+        assert!((strong - 0.03).abs() < 1e-4, "{strong}");
+        // A zero prior is no prior.
+        let zero = x_with(Some(0.0));
+        assert!((zero - free).abs() < 1e-9, "{zero} {free}");
     }
 
     #[test]

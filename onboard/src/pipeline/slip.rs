@@ -50,6 +50,8 @@ const MIN_FRAMES_BETWEEN_KEYFRAMES: u64 = 2;
 struct Keyframe {
     /// The scan's frame index.
     frame: u64,
+    /// The scan's start, seconds.
+    stamp_s: f64,
     /// Wheel odometry's pose at the scan's start.
     wheel: Pose,
     /// The estimated pose at the scan's start.
@@ -69,6 +71,24 @@ pub struct Scan<'a> {
     pub corners: &'a [V3],
 }
 
+/// What one long-baseline registration measured ([`SlipMeter::measure`]).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Measurement {
+    /// `(laser, wheel)` distances, metres, per determined translation component.
+    pub distances: Vec<(f64, f64)>,
+    /// When the registration determined the yaw: the wheels' turn minus the laser's over the
+    /// baseline, radians, and the baseline's duration, seconds (evidence of a wheel yaw-rate
+    /// bias, [`super::fusion::Fusion::add_yaw_measurement`]).
+    pub yaw: Option<(f64, f64)>,
+}
+
+impl Measurement {
+    /// True when nothing was measured.
+    pub fn is_empty(&self) -> bool {
+        self.distances.is_empty() && self.yaw.is_none()
+    }
+}
+
 /// Measures the distance between keyframes and later scans by the laser and by the wheels.
 #[derive(Debug, Clone)]
 pub struct SlipMeter {
@@ -85,24 +105,25 @@ impl SlipMeter {
         }
     }
 
-    /// Register `scan` (estimated at `world_from_robot`, wheel pose `wheel`) against the newest
-    /// keyframe at least a baseline behind it by the wheels, and drop that keyframe and the older
-    /// ones. Returns the `(laser, wheel)` distance pairs of the translation components (x, y of
-    /// the keyframe's robot frame) that the registration determined and the wheels moved along by
-    /// at least half the baseline; empty when no keyframe is far enough behind.
+    /// Register `scan` (starting at `stamp_s`, estimated at `world_from_robot`, wheel pose
+    /// `wheel`) against the newest keyframe at least a baseline behind it by the wheels, and drop
+    /// that keyframe and the older ones. Returns the `(laser, wheel)` distance pairs of the
+    /// translation components (x, y of the keyframe's robot frame) that the registration
+    /// determined and the wheels moved along by at least half the baseline, and the yaw evidence
+    /// when it determined the yaw; empty when no keyframe is far enough behind.
     pub fn measure(
         &mut self,
-        wheel: &Pose,
+        (stamp_s, wheel): (f64, &Pose),
         world_from_robot: &Pose,
         scan: Scan<'_>,
         config: &LaserOdometryConfig,
-    ) -> Vec<(f64, f64)> {
+    ) -> Measurement {
         let far_enough = |k: &Keyframe| travelled(&k.wheel, wheel) >= self.baseline_m;
         let Some(newest_far) = self.keyframes.iter().rposition(far_enough) else {
-            return Vec::new();
+            return Measurement::default();
         };
         let Some(keyframe) = self.keyframes.drain(..=newest_far).next_back() else {
-            return Vec::new();
+            return Measurement::default();
         };
         let prior = keyframe
             .world_from_robot
@@ -116,11 +137,20 @@ impl SlipMeter {
             prior,
             config,
         );
-        let wheel_m = keyframe.wheel.inverse().compose(wheel).translation;
-        (0..2)
-            .filter(|&k| !laser.degenerate[3 + k] && wheel_m[k].abs() >= 0.5 * self.baseline_m)
-            .map(|k| (laser.pose.translation[k], wheel_m[k]))
-            .collect()
+        let wheel_relative = keyframe.wheel.inverse().compose(wheel);
+        let wheel_m = wheel_relative.translation;
+        let dt_s = stamp_s - keyframe.stamp_s;
+        let yaw = (!laser.degenerate[2] && dt_s > 0.0).then(|| {
+            let turn = |p: &Pose| p.rpy()[2];
+            (turn(&wheel_relative) - turn(&laser.pose), dt_s)
+        });
+        Measurement {
+            distances: (0..2)
+                .filter(|&k| !laser.degenerate[3 + k] && wheel_m[k].abs() >= 0.5 * self.baseline_m)
+                .map(|k| (laser.pose.translation[k], wheel_m[k]))
+                .collect(),
+            yaw,
+        }
     }
 
     /// True when a keyframe lies at least a baseline behind wheel pose `wheel` (so
@@ -145,13 +175,14 @@ impl SlipMeter {
     /// Keep scan number `frame` as a keyframe (see [`Self::wants_keyframe`]).
     pub fn add_keyframe(
         &mut self,
-        frame: u64,
+        (frame, stamp_s): (u64, f64),
         wheel: Pose,
         world_from_robot: Pose,
         target: FeatureTarget,
     ) {
         self.keyframes.push_back(Keyframe {
             frame,
+            stamp_s,
             wheel,
             world_from_robot,
             target,
@@ -189,7 +220,7 @@ mod tests {
         let (planes, corners) = scene(true);
         let mut meter = SlipMeter::new(0.25);
         assert!(meter.wants_keyframe(0, &at(0.0)));
-        meter.add_keyframe(0, at(0.0), at(0.0), target_of(&planes, &corners));
+        meter.add_keyframe((0, 0.0), at(0.0), at(0.0), target_of(&planes, &corners));
         // The next keyframe is due a quarter baseline and two frames on.
         assert!(!meter.wants_keyframe(5, &at(0.05)));
         assert!(meter.wants_keyframe(5, &at(0.07)));
@@ -206,7 +237,7 @@ mod tests {
         assert!(!meter.is_due(&at(0.2)));
         assert!(
             meter
-                .measure(&at(0.2), &at(0.2), scan, &config())
+                .measure((1.0, &at(0.2)), &at(0.2), scan, &config())
                 .is_empty()
         );
         // The robot moved 0.26 m; the wheels (5 % slip), and the estimate built on them, 0.273 m.
@@ -219,14 +250,25 @@ mod tests {
         };
         let wheel = at(0.26 * 1.05);
         assert!(meter.is_due(&wheel));
-        let pairs = meter.measure(&wheel, &wheel, scan, &config());
+        let measured = meter.measure((1.0, &wheel), &wheel, scan, &config());
+        let pairs = &measured.distances;
         // x only: the wheels did not move along y.
         assert_eq!(pairs.len(), 1, "{pairs:?}");
+        // The tyres determine the yaw: neither turned, over the 1 s since the keyframe.
+        let (turn_rad, dt_s) = measured.yaw.expect("yaw determined");
+        assert!(
+            turn_rad.abs() < 1e-3 && (dt_s - 1.0).abs() < 1e-12,
+            "{measured:?}"
+        );
         let (laser_m, wheel_m) = pairs[0];
         assert!((laser_m - 0.26).abs() < 2e-3, "{laser_m}");
         assert!((wheel_m - 0.273).abs() < 1e-12, "{wheel_m}");
         // The keyframe is used up.
-        assert!(meter.measure(&wheel, &wheel, scan, &config()).is_empty());
+        assert!(
+            meter
+                .measure((1.0, &wheel), &wheel, scan, &config())
+                .is_empty()
+        );
     }
 
     #[test]
@@ -235,7 +277,7 @@ mod tests {
         // (the wheels' own distance) and must not count as a measurement.
         let (planes, corners) = scene(false);
         let mut meter = SlipMeter::new(0.25);
-        meter.add_keyframe(0, at(0.0), at(0.0), target_of(&planes, &corners));
+        meter.add_keyframe((0, 0.0), at(0.0), at(0.0), target_of(&planes, &corners));
         let truth = at(0.26);
         let (sp, sc) = (moved(&planes, &truth), moved(&corners, &truth));
         let scan = Scan {
@@ -244,7 +286,11 @@ mod tests {
             corners: &sc,
         };
         let wheel = at(0.273);
-        assert!(meter.measure(&wheel, &wheel, scan, &config()).is_empty());
+        assert!(
+            meter
+                .measure((1.0, &wheel), &wheel, scan, &config())
+                .is_empty()
+        );
         // Off: no keyframes at all.
         assert!(!SlipMeter::new(0.0).wants_keyframe(0, &at(1.0)));
     }
