@@ -57,6 +57,12 @@
 //!   x is too noisy and biased for a few per cent (see [`super::slip`]): it found slip on the
 //!   slip-free simulated passes.
 //!
+//! **Wheel yaw-rate bias** (`wheel-yaw-bias`): the same long-baseline registrations, where they
+//! determine the yaw, give the wheels' turn minus the laser's over the baseline's duration
+//! ([`Fusion::add_yaw_measurement`]); the least-squares bias is taken off the wheels' yaw rate in
+//! selection and gap filling when it exceeds three standard errors
+//! ([`Fusion::wheel_yaw_bias_radps`]).
+//!
 //! The factor is clamped to [`WHEEL_SCALE_RANGE`]; pairs that disagree by more than that range are
 //! outliers and are skipped.
 

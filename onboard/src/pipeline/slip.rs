@@ -23,6 +23,10 @@
 //! [`super::fusion::Fusion::add_scale_measurement`], which estimates the factor and applies it only
 //! where it is significant.
 //!
+//! The same registration, where it determines the yaw, also compares the wheels' turn with the
+//! laser's over the baseline: evidence of a wheel yaw-rate bias
+//! ([`super::fusion::Fusion::add_yaw_measurement`]).
+//!
 //! A keyframe is kept every quarter baseline, so the measurements overlap in time but no two share
 //! a scan pair (a quarter of the wait for the first ones), and at most every second frame. Cost:
 //! one extra registration per keyframe (every 2-3 frames at 10 Hz and 0.25-0.3 m/s) and up to
