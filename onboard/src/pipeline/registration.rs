@@ -161,10 +161,10 @@ pub fn keep_components(estimate: &Pose, prior: &Pose, keep: [bool; 6]) -> Pose {
 /// Register source features to `target` with all six parameters in one LM problem (the scan-to-map
 /// refinement), starting from and falling back to `prior` = `target_from_source`.
 ///
-/// `prior_information`: the prior as a Gaussian too (its information matrix on the increment, in the residuals' units):
-/// the solve weighs the scan against it, and a direction counts as determined when the scan and
-/// the prior together determine it, so the hard split below (scan or prior) applies only to the
-/// directions the prior leaves free.
+/// `prior_information`: the prior as a Gaussian too (its information matrix on the increment,
+/// in the residuals' units): the solve weighs the scan against it, and a direction counts as
+/// determined when the scan and the prior together determine it, so the hard split below (scan
+/// or prior) applies only to the directions the prior leaves free.
 pub fn register_joint(
     target: &FeatureTarget,
     (planes, corners): (&[V3], &[V3]),
