@@ -536,8 +536,9 @@ pub(crate) fn solve_with(
 }
 
 /// One Levenberg-Marquardt step over `active` on a fixed correspondence set (and the prior's
-/// cost, with its information matrix and `init`, when there is one): up to four dampings, the first whose pose lowers the cost wins (the damping then shrinks). Returns the
-/// new pose and its increment, or `None` when no damping improved the cost.
+/// cost, with its information matrix and `init`, when there is one): up to four dampings, the
+/// first whose pose lowers the cost wins (the damping then shrinks). Returns the new pose and
+/// its increment, or `None` when no damping improved the cost.
 #[allow(clippy::too_many_arguments)] // One step's state; a struct would only rename it.
 fn lm_step(
     corr: &[Correspondence],

@@ -36,6 +36,7 @@
 //! the same output; the 10 and 20 Hz passes keep every keyframe they had).
 
 use std::collections::VecDeque;
+use std::f64::consts::{PI, TAU};
 
 use super::config::LaserOdometryConfig;
 use super::geom::{Pose, V3};
@@ -146,7 +147,10 @@ impl SlipMeter {
         let dt_s = stamp_s - keyframe.stamp_s;
         let yaw = (!laser.degenerate[2] && dt_s > 0.0).then(|| {
             let turn = |p: &Pose| p.rpy()[2];
-            (turn(&wheel_relative) - turn(&laser.pose), dt_s)
+            let excess = turn(&wheel_relative) - turn(&laser.pose);
+            // Into (-pi, pi]: both turns are small, their difference must stay so.
+            let excess = PI - (PI - excess).rem_euclid(TAU);
+            (excess, dt_s)
         });
         Measurement {
             distances: (0..2)
