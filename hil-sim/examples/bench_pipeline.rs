@@ -654,17 +654,15 @@ fn main() -> anyhow::Result<()> {
             if let Some(d) = duration_s {
                 file.duration_s = Some(d);
             }
-            let mut scenario = Scenario::from_parts(path, file, base.vehicle.clone())?;
+            if wheel_noise && file.wheel_odometry.is_exact() {
+                // `--wheel-noise`: the assumed mecanum errors where the scenario sets none.
+                file.wheel_odometry = WheelNoise::TYPICAL_MECANUM;
+            }
+            let scenario = Scenario::from_parts(path, file, base.vehicle.clone())?;
             let scene = Scene::from_vehicle(&scenario.vehicle);
             let lidar = scenario.decoded_lidar_frames(&scene);
             if let Some(dir) = &export_dir {
                 export_frames(dir, &format!("{name}-{seed}"), &scenario, &scene, &lidar)?;
-            }
-            if wheel_noise && scenario.file.wheel_odometry.is_exact() {
-                // `--wheel-noise`: the assumed mecanum errors where the scenario sets none.
-                let mut file = scenario.file.clone();
-                file.wheel_odometry = WheelNoise::TYPICAL_MECANUM;
-                scenario = Scenario::from_parts(path, file, base.vehicle.clone())?;
             }
             let wheel = scenario.wheel_odometry(0.2);
             let mode = if mode == Mode::Ablation && seed > 1 {

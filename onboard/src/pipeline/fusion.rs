@@ -156,7 +156,7 @@ impl Fusion {
         if !self.config.wheel_yaw_bias || self.yaw_measurements.len() < MIN_SCALE_MEASUREMENTS {
             return 0.0;
         }
-        let (b, standard_error) = least_squares_scale(&self.yaw_measurements);
+        let (b, standard_error) = least_squares_slope(&self.yaw_measurements);
         if b.abs() > 3.0 * standard_error {
             b
         } else {
@@ -189,13 +189,13 @@ impl Fusion {
             if self.scale_pairs.len() < MIN_SCALE_PAIRS {
                 return 1.0;
             }
-            let (s, _) = least_squares_scale(&self.scale_pairs);
+            let (s, _) = least_squares_slope(&self.scale_pairs);
             return s.clamp(WHEEL_SCALE_RANGE.0, WHEEL_SCALE_RANGE.1);
         }
         if self.scale_measurements.len() < MIN_SCALE_MEASUREMENTS {
             return 1.0;
         }
-        let (s, standard_error) = least_squares_scale(&self.scale_measurements);
+        let (s, standard_error) = least_squares_slope(&self.scale_measurements);
         let significant =
             (s - 1.0).abs() > self.config.wheel_scale_min_slip.max(3.0 * standard_error);
         if significant {
@@ -408,9 +408,10 @@ impl Fusion {
     }
 }
 
-/// The least-squares factor `s` of `laser = s * wheel` over `pairs`, and its standard error from
-/// the pairs' scatter about the fit (infinite with fewer than two pairs).
-fn least_squares_scale(pairs: &VecDeque<(f64, f64)>) -> (f64, f64) {
+/// The least-squares slope `s` of `y = s * x` over `(y, x)` pairs (the wheel scale: laser
+/// distance over wheel distance; the yaw-rate bias: excess turn over duration), and its standard
+/// error from the pairs' scatter about the fit (infinite with fewer than two pairs).
+fn least_squares_slope(pairs: &VecDeque<(f64, f64)>) -> (f64, f64) {
     let (lw, ww) = pairs
         .iter()
         .fold((0.0, 0.0), |(lw, ww), &(l, w)| (lw + l * w, ww + w * w));
