@@ -502,7 +502,9 @@ fn export_trajectory(
 ///   in the vehicle frame), `x y z` per line.
 /// - `NAME-SEED-SLUG.traj.tsv`: per frame the stamp, the estimated `x y z roll pitch yaw` of
 ///   `world_from_robot` and the true one (both relative to the first frame; metres, degrees), so a
-///   spread can be traced to a pose error.
+///   spread can be traced to a pose error; then, per component (roll pitch yaw x y z), the
+///   fused source's initial (`L`aser, `V`isual, `W`heel, `R`eference, `Z`ero), and 1/0 for the
+///   laser's degenerate components and the components the refinement left at the prediction.
 fn save_cloud(
     dir: &Path,
     run: &str,
@@ -538,7 +540,7 @@ fn save_cloud(
         ),
     )?;
     let mut text = String::from(
-        "# stamp_s est_x_m est_y_m est_z_m est_roll_deg est_pitch_deg est_yaw_deg true_x_m true_y_m true_z_m true_roll_deg true_pitch_deg true_yaw_deg\n",
+        "# stamp_s est_x_m est_y_m est_z_m est_roll_deg est_pitch_deg est_yaw_deg true_x_m true_y_m true_z_m true_roll_deg true_pitch_deg true_yaw_deg sources laser_degenerate refine_rejected\n",
     );
     let six = |p: &Pose| {
         let r = p.rpy().map(f64::to_degrees);
@@ -549,12 +551,23 @@ fn save_cloud(
     };
     for tp in &built.trajectory {
         let rel = t0.inverse().compose(&truth(tp.stamp_s));
+        // Per component roll pitch yaw x y z: the fused source's initial (Laser, Visual,
+        // Wheel, Reference, Zero) and 1/0 flags.
+        let sources: String = tp
+            .chosen
+            .iter()
+            .map(|s| format!("{s:?}").remove(0))
+            .collect();
+        let flags =
+            |f: &[bool; 6]| -> String { f.iter().map(|&b| if b { '1' } else { '0' }).collect() };
         writeln!(
             text,
-            "{} {} {}",
+            "{} {} {} {sources} {} {}",
             tp.stamp_s,
             six(&tp.world_from_robot),
-            six(&rel)
+            six(&rel),
+            flags(&tp.laser_degenerate),
+            flags(&tp.refine_rejected),
         )?;
     }
     std::fs::write(stem.with_extension("traj.tsv"), text)?;

@@ -6,7 +6,7 @@
 //!
 //! Run: `cargo run --release -p hil-sim --example diag_laser_odometry -- SCENARIO [--duration-s S]
 //! [--prior truth|zero|wheel] [--frames] [--explain [--dump GROUP]] [--no-corners] [--no-planes]
-//! [--mixed-planes]` (SCENARIO: a file stem under `hil-sim/scenarios`, e.g. `sedan-pass`).
+//! [--mixed-planes] [--stride K] [--straight-deskew]` (SCENARIO: a file stem under `hil-sim/scenarios`, e.g. `sedan-pass`).
 //! `--frames` prints one line per frame; the summary gives the mean (bias) and RMS of the error per
 //! component `[rx, ry, rz, tx, ty, tz]` in mrad and mm per frame, the summed x error over the run
 //! against the distance travelled, and how often each component was degenerate. `--explain` groups
@@ -180,7 +180,16 @@ fn main() -> anyhow::Result<()> {
     // Pull on x at the true pose, per group: sum of e_x * r (positive pushes the estimate back).
     let mut pull: std::collections::BTreeMap<String, (f64, usize)> =
         std::collections::BTreeMap::default();
-    let mut previous: Option<Prepared> = None;
+    // `--stride K`: register each frame against the one K frames back (the slip meter's long
+    // baseline is 10-17 frames).
+    // `--straight-deskew`: deskew with the true linear velocity only, no rotation (what the
+    // pipeline's wheel-velocity deskew can do: the vibration's rotation stays in the scan).
+    let straight_deskew = args.iter().any(|a| a == "--straight-deskew");
+    let stride: usize = flag("--stride")
+        .map(|s| s.parse())
+        .transpose()?
+        .unwrap_or(1);
+    let mut history: std::collections::VecDeque<Prepared> = std::collections::VecDeque::new();
     for (i, frame) in frames.iter().enumerate() {
         let current = prepare(
             if args.iter().any(|a| a == "--mixed-planes") {
@@ -191,10 +200,20 @@ fn main() -> anyhow::Result<()> {
             frame,
             i as u64,
             &robot_from_lidar,
-            velocity_at(frame.stamp_s + 0.05),
+            if straight_deskew {
+                let v = velocity_at(frame.stamp_s + 0.05);
+                Velocity {
+                    linear_mps: v.linear_mps,
+                    angular_radps: [0.0; 3],
+                }
+            } else {
+                velocity_at(frame.stamp_s + 0.05)
+            },
             &config,
         );
-        if let Some(prev) = &previous {
+        if history.len() == stride.max(1)
+            && let Some(prev) = history.front()
+        {
             let truth_inc = true_increment(prev.stamp_s, current.stamp_s);
             let prior = match prior_mode.as_str() {
                 "zero" => Pose::IDENTITY,
@@ -272,7 +291,10 @@ fn main() -> anyhow::Result<()> {
                 );
             }
         }
-        previous = Some(current);
+        history.push_back(current);
+        if history.len() > stride.max(1) {
+            history.pop_front();
+        }
     }
     if explain {
         let mut v: Vec<_> = pull.into_iter().collect();

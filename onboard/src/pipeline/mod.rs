@@ -728,10 +728,12 @@ impl Pipeline {
                 self.slip
                     .measure((stamp_s, wheel), world_from_robot, scan, &self.config.laser);
             for (laser_m, wheel_m) in measured.distances {
-                self.fusion.add_scale_measurement(laser_m, wheel_m);
+                self.fusion
+                    .add_scale_measurement(laser_m, wheel_m, measured.interval_s);
             }
-            if let Some((excess_rad, dt_s)) = measured.yaw {
-                self.fusion.add_yaw_measurement(excess_rad, dt_s);
+            if let Some(excess_rad) = measured.yaw {
+                self.fusion
+                    .add_yaw_measurement(excess_rad, measured.interval_s);
             }
             self.stats.scale_measurements = self.fusion.scale_measurements();
             self.stats.yaw_measurements = self.fusion.yaw_measurements();

@@ -79,12 +79,14 @@ pub struct Scan<'a> {
 /// What one long-baseline registration measured ([`SlipMeter::measure`]).
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct Measurement {
+    /// The baseline's interval: the keyframe's and the scan's start, seconds.
+    pub interval_s: (f64, f64),
     /// `(laser, wheel)` distances, metres, per determined translation component.
     pub distances: Vec<(f64, f64)>,
     /// When the registration determined the yaw: the wheels' turn minus the laser's over the
-    /// baseline, radians, and the baseline's duration, seconds (evidence of a wheel yaw-rate
-    /// bias, [`super::fusion::Fusion::add_yaw_measurement`]).
-    pub yaw: Option<(f64, f64)>,
+    /// baseline, radians (evidence of a wheel yaw-rate bias,
+    /// [`super::fusion::Fusion::add_yaw_measurement`]).
+    pub yaw: Option<f64>,
 }
 
 impl Measurement {
@@ -144,15 +146,14 @@ impl SlipMeter {
         );
         let wheel_relative = keyframe.wheel.inverse().compose(wheel);
         let wheel_m = wheel_relative.translation;
-        let dt_s = stamp_s - keyframe.stamp_s;
-        let yaw = (!laser.degenerate[2] && dt_s > 0.0).then(|| {
+        let yaw = (!laser.degenerate[2]).then(|| {
             let turn = |p: &Pose| p.rpy()[2];
             let excess = turn(&wheel_relative) - turn(&laser.pose);
             // Into (-pi, pi]: both turns are small, their difference must stay so.
-            let excess = PI - (PI - excess).rem_euclid(TAU);
-            (excess, dt_s)
+            PI - (PI - excess).rem_euclid(TAU)
         });
         Measurement {
+            interval_s: (keyframe.stamp_s, stamp_s),
             distances: (0..2)
                 .filter(|&k| !laser.degenerate[3 + k] && wheel_m[k].abs() >= 0.5 * self.baseline_m)
                 .map(|k| (laser.pose.translation[k], wheel_m[k]))
@@ -263,9 +264,10 @@ mod tests {
         // x only: the wheels did not move along y.
         assert_eq!(pairs.len(), 1, "{pairs:?}");
         // The tyres determine the yaw: neither turned, over the 1 s since the keyframe.
-        let (turn_rad, dt_s) = measured.yaw.expect("yaw determined");
+        let turn_rad = measured.yaw.expect("yaw determined");
+        let (from_s, to_s) = measured.interval_s;
         assert!(
-            turn_rad.abs() < 1e-3 && (dt_s - 1.0).abs() < 1e-12,
+            turn_rad.abs() < 1e-3 && (to_s - from_s - 1.0).abs() < 1e-12,
             "{measured:?}"
         );
         let (laser_m, wheel_m) = pairs[0];
