@@ -6,21 +6,37 @@
 //!
 //! Run: `cargo run --release -p hil-sim --example diag_laser_odometry -- SCENARIO [--duration-s S]
 //! [--prior truth|zero|wheel] [--frames] [--explain [--dump GROUP]] [--no-corners] [--no-planes]
-//! [--mixed-planes] [--stride K] [--straight-deskew]` (SCENARIO: a file stem under `hil-sim/scenarios`, e.g. `sedan-pass`).
+//! [--mixed-planes] [--stride K] [--straight-deskew] [--map [--free]] [--config FILE]`
+//! (SCENARIO: a file stem under `hil-sim/scenarios`, e.g. `sedan-pass`).
 //! `--frames` prints one line per frame; the summary gives the mean (bias) and RMS of the error per
 //! component `[rx, ry, rz, tx, ty, tz]` in mrad and mm per frame, the summed x error over the run
 //! against the distance travelled, and how often each component was degenerate. `--explain` groups
 //! the step-2 residuals at the TRUE pose by feature kind, normal axis and position and prints which
 //! groups pull x (`--dump GROUP` prints every 20th frame's residuals of groups starting so).
 //! `--no-corners` / `--no-planes` leave a feature kind out of step 2; `--mixed-planes` tags the
-//! ground like any other plane point (the behaviour before `GROUND_TAG_BIT`).
+//! ground like any other plane point (the behaviour before `GROUND_TAG_BIT`). `--stride K`
+//! registers against the frame K back (the slip meter's baseline); `--straight-deskew` deskews
+//! without the rotation (as the pipeline's wheel deskew does). `--map` registers each frame
+//! against the scan-to-map refinement's feature map built from the earlier frames at their TRUE
+//! poses (`register_joint`, no wheel prior); `--free` drops the degeneracy test there, so the
+//! directions the map hardly determines show where it pulls; `--config FILE` takes the pipeline
+//! settings from a `[pipeline]`-like TOML file.
 //!
 //! What it showed (sedan-pass, 12 s, truth prior): plane residuals of underbody points whose
 //! "plane" was fitted through underbody and ground points together had normals along x and pulled
 //! every increment towards zero motion: x bias -2.87 mm per 30 mm frame (-9.7 %); with the classes
 //! kept apart -0.02 mm (-0.07 %).
+//!
+//! Later (6f362b8): corners alone read 3.5-4 % short scan-to-scan on the off-roader and the
+//! sedan, planes alone 0.2 % at the slip baseline (`--stride 10 --no-corners`); and the map
+//! refinement left free (`--map --free`) pulls every frame back along x, by 25 (pickup) to 66
+//! (off-roader) mm on average from the true pose, through plane fits with normals along x on the
+//! parts behind and ahead of the robot (`--explain`: residuals of 2-7 cm at the true pose). The
+//! pipeline's wheel prior holds x against that pull; what gets through is the x drifting short.
 
 use std::path::PathBuf;
+
+use anyhow::Context;
 
 use hil_sim::geometry::Isometry;
 use hil_sim::scenario::Scenario;
@@ -35,6 +51,8 @@ use onboard::pipeline::ground;
 use onboard::pipeline::laser_odometry::{
     FeatureTarget, GROUND_TAG_BIT, register_two_step, residuals_at,
 };
+use onboard::pipeline::map::FeatureMap;
+use onboard::pipeline::registration::register_joint;
 
 fn pose_of(iso: &Isometry) -> Pose {
     Pose {
@@ -59,6 +77,10 @@ struct Prepared {
     planes: Vec<V3>,
     corners: Vec<V3>,
     target: FeatureTarget,
+    /// The tagged plane candidates (with the ground), for the map.
+    tagged_planes: Vec<(V3, u32)>,
+    /// The tagged corner candidates, for the map.
+    tagged_corners: Vec<(V3, u32)>,
 }
 
 /// The pipeline's steps 1-4 for one frame, deskewed with `velocity`.
@@ -114,6 +136,8 @@ fn prepare(
     let (cp, ct) = tag(&feats.corner_candidates);
     let voxel = config.laser.max_correspondence_m;
     Prepared {
+        tagged_planes: pp.iter().copied().zip(pt.iter().copied()).collect(),
+        tagged_corners: cp.iter().copied().zip(ct.iter().copied()).collect(),
         stamp_s: frame.stamp_s,
         step1_planes,
         planes: feats.planes,
@@ -156,7 +180,16 @@ fn main() -> anyhow::Result<()> {
     let scenario = Scenario::from_parts(&path, file, base.vehicle.clone())?;
     let scene = Scene::from_vehicle(&scenario.vehicle);
     let frames = scenario.decoded_lidar_frames(&scene);
-    let mut config = PipelineConfig::default();
+    // `--config FILE`: the pipeline settings, a TOML table like the service's `[pipeline]`.
+    let mut config = match flag("--config") {
+        Some(path) => {
+            let text = std::fs::read_to_string(&path).with_context(|| path.clone())?;
+            let config: PipelineConfig = toml::from_str(&text).with_context(|| path.clone())?;
+            config.validate().with_context(|| path.clone())?;
+            config
+        }
+        None => PipelineConfig::default(),
+    };
     let robot_from_lidar = pose_of(&scenario.file.lidar.robot_from_lidar());
     config.mounts.lidar_xyz_m = robot_from_lidar.translation;
     let truth = |t: f64| pose_of(&scenario.run.pose_at(t).to_isometry());
@@ -190,6 +223,24 @@ fn main() -> anyhow::Result<()> {
         .transpose()?
         .unwrap_or(1);
     let mut history: std::collections::VecDeque<Prepared> = std::collections::VecDeque::new();
+    // `--map`: register each frame against the pipeline's feature map built from every earlier
+    // frame at its TRUE pose (the scan-to-map refinement, `register_joint`, no wheel prior),
+    // starting from the TRUE pose (or the `--prior`); the error is the refined pose's against the
+    // truth, in the robot frame, per frame (it does not accumulate here; in the pipeline the next
+    // frame starts from it).
+    let mut map = args
+        .iter()
+        .any(|a| a == "--map")
+        .then(|| FeatureMap::new(config.map.feature_voxel_m, config.map.points_per_voxel));
+    // `--free`: the map solve without the degeneracy test (no direction held at the prior), to
+    // see where the map alone pulls.
+    let mut map_laser = config.laser.clone();
+    if args.iter().any(|a| a == "--free") {
+        map_laser.degeneracy_eigen_min = 0.0;
+        map_laser.degeneracy_rotation_eigen_min_m2 = 0.0;
+    }
+    let t0 = frames.first().map_or(0.0, |f| f.stamp_s);
+    let world_truth = |t: f64| truth(t0).inverse().compose(&truth(t));
     for (i, frame) in frames.iter().enumerate() {
         let current = prepare(
             if args.iter().any(|a| a == "--mixed-planes") {
@@ -224,12 +275,22 @@ fn main() -> anyhow::Result<()> {
                 }
                 _ => truth_inc,
             };
+            // In map mode the target is the map and the poses are world poses.
+            let prev_world = world_truth(prev.stamp_s);
+            let (target, truth_pose, prior) = match &map {
+                Some(m) => (
+                    m.target(),
+                    world_truth(current.stamp_s),
+                    prev_world.compose(&prior),
+                ),
+                None => (&prev.target, truth_inc, prior),
+            };
             if explain {
                 for r in residuals_at(
-                    &prev.target,
+                    target,
                     &current.planes,
                     &current.corners,
-                    &truth_inc,
+                    &truth_pose,
                     config.laser.max_correspondence_m,
                 ) {
                     let axis = (0..3)
@@ -253,16 +314,41 @@ fn main() -> anyhow::Result<()> {
                     e.1 += 1;
                 }
             }
-            let reg = register_two_step(
-                &prev.target,
-                &current.step1_planes,
-                if no_planes { &[] } else { &current.planes },
-                if no_corners { &[] } else { &current.corners },
-                prior,
-                &config.laser,
-            );
-            let est = reg.pose.to_increment();
-            let tru = truth_inc.to_increment();
+            let corners: &[V3] = if no_corners { &[] } else { &current.corners };
+            let reg = if map.is_some() {
+                // The refinement's step-1 planes with the ground sample, as the pipeline passes.
+                let planes: Vec<V3> = if no_planes {
+                    current.step1_planes[current.planes.len()..].to_vec()
+                } else {
+                    current.step1_planes.clone()
+                };
+                register_joint(
+                    target,
+                    (&planes, corners),
+                    prior,
+                    None,
+                    config.map.iterations,
+                    &map_laser,
+                )
+            } else {
+                register_two_step(
+                    target,
+                    &current.step1_planes,
+                    if no_planes { &[] } else { &current.planes },
+                    corners,
+                    prior,
+                    &config.laser,
+                )
+            };
+            // Map mode: the refined pose's error in the robot frame, as an increment from the
+            // truth; the "true motion" is the frame's true increment.
+            let (est, tru) = if map.is_some() {
+                let e = truth_pose.inverse().compose(&reg.pose).to_increment();
+                let t = truth_inc.to_increment();
+                (std::array::from_fn(|k| t[k] + e[k]), t)
+            } else {
+                (reg.pose.to_increment(), truth_inc.to_increment())
+            };
             let err: [f64; 6] = std::array::from_fn(|k| est[k] - tru[k]);
             for k in 0..6 {
                 sum[k] += err[k];
@@ -290,6 +376,13 @@ fn main() -> anyhow::Result<()> {
                     current.corners.len()
                 );
             }
+        }
+        if let Some(m) = &mut map {
+            m.add(
+                &world_truth(current.stamp_s),
+                &current.tagged_planes,
+                &current.tagged_corners,
+            );
         }
         history.push_back(current);
         if history.len() > stride.max(1) {
