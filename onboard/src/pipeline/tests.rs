@@ -158,7 +158,8 @@ fn laser_and_wheel_track_the_run_and_beat_slipping_wheels() {
 
 #[test]
 fn long_baseline_slip_measurements_calibrate_slipping_wheels_and_leave_exact_ones_alone() {
-    let (_, built) = run(PipelineConfig::default(), 30, Some(0.05));
+    // 1.3 m: the overlapping measurements must cover a metre of travel to count as four.
+    let (_, built) = run(PipelineConfig::default(), 45, Some(0.05));
     assert!(
         built.stats.scale_measurements >= fusion::MIN_SCALE_MEASUREMENTS,
         "{:?}",
@@ -170,7 +171,7 @@ fn long_baseline_slip_measurements_calibrate_slipping_wheels_and_leave_exact_one
         "wheel scale {} vs {truth}",
         built.stats.wheel_scale
     );
-    let (_, exact) = run(PipelineConfig::default(), 30, Some(0.0));
+    let (_, exact) = run(PipelineConfig::default(), 45, Some(0.0));
     assert!(exact.stats.scale_measurements >= fusion::MIN_SCALE_MEASUREMENTS);
     assert!(
         (exact.stats.wheel_scale - 1.0).abs() < 1e-15,
