@@ -305,8 +305,12 @@ fn main() -> anyhow::Result<()> {
                     );
                     if dump.as_ref().is_some_and(|d| key.starts_with(d.as_str())) && i % 20 == 0 {
                         println!(
-                            "frame {i} {key} src {:.3?} dir {:.3?} r {:+.4}",
-                            r.source, r.direction, r.residual_m
+                            "frame {i} {key} src {:.3?} at {:.3?} dir {:.3?} r {:+.4} anchor {:.3?}",
+                            r.source,
+                            truth_pose.apply(r.source),
+                            r.direction,
+                            r.residual_m,
+                            r.anchor
                         );
                     }
                     let e = pull.entry(key).or_default();

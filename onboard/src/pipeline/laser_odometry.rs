@@ -228,6 +228,9 @@ pub struct ResidualInfo {
     pub residual_m: f64,
     /// Point-to-line (corner) rather than point-to-plane.
     pub corner: bool,
+    /// The target's line or plane: the centroid of the neighbours it was fitted through,
+    /// target frame.
+    pub anchor: V3,
 }
 
 /// The residuals of `planes` and `corners` against `target` at `pose` (`target_from_source`),
@@ -251,6 +254,7 @@ pub fn residuals_at(
             direction: c.direction,
             residual_m: dot(c.direction, sub(pose.apply(c.source), c.anchor)),
             corner: i >= n_planes,
+            anchor: c.anchor,
         })
         .collect()
 }
