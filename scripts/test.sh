@@ -61,14 +61,15 @@ cargo build -p control --target thumbv7em-none-eabihf
 
 step "V4L2 depth capture (the onboard's \`v4l2\` feature; its bindings need libclang)"
 # bindgen loads libclang.so / libclang-N.so; libclang-cpp (installed with other tools) is not it.
-if ! ldconfig -p 2>/dev/null | grep -qE 'libclang(-[0-9.]+)?\.so'; then
+have_libclang() { ldconfig -p 2>/dev/null | grep -qE 'libclang(-[0-9.]+)?\.so'; }
+if ! have_libclang; then
     if [[ $(id -u) == 0 ]] && command -v apt-get >/dev/null; then
         echo "installing libclang-dev (Debian) for the v4l crate's bindgen"
         (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq libclang-dev) >/dev/null \
             || echo "NOTE: could not install libclang-dev" >&2
     fi
 fi
-if ldconfig -p 2>/dev/null | grep -qE 'libclang(-[0-9.]+)?\.so'; then
+if have_libclang; then
     cargo clippy -p onboard --features v4l2 --all-targets -- -D warnings
     cargo test -p onboard --features v4l2 --lib camera
 else

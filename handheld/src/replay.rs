@@ -46,7 +46,7 @@ pub fn run(args: &ReplayArgs, out: &mut impl Write) -> anyhow::Result<()> {
         Some(path) => {
             let text = std::fs::read_to_string(path)
                 .with_context(|| format!("reading {}", path.display()))?;
-            toml::from_str::<PipelineConfig>(&text)
+            PipelineConfig::from_toml(&text)
                 .with_context(|| format!("{}: pipeline config", path.display()))?
         }
         None => PipelineConfig::default(),

@@ -637,9 +637,7 @@ fn main() -> anyhow::Result<()> {
                 .get(i + 1)
                 .ok_or_else(|| anyhow::anyhow!("--config needs a file"))?;
             let text = std::fs::read_to_string(path).with_context(|| path.clone())?;
-            let config: PipelineConfig = toml::from_str(&text).with_context(|| path.clone())?;
-            config.validate().with_context(|| path.clone())?;
-            config
+            PipelineConfig::from_toml(&text).with_context(|| path.clone())?
         }
         None => PipelineConfig::default(),
     };
@@ -751,7 +749,8 @@ fn main() -> anyhow::Result<()> {
     // Issue 7's target: a standard deviation under 0.15 degree on every angle.
     let (mut under_target, mut angles) = (0, 0);
     for (name, errors, ates_m) in &per_vehicle {
-        let mut stats = |k: usize| {
+        // Per angle: the cell and the sample standard deviation (needs two values).
+        let stats = |k: usize| -> (String, Option<f64>) {
             let v: Vec<f64> = errors
                 .iter()
                 .map(|e| e[k])
@@ -759,19 +758,18 @@ fn main() -> anyhow::Result<()> {
                 .collect();
             let n = v.len() as f64;
             let mean = v.iter().sum::<f64>() / n;
-            // Sample standard deviation: needs two values.
             let sd = (v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt();
-            if v.len() > 1 {
-                angles += 1;
-                under_target += usize::from(sd < 0.15);
-            }
             match v.len() {
-                0 => "no angle (0 ok)".to_owned(),
-                1 => format!("{mean:+.2} / - (1 ok)"),
-                k => format!("{mean:+.2} / {sd:.2} ({k} ok)"),
+                0 => ("no angle (0 ok)".to_owned(), None),
+                1 => (format!("{mean:+.2} / - (1 ok)"), None),
+                k => (format!("{mean:+.2} / {sd:.2} ({k} ok)"), Some(sd)),
             }
         };
-        let (a0, a1, a2) = (stats(0), stats(1), stats(2));
+        let [(a0, sd0), (a1, sd1), (a2, sd2)] = [stats(0), stats(1), stats(2)];
+        for sd in [sd0, sd1, sd2].into_iter().flatten() {
+            angles += 1;
+            under_target += usize::from(sd < 0.15);
+        }
         let ate_mm = ates_m.iter().sum::<f64>() / ates_m.len().max(1) as f64 * 1e3;
         let ate_max_mm = ates_m.iter().fold(0.0_f64, |m, &a| m.max(a)) * 1e3;
         println!(

@@ -29,10 +29,12 @@
 //!
 //! Later (6f362b8): corners alone read 3.5-4 % short scan-to-scan on the off-roader and the
 //! sedan, planes alone 0.2 % at the slip baseline (`--stride 10 --no-corners`); and the map
-//! refinement left free (`--map --free`) pulls every frame back along x, by 25 (pickup) to 66
-//! (off-roader) mm on average from the true pose, through plane fits with normals along x on the
-//! parts behind and ahead of the robot (`--explain`: residuals of 2-7 cm at the true pose). The
-//! pipeline's wheel prior holds x against that pull; what gets through is the x drifting short.
+//! refinement left free (`--map --free`) pulls every frame back along x, by 4 (sedan) to 66
+//! (off-roader) mm on average from the true pose, through plane and corner fits with normals
+//! along x on the parts behind and ahead of the robot (`--explain`: residuals of 2-7 cm at the
+//! true pose; on the off-roader the strongest are corners on the differentials, whose grazing
+//! line moves around them with the viewpoint). The pipeline's wheel prior holds x against that
+//! pull; what gets through is the x drifting short.
 
 use std::path::PathBuf;
 
@@ -184,9 +186,7 @@ fn main() -> anyhow::Result<()> {
     let mut config = match flag("--config") {
         Some(path) => {
             let text = std::fs::read_to_string(&path).with_context(|| path.clone())?;
-            let config: PipelineConfig = toml::from_str(&text).with_context(|| path.clone())?;
-            config.validate().with_context(|| path.clone())?;
-            config
+            PipelineConfig::from_toml(&text).with_context(|| path.clone())?
         }
         None => PipelineConfig::default(),
     };

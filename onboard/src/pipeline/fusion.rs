@@ -201,15 +201,15 @@ impl Fusion {
         if !(dt_s > 0.0 && excess_rad.is_finite()) {
             return;
         }
-        self.yaw_measurements.push_back(Baseline {
-            y: excess_rad,
-            x: dt_s,
-            from_s,
-            to_s,
-        });
-        while self.yaw_measurements.len() > MAX_SCALE_MEASUREMENTS {
-            self.yaw_measurements.pop_front();
-        }
+        push_latest(
+            &mut self.yaw_measurements,
+            Baseline {
+                y: excess_rad,
+                x: dt_s,
+                from_s,
+                to_s,
+            },
+        );
     }
 
     /// The current wheel scale factor: laser distance over wheel distance. 1 until there is
@@ -220,11 +220,7 @@ impl Fusion {
             if self.scale_pairs.len() < MIN_SCALE_PAIRS {
                 return 1.0;
             }
-            let (lw, ww) = self
-                .scale_pairs
-                .iter()
-                .fold((0.0, 0.0), |(lw, ww), &(l, w)| (lw + l * w, ww + w * w));
-            let s = lw / ww;
+            let (s, _) = slope_through_origin(self.scale_pairs.iter().copied());
             return s.clamp(WHEEL_SCALE_RANGE.0, WHEEL_SCALE_RANGE.1);
         }
         let fit = least_squares_slope(&self.scale_measurements);
@@ -266,15 +262,15 @@ impl Fusion {
         if !usable {
             return;
         }
-        self.scale_measurements.push_back(Baseline {
-            y: laser_m,
-            x: wheel_m,
-            from_s,
-            to_s,
-        });
-        while self.scale_measurements.len() > MAX_SCALE_MEASUREMENTS {
-            self.scale_measurements.pop_front();
-        }
+        push_latest(
+            &mut self.scale_measurements,
+            Baseline {
+                y: laser_m,
+                x: wheel_m,
+                from_s,
+                to_s,
+            },
+        );
     }
 
     /// `wheel` with its translation multiplied by the wheel scale and its yaw rate less the
@@ -494,10 +490,7 @@ impl Slope {
 /// The least-squares slope `s` of `y = s * x` over the measurements (the wheel scale: laser
 /// distance over wheel distance; the yaw-rate bias: excess turn over duration).
 fn least_squares_slope(measurements: &VecDeque<Baseline>) -> Slope {
-    let (yx, xx) = measurements
-        .iter()
-        .fold((0.0, 0.0), |(yx, xx), m| (yx + m.y * m.x, xx + m.x * m.x));
-    let value = yx / xx;
+    let (value, xx) = slope_through_origin(measurements.iter().map(|m| (m.y, m.x)));
     let count = measurements.len();
     if count < 2 {
         return Slope {
@@ -519,6 +512,20 @@ fn least_squares_slope(measurements: &VecDeque<Baseline>) -> Slope {
         standard_error: sigma / xx.sqrt(),
         count,
         independent: (covered_s(measurements) / mean_duration_s).clamp(1.0, count as f64),
+    }
+}
+
+/// The least-squares slope `s` of `y = s * x` over `(y, x)` pairs, and `sum(x^2)`.
+fn slope_through_origin(pairs: impl Iterator<Item = (f64, f64)>) -> (f64, f64) {
+    let (yx, xx) = pairs.fold((0.0, 0.0), |(yx, xx), (y, x)| (yx + y * x, xx + x * x));
+    (yx / xx, xx)
+}
+
+/// Append `m`, keeping the latest [`MAX_SCALE_MEASUREMENTS`].
+fn push_latest(measurements: &mut VecDeque<Baseline>, m: Baseline) {
+    measurements.push_back(m);
+    while measurements.len() > MAX_SCALE_MEASUREMENTS {
+        measurements.pop_front();
     }
 }
 

@@ -280,6 +280,15 @@ impl PipelineConfig {
         ]
     }
 
+    /// A config from the text of a `[pipeline]`-like TOML table (kebab-case keys, unknown keys
+    /// rejected, missing keys at their defaults), checked by [`Self::validate`].
+    pub fn from_toml(text: &str) -> Result<Self, PipelineError> {
+        let config: Self =
+            toml::from_str(text).map_err(|e| PipelineError::InvalidConfig(e.to_string()))?;
+        config.validate()?;
+        Ok(config)
+    }
+
     /// Check every value the stages divide by or loop on; the error names the key.
     pub fn validate(&self) -> Result<(), PipelineError> {
         let positive = self.positive_values();

@@ -275,3 +275,21 @@ fn a_coarser_ground_voxel_thins_the_floor_and_keeps_the_rest() {
     let e = Pipeline::new(config).unwrap_err().to_string();
     assert!(e.contains("map.ground-voxel-m"), "{e}");
 }
+
+#[test]
+fn a_config_text_is_parsed_and_checked_and_errors_name_the_key() {
+    let c = PipelineConfig::from_toml("[map]\nwheel-prior = false\n").unwrap();
+    assert!(!c.map.wheel_prior);
+    assert_eq!(
+        PipelineConfig::from_toml("").unwrap(),
+        PipelineConfig::default()
+    );
+    let e = PipelineConfig::from_toml("[map]\nresidual-sigma-m = -1.0\n")
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("map.residual-sigma-m"), "{e}");
+    let e = PipelineConfig::from_toml("[map]\nwheel-priors = true\n")
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("wheel-priors"), "{e}");
+}
