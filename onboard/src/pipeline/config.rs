@@ -206,6 +206,12 @@ pub struct LaserOdometryConfig {
     pub max_correspondence_m: f64,
     /// Huber kernel width, metres.
     pub huber_m: f64,
+    /// Residuals beyond `max-residual-m` plus what an attitude error of `max-residual-rad` moves
+    /// them (their lever arm across the residual's direction) have no weight: the Huber kernel
+    /// truncated (`laser_odometry::Kernel`), metres.
+    pub max_residual_m: f64,
+    /// The attitude error the cutoff allows for, radians (see `max-residual-m`).
+    pub max_residual_rad: f64,
     /// Initial LM damping (relative to the Hessian's diagonal).
     pub lm_lambda: f64,
     /// An eigenvalue of a step's normal matrix below this (per correspondence) marks that
@@ -230,6 +236,11 @@ impl Default for LaserOdometryConfig {
             iterations: 8,
             max_correspondence_m: 0.2,
             huber_m: 0.05,
+            // 0.03 m and 0.1 rad (README, "The map's pull cut off"): 10 seeds per pass against
+            // Huber alone, mean ATE lower on all five with exact wheels and on four of five with
+            // the assumed wheel errors.
+            max_residual_m: 0.03,
+            max_residual_rad: 0.1,
             lm_lambda: 1e-3,
             degeneracy_eigen_min: 0.3,
             degeneracy_rotation_eigen_min_m2: 0.3,

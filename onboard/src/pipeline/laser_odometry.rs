@@ -8,7 +8,8 @@
 //! - **point-to-line** (corner features): the five nearest target corners; if they are linear
 //!   (largest eigenvalue dominates) the residual is the distance from `q` to the line.
 //!
-//! Both are weighted by a Huber kernel (`huber_m`). The increment is left-multiplied with its
+//! Both are weighted by a Huber kernel (`huber_m`) truncated beyond a cutoff that grows with the
+//! point's distance (`max_residual_m`, `max_residual_rad`; see [`Kernel`]). The increment is left-multiplied with its
 //! rotation about the prior's position `c`, `T <- about(c, delta) T`, with
 //! `delta = [rx, ry, rz, tx, ty, tz]`, so the Jacobian of a residual with unit direction `e` (the
 //! plane normal, or the perpendicular to the line) is `[(q - c) x e, e]`: the same numbers wherever
@@ -47,6 +48,8 @@ struct Correspondence {
     source: V3,
     direction: V3,
     anchor: V3,
+    /// Beyond this the residual has no weight ([`Kernel`]); set where it is searched.
+    cutoff_m: f64,
 }
 
 /// True when the neighbours come from at least two scan lines (tags). Neighbours on one ring lie
@@ -148,6 +151,7 @@ fn match_plane(target: &FeatureTarget, p: V3, q: V3, radius_m: f64) -> Option<Co
         source: p,
         direction: n,
         anchor: c,
+        cutoff_m: f64::INFINITY,
     })
 }
 
@@ -162,6 +166,7 @@ fn match_corner(target: &FeatureTarget, p: V3, q: V3, radius_m: f64) -> Option<C
         source: p,
         direction: scale(perp, 1.0 / len),
         anchor: c,
+        cutoff_m: f64::INFINITY,
     })
 }
 
@@ -179,8 +184,8 @@ struct Match {
 fn refresh(
     target: &FeatureTarget,
     (planes, corners): (&[V3], &[V3]),
-    pose: &Pose,
-    (radius_m, limit_m): (f64, f64),
+    (pose, centre): (&Pose, V3),
+    (radius_m, limit_m, kernel): (f64, f64, Kernel),
     matches: &mut [Match],
 ) -> usize {
     let mut searched = 0;
@@ -194,7 +199,11 @@ fn refresh(
             match_plane(target, p, q, radius_m)
         } else {
             match_corner(target, p, q, radius_m)
-        };
+        }
+        .map(|c| Correspondence {
+            cutoff_m: kernel.cutoff(q, centre, c.direction),
+            ..c
+        });
         searched += 1;
     }
     searched
@@ -259,36 +268,95 @@ pub fn residuals_at(
         .collect()
 }
 
-fn huber_weight(r: f64, k: f64) -> f64 {
-    if r.abs() <= k { 1.0 } else { k / r.abs() }
+/// The residuals' robust kernel: Huber of width `huber_m`, truncated at a cutoff of `cutoff_m`
+/// plus what an attitude error of `cutoff_rad` would add to the residual, `cutoff_rad * |(q - c) x
+/// e|` (its rotational Jacobian: the lever arm about the solve's centre `c`, across the
+/// residual's direction `e`). A residual beyond the cutoff has zero weight and a constant cost:
+/// it no longer pulls.
+///
+/// Why: under a car the wrong correspondences are silhouettes. The map's corner line runs round
+/// the far side of a cylinder lying across the path (a differential), seen from elsewhere, 5-15
+/// cm from where this scan grazes it, and such residuals point along the travel; with Huber alone
+/// each still pulled by the kernel's width, all the same way (README, "The map's pull cut
+/// off"). The lever-arm term keeps the residuals a drifted yaw moves (the far tyres' sides),
+/// which hold the map's yaw against the wheels' (a plain cutoff lost them: ATE up to twice as
+/// high with the assumed wheel errors), while residuals along the travel near the centre line
+/// get the tight cutoff.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct Kernel {
+    pub huber_m: f64,
+    pub cutoff_m: f64,
+    pub cutoff_rad: f64,
 }
 
-fn cost(corr: &[Correspondence], pose: &Pose, k: f64) -> f64 {
+impl Kernel {
+    pub(crate) fn of(config: &LaserOdometryConfig) -> Self {
+        Self {
+            huber_m: config.huber_m,
+            cutoff_m: config.max_residual_m,
+            cutoff_rad: config.max_residual_rad,
+        }
+    }
+
+    /// The cutoff of a residual along `e` at `q` (target frame), solved about `centre`.
+    fn cutoff(&self, q: V3, centre: V3, e: V3) -> f64 {
+        self.cutoff_m + self.cutoff_rad * norm(cross(sub(q, centre), e))
+    }
+
+    /// IRLS weight of residual `r` with cutoff `cutoff_m`.
+    fn weight(&self, r: f64, cutoff_m: f64) -> f64 {
+        let (k, r) = (self.huber_m, r.abs());
+        if r > cutoff_m {
+            0.0
+        } else if r <= k {
+            1.0
+        } else {
+            k / r
+        }
+    }
+
+    /// Cost of residual `r` with cutoff `cutoff_m`.
+    fn cost(&self, r: f64, cutoff_m: f64) -> f64 {
+        let k = self.huber_m;
+        let r = r.abs().min(cutoff_m);
+        if r <= k {
+            0.5 * r * r
+        } else {
+            k * (r - 0.5 * k)
+        }
+    }
+}
+
+fn cost(corr: &[Correspondence], pose: &Pose, k: Kernel) -> f64 {
     corr.iter()
         .map(|c| {
-            let r = dot(c.direction, sub(pose.apply(c.source), c.anchor)).abs();
-            if r <= k {
-                0.5 * r * r
-            } else {
-                k * (r - 0.5 * k)
-            }
+            k.cost(
+                dot(c.direction, sub(pose.apply(c.source), c.anchor)),
+                c.cutoff_m,
+            )
         })
         .sum()
 }
 
-/// Normal equations `(H, g)` over all six parameters.
+/// Normal equations `(H, g)` over all six parameters, and how many residuals have weight (are
+/// within the kernel's cutoff).
 fn normal_equations(
     corr: &[Correspondence],
     pose: &Pose,
     centre: V3,
-    k: f64,
-) -> ([[f64; 6]; 6], [f64; 6]) {
+    k: Kernel,
+) -> ([[f64; 6]; 6], [f64; 6], usize) {
     let mut h = [[0.0; 6]; 6];
     let mut g = [0.0; 6];
+    let mut weighted = 0;
     for c in corr {
         let q = pose.apply(c.source);
         let r = dot(c.direction, sub(q, c.anchor));
-        let w = huber_weight(r, k);
+        let w = k.weight(r, c.cutoff_m);
+        if w == 0.0 {
+            continue;
+        }
+        weighted += 1;
         let jw = cross(sub(q, centre), c.direction);
         let j = [
             jw[0],
@@ -305,7 +373,7 @@ fn normal_equations(
             }
         }
     }
-    (h, g)
+    (h, g, weighted)
 }
 
 /// `exp(d) * pose` (left increment).
@@ -450,7 +518,7 @@ pub(crate) fn solve_with(
     config: &LaserOdometryConfig,
     guides: &SolveGuides,
 ) -> (Solution, SolveStats) {
-    let k = config.huber_m;
+    let k = Kernel::of(config);
     let mut projection: Option<[[f64; 6]; 6]> = None;
     let radius_m = config.max_correspondence_m;
     let research_m = RESEARCH_FRACTION * radius_m;
@@ -472,8 +540,8 @@ pub(crate) fn solve_with(
         let searched = refresh(
             target,
             features,
-            &pose,
-            (radius_m, research_m),
+            (&pose, centre),
+            (radius_m, research_m, k),
             &mut matches,
         );
         if searched > 0 {
@@ -481,10 +549,10 @@ pub(crate) fn solve_with(
             stats.searches += 1;
             stats.queries += searched;
         }
-        if corr.len() < active.len() {
+        let (mut h, mut g, weighted) = normal_equations(&corr, &pose, centre, k);
+        if weighted < active.len() {
             break;
         }
-        let (mut h, mut g) = normal_equations(&corr, &pose, centre, k);
         let data_cost = cost(&corr, &pose, k);
         let mut before = data_cost;
         if let Some(l) = &guides.prior_information {
@@ -497,8 +565,9 @@ pub(crate) fn solve_with(
                 }
             }
         }
+        // Per residual: the ones the kernel's cutoff leaves out do not count.
         last_h = h;
-        last_n = corr.len();
+        last_n = weighted;
         if let (Some(thresholds), None) = (guides.hold, projection) {
             let per_residual = h.map(|row| row.map(|v| v / last_n as f64));
             projection = Some(determined_projection(&per_residual, active, thresholds).0);
@@ -552,7 +621,7 @@ fn lm_step(
     lambda: &mut f64,
     before: f64,
     centre: V3,
-    k: f64,
+    k: Kernel,
 ) -> Option<(Pose, Twist6)> {
     for _ in 0..4 {
         let mut a = [[0.0; 6]; 6];
@@ -725,6 +794,49 @@ pub(crate) mod tests {
     }
 
     #[test]
+    fn residuals_beyond_the_cutoff_do_not_pull() {
+        // Corners whose nearest target line is the wrong one, 12 cm away along x (a silhouette
+        // seen from elsewhere: the map's line runs round the far side of a cylinder), all on one
+        // side: the Huber kernel still pulls by its width for each of them; the cutoff drops them.
+        let truth = Pose::from_xyz_rpy([0.02, 0.0, 0.0], [0.0; 3]);
+        let (planes, corners) = scene(true);
+        let target = target_of(&planes, &corners);
+        let mut source_corners = corners.clone();
+        for &(cx, cy) in &[(1.4_f64, 0.8_f64), (1.4, -0.8), (-1.4, 0.8), (-1.4, -0.8)] {
+            for k in 0..60 {
+                let z = 0.01 + f64::from(k) * 0.006;
+                source_corners.push([cx + 0.3 + 0.12, cy, z]);
+            }
+        }
+        let (planes, source_corners) = (moved(&planes, &truth), moved(&source_corners, &truth));
+        let x_error = |max_residual_m: f64| {
+            let config = LaserOdometryConfig {
+                max_residual_m,
+                max_residual_rad: 0.0,
+                ..LaserOdometryConfig::default()
+            };
+            let (pose, _, residuals, _) = solve(
+                &target,
+                &planes,
+                &source_corners,
+                Pose::from_xyz_rpy([0.015, 0.0, 0.0], [0.0; 3]),
+                &ALL,
+                30,
+                &config,
+            );
+            (error_of(&pose, &truth)[3], residuals)
+        };
+        let ((huber, n_huber), (cut, n_cut)) = (x_error(f64::INFINITY), x_error(0.05));
+        assert!(huber.abs() > 5e-3, "Huber alone: x error {huber}");
+        assert!(cut.abs() < 2e-3, "cut at 5 cm: x error {cut}");
+        // The residuals cut off do not count as residuals (the degeneracy test divides by them).
+        assert!(
+            n_cut + 200 < n_huber,
+            "{n_cut} residuals cut, {n_huber} Huber"
+        );
+    }
+
+    #[test]
     fn the_normal_matrix_is_the_one_at_the_final_pose() {
         // Registration's degeneracy test reads the returned matrix: it must match one formed
         // from a fresh search at the final pose, not the first (stale) correspondence set.
@@ -739,8 +851,8 @@ pub(crate) mod tests {
             &pose,
             config.max_correspondence_m,
         );
-        let (fresh, _) = normal_equations(&corr, &pose, [0.0; 3], config.huber_m);
-        let n = corr.len() as f64;
+        let (fresh, _, weighted) = normal_equations(&corr, &pose, [0.0; 3], Kernel::of(&config));
+        let n = weighted as f64;
         let largest = (0..6).map(|a| h[a][a]).fold(0.0, f64::max);
         for a in 0..6 {
             for b in 0..6 {

@@ -240,7 +240,7 @@ pub enum PipelineError {
 }
 
 /// How many keys [`PipelineConfig::positive_values`] checks.
-const POSITIVE_KEYS: usize = 16;
+const POSITIVE_KEYS: usize = 17;
 
 impl PipelineConfig {
     /// The values that must be positive numbers, by key.
@@ -260,6 +260,7 @@ impl PipelineConfig {
                 self.laser.max_correspondence_m,
             ),
             ("laser.huber-m", self.laser.huber_m),
+            ("laser.max-residual-m", self.laser.max_residual_m),
             ("visual.max-depth-m", self.visual.max_depth_m),
             ("visual.max-residual-m", self.visual.max_residual_m),
             ("map.feature-voxel-m", self.map.feature_voxel_m),
@@ -306,6 +307,7 @@ impl PipelineConfig {
             )));
         }
         for (key, v) in [
+            ("laser.max-residual-rad", self.laser.max_residual_rad),
             (
                 "laser.degeneracy-eigen-min",
                 self.laser.degeneracy_eigen_min,

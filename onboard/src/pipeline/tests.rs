@@ -288,6 +288,10 @@ fn a_config_text_is_parsed_and_checked_and_errors_name_the_key() {
         .unwrap_err()
         .to_string();
     assert!(e.contains("map.residual-sigma-m"), "{e}");
+    let e = PipelineConfig::from_toml("[laser]\nmax-residual-rad = -0.1\n")
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("laser.max-residual-rad"), "{e}");
     let e = PipelineConfig::from_toml("[map]\nwheel-priors = true\n")
         .unwrap_err()
         .to_string();
