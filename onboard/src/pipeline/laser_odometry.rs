@@ -9,8 +9,8 @@
 //!   (largest eigenvalue dominates) the residual is the distance from `q` to the line.
 //!
 //! Both are weighted by a Huber kernel (`huber_m`) truncated beyond a cutoff that grows with the
-//! point's distance (`max_residual_m`, `max_residual_rad`; see [`Kernel`]). The increment is left-multiplied with its
-//! rotation about the prior's position `c`, `T <- about(c, delta) T`, with
+//! residual's lever arm (`max_residual_m`, `max_residual_rad`; see [`Kernel`]). The increment is
+//! left-multiplied with its rotation about the prior's position `c`, `T <- about(c, delta) T`, with
 //! `delta = [rx, ry, rz, tx, ty, tz]`, so the Jacobian of a residual with unit direction `e` (the
 //! plane normal, or the perpendicular to the line) is `[(q - c) x e, e]`: the same numbers wherever
 //! the robot is in the target frame (see `about`).
@@ -48,7 +48,8 @@ struct Correspondence {
     source: V3,
     direction: V3,
     anchor: V3,
-    /// Beyond this the residual has no weight ([`Kernel`]); set where it is searched.
+    /// Beyond this the residual has no weight ([`Kernel`]): set by the solve's search
+    /// (`refresh`), which knows the solve's centre; unbounded for the diagnostics' residuals.
     cutoff_m: f64,
 }
 
@@ -283,14 +284,14 @@ pub fn residuals_at(
 /// high with the assumed wheel errors), while residuals along the travel near the centre line
 /// get the tight cutoff.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub(crate) struct Kernel {
-    pub huber_m: f64,
-    pub cutoff_m: f64,
-    pub cutoff_rad: f64,
+struct Kernel {
+    huber_m: f64,
+    cutoff_m: f64,
+    cutoff_rad: f64,
 }
 
 impl Kernel {
-    pub(crate) fn of(config: &LaserOdometryConfig) -> Self {
+    fn of(config: &LaserOdometryConfig) -> Self {
         Self {
             huber_m: config.huber_m,
             cutoff_m: config.max_residual_m,
