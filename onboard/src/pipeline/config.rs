@@ -236,9 +236,10 @@ impl Default for LaserOdometryConfig {
             iterations: 8,
             max_correspondence_m: 0.2,
             huber_m: 0.05,
-            // 0.03 m and 0.1 rad (README, "The map's pull cut off"): 10 seeds per pass against
-            // Huber alone, mean ATE lower on all five with exact wheels; with the assumed wheel
-            // errors lower on three, the off-roader the same, the sedan 21.9 -> 23.7 mm.
+            // 0.03 m and 0.1 rad (docs/pipeline-history.md, "The map's pull cut off"): 10 seeds
+            // per pass against Huber alone, mean ATE lower on all five with exact wheels; with
+            // the assumed wheel errors lower on three, the off-roader the same, the sedan 21.9 ->
+            // 23.7 mm.
             max_residual_m: 0.03,
             max_residual_rad: 0.1,
             lm_lambda: 1e-3,
@@ -358,12 +359,12 @@ impl Default for FusionConfig {
             translation_tolerance_mps: [0.02, 0.02, 0.02],
             // Off: on the slip-free simulated passes the per-frame estimate drifted off 1 (the
             // scan-to-scan x is too noisy for a few per cent); the long-baseline estimator below
-            // replaces it. See `slip` and the README's pipeline figures.
+            // replaces it. See `slip` and docs/pipeline-history.md, "Slip".
             wheel_scale_frames: 0,
             wheel_scale_baseline_m: 0.25,
             wheel_scale_min_slip: 0.025,
             // Zero: held laser yaw rates integrated to 50 degrees on the simulated offroader
-            // (laser only); see `fusion` and the README's laser odometry figures.
+            // (laser only); see `fusion` and docs/pipeline-history.md, "Yaw under a car".
             rotation_gap_decay: 0.0,
             // Off: on the simulated passes (laser + wheel, seed 1, 9e49f69) it cut the largest yaw
             // error (suv-offset 2.8 -> 0.35 degrees) but rejected some of the map's drift
@@ -459,7 +460,7 @@ impl Default for MapConfig {
             // 39/32 mm (offroader, pickup, sedan, suv-offset, van), angle sd below 0.15 on 6 of 15
             // instead of 5; on the simulator's exact wheels (with `fusion.wheel-yaw-bias`) 10 ->
             // 12 of 15, but the pickup's ATE 7.7 -> 23 mm and suv-offset's departure +0.17 ->
-            // +0.69 (README, "Wheel errors and the wheel prior").
+            // +0.69 (docs/pipeline-history.md, "Wheel errors and the wheel prior").
             wheel_prior: true,
             // 0.01 and 0.04 tried on seeds 1-3 with the wheel errors: neither better on most.
             residual_sigma_m: 0.02,

@@ -176,7 +176,7 @@ impl Fusion {
     /// wheels' yaw wander decorrelates within a baseline (0.3 s in the assumed model against
     /// 0.8-1 s). Counted like the scale's, the estimate was never applied on the simulated
     /// passes with the assumed wheel errors (it had been on 13 of 50, and lowered their mean
-    /// ATE; see the README).
+    /// ATE; see docs/pipeline-history.md).
     pub fn wheel_yaw_bias_radps(&self) -> f64 {
         if !self.config.wheel_yaw_bias || self.yaw_measurements.len() < MIN_YAW_MEASUREMENTS {
             return 0.0;

@@ -28,7 +28,7 @@
 //! laser x still beats a guessed speed; at 0.3 the simulated van's laser-only run stood still for
 //! its first 3 s and lost 0.8 m) and `unaided-degeneracy-rotation-eigen-min-m2` (1.0 m^2: a weak
 //! laser yaw is worse than the straight-driving prior, which fusion then fills with zero rate).
-//! Measured on the five simulated passes; see the README's laser odometry section.
+//! Measured on the five simulated passes; see docs/pipeline-history.md, "Laser odometry".
 //!
 //! **Gating a registration by another source** ([`keep_components`]): the pipeline may reject
 //! some components of a registration after the fact (the scan-to-map refinement against wheel
