@@ -385,6 +385,19 @@ mod tests {
 
     use crate::angles::tyres::tests::gauss as gaussian;
 
+    /// The lower envelope in 5 mm bins (half window 5 mm, support 5), sorted by x.
+    fn envelope_5mm(points: &[V3], noise_m: f64) -> Vec<EnvelopeSample> {
+        let params = EnvelopeParams {
+            bin_m: 0.005,
+            half_window_m: 0.005,
+            min_support: 5,
+            noise_m,
+        };
+        let mut samples = lower_envelope(points, params).samples;
+        samples.sort_by(|a, b| a.x_m.total_cmp(&b.x_m));
+        samples
+    }
+
     /// A flat surface at 0.40 m ending at x = 0.30 m, seen by grazing rays: 8 mm of noise along x,
     /// 1 mm along z. The envelope's last bin ends more than 2 mm off the edge (which of the
     /// smear's sparse bins survives the support and fringe rules); the count places the edge
@@ -403,14 +416,7 @@ mod tests {
                 ]);
             }
         }
-        let params = EnvelopeParams {
-            bin_m: 0.005,
-            half_window_m: 0.005,
-            min_support: 5,
-            noise_m: 0.002,
-        };
-        let mut samples = lower_envelope(&points, params).samples;
-        samples.sort_by(|a, b| a.x_m.total_cmp(&b.x_m));
+        let mut samples = envelope_5mm(&points, 0.002);
         let last = samples.last().map(|s| s.x_m).unwrap_or_default();
         assert!(
             (last - 0.30).abs() > 0.002,
@@ -463,14 +469,7 @@ mod tests {
                 points.push([0.30 + 0.004 * gaussian(&mut rng), y, z]);
             }
         }
-        let params = EnvelopeParams {
-            bin_m: 0.005,
-            half_window_m: 0.005,
-            min_support: 5,
-            noise_m: 0.002,
-        };
-        let mut samples = lower_envelope(&points, params).samples;
-        samples.sort_by(|a, b| a.x_m.total_cmp(&b.x_m));
+        let mut samples = envelope_5mm(&points, 0.002);
         assert!(refine_end(&mut samples, &points, 1.0, 0.0, 0.002, 0.005).is_none());
     }
 
@@ -497,14 +496,7 @@ mod tests {
                 points.push([0.30 + 0.008 * gaussian(&mut rng), y, z]);
             }
         }
-        let params = EnvelopeParams {
-            bin_m: 0.005,
-            half_window_m: 0.005,
-            min_support: 5,
-            noise_m: 0.006,
-        };
-        let mut samples = lower_envelope(&points, params).samples;
-        samples.sort_by(|a, b| a.x_m.total_cmp(&b.x_m));
+        let mut samples = envelope_5mm(&points, 0.006);
         let edge = refine_end(&mut samples, &points, 1.0, 0.0, 0.006, 0.005)
             .expect("a face under a quarter of the count is refined");
         assert!((edge.x_m - 0.30).abs() < 0.0015, "{edge:?}");
