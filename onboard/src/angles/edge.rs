@@ -50,9 +50,9 @@
 //! edge a few millimetres outward (the off-roader's front bumper: +4..+8 mm, its height lifted
 //! with it); the line assumes the last few centimetres of the surface are straight. The
 //! simulated SUV's front end (a 0.31 slope meeting a face, 1.5 cm range noise) still comes out
-//! about 1 cm outward on oracle clouds (approach -0.27 degree): most of it is the density trend
-//! (without the trend the SUV reads -0.21 / -0.20 degree at both ends, but the off-roader's
-//! approach -0.34), not checked further.
+//! about 1 cm outward on oracle clouds (approach -0.27 degree); about half of that is the
+//! density trend (without it the SUV's approach reads -0.15, but the off-roader's -0.33), the
+//! rest not traced.
 
 use super::envelope::EnvelopeSample;
 use super::geom::V3;

@@ -278,11 +278,11 @@ pub fn residuals_at(
 /// Why: under a car the wrong correspondences are silhouettes. The map's corner line runs round
 /// the far side of a cylinder lying across the path (a differential), seen from elsewhere, 5-15
 /// cm from where this scan grazes it, and such residuals point along the travel; with Huber alone
-/// each still pulled by the kernel's width, all the same way (docs/pipeline-history.md, "The map's
-/// pull cut off"). The lever-arm term keeps the residuals a drifted yaw moves (the far tyres' sides),
-/// which hold the map's yaw against the wheels' (a plain cutoff lost them: ATE up to twice as
-/// high with the assumed wheel errors), while residuals along the travel near the centre line
-/// get the tight cutoff.
+/// each still pulled by the kernel's width, all the same way (docs/pipeline-history.md, "The
+/// map's pull cut off"). The lever-arm term keeps the residuals a drifted yaw moves (the far
+/// tyres' sides), which hold the map's yaw against the wheels' (a plain cutoff lost them: ATE up
+/// to twice as high with the assumed wheel errors), while residuals along the travel near the
+/// centre line get the tight cutoff.
 #[derive(Debug, Clone, Copy, PartialEq)]
 struct Kernel {
     huber_m: f64,
