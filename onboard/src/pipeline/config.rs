@@ -318,6 +318,12 @@ pub struct FusionConfig {
     /// fraction (and by more than three standard errors); see `fusion`. 0.025: approaching a car
     /// the measurements read up to 2 % short on slip-free simulated passes (the off-roader).
     pub wheel_scale_min_slip: f64,
+    /// Seconds of lidar frames kept from the start of the run so that, once the long-baseline
+    /// wheel scale is first significant, steps 2-7 run again over them with that scale from the
+    /// first frame (0: off). The slip of the travel before the scale is significant (about a
+    /// metre) otherwise stays in the trajectory and the cloud. Frames are kept until then or
+    /// until this window has passed, whichever is first (a VLP-16 second is about 7 MB).
+    pub slip_replay_s: f64,
     /// Rotation rates (rx, ry, rz) that no source determines come from the constant-velocity
     /// reference multiplied by this factor per frame: 1 holds the reference's rate (translation
     /// always does), 0 takes zero (the robot drives straight by design). See `fusion`.
@@ -363,6 +369,7 @@ impl Default for FusionConfig {
             wheel_scale_frames: 0,
             wheel_scale_baseline_m: 0.25,
             wheel_scale_min_slip: 0.025,
+            slip_replay_s: 8.0,
             // Zero: held laser yaw rates integrated to 50 degrees on the simulated offroader
             // (laser only); see `fusion` and docs/pipeline-history.md, "Yaw under a car".
             rotation_gap_decay: 0.0,

@@ -152,6 +152,9 @@ pub struct Fusion {
     /// `(wheel turn - laser turn, duration)` of the latest long-baseline measurements that
     /// determined the yaw (radians, seconds), with their intervals.
     yaw_measurements: VecDeque<Baseline>,
+    /// A wheel scale known from an earlier pass over the same frames (the pipeline's slip
+    /// replay), applied while this fusion's own measurements are not yet significant.
+    preset_scale: Option<f64>,
 }
 
 impl Fusion {
@@ -163,7 +166,15 @@ impl Fusion {
             scale_pairs: VecDeque::new(),
             scale_measurements: VecDeque::new(),
             yaw_measurements: VecDeque::new(),
+            preset_scale: None,
         }
+    }
+
+    /// Apply `scale` as the wheel scale until this fusion's own long-baseline estimate is
+    /// significant (then that one): the pipeline's slip replay starts its second pass with the
+    /// scale the first pass measured.
+    pub fn preset_wheel_scale(&mut self, scale: f64) {
+        self.preset_scale = Some(scale.clamp(WHEEL_SCALE_RANGE.0, WHEEL_SCALE_RANGE.1));
     }
 
     /// The wheels' yaw-rate bias, rad/s (what they report minus what the laser measured, per
@@ -214,7 +225,8 @@ impl Fusion {
 
     /// The current wheel scale factor: laser distance over wheel distance. 1 until there is
     /// enough evidence, while the long-baseline estimate is not significant, and when both
-    /// estimators are off (see the module docs).
+    /// estimators are off (see the module docs); a preset scale
+    /// ([`Fusion::preset_wheel_scale`]) instead of 1 in the long-baseline cases.
     pub fn wheel_scale(&self) -> f64 {
         if self.config.wheel_scale_frames > 0 {
             if self.scale_pairs.len() < MIN_SCALE_PAIRS {
@@ -234,7 +246,7 @@ impl Fusion {
         if significant {
             s.clamp(WHEEL_SCALE_RANGE.0, WHEEL_SCALE_RANGE.1)
         } else {
-            1.0
+            self.preset_scale.unwrap_or(1.0)
         }
     }
 
@@ -817,6 +829,24 @@ mod tests {
         }
         assert_eq!(off.scale_measurements(), 0);
         assert!((off.wheel_scale() - 1.0).abs() < 1e-15);
+    }
+
+    #[test]
+    fn a_preset_scale_holds_until_the_own_estimate_is_significant() {
+        let mut f = Fusion::new(FusionConfig::default());
+        f.preset_wheel_scale(0.97);
+        assert!((f.wheel_scale() - 0.97).abs() < 1e-15);
+        // Too few measurements of its own, and then a significant estimate, which wins.
+        f.add_scale_measurement(0.25 * 0.95, 0.25, apart(0));
+        assert!((f.wheel_scale() - 0.97).abs() < 1e-15);
+        for i in 1..20 {
+            f.add_scale_measurement(0.25 * 0.95, 0.25, apart(i));
+        }
+        assert!((f.wheel_scale() - 0.95).abs() < 1e-9, "{}", f.wheel_scale());
+        // A preset outside the plausible range is clamped like a measured scale.
+        let mut wild = Fusion::new(FusionConfig::default());
+        wild.preset_wheel_scale(0.1);
+        assert!((wild.wheel_scale() - WHEEL_SCALE_RANGE.0).abs() < 1e-15);
     }
 
     #[test]
