@@ -193,6 +193,8 @@ pub struct PipelineStats {
     pub depth_frames: usize,
     /// Depth frames with a visual odometry step.
     pub visual_steps: usize,
+    /// Depth points added to the output cloud (`visual.add-to-cloud`).
+    pub depth_points: usize,
     /// Wheel odometry messages received.
     pub wheel_messages: usize,
     /// Fused components taken from [laser, visual, wheel, reference, zero].
@@ -1030,6 +1032,7 @@ impl Pipeline {
             let Some(pose) = pose_on_trajectory(&self.trajectory, stamp_s) else {
                 continue;
             };
+            self.stats.depth_points += points.len();
             for p in points {
                 self.cloud.add(pose.apply(p));
             }

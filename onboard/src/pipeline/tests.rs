@@ -245,6 +245,45 @@ fn slip_replay_scales_the_travel_before_the_scale_was_significant() {
     assert!(e.contains("fusion.slip-replay-s"), "{e}");
 }
 
+/// The slipping run of [`run`] with a depth frame (the ceiling of the visual odometry tests)
+/// after every lidar frame.
+fn run_with_depth(config: PipelineConfig, frames: usize) -> BuiltCloud {
+    let mut rng = ChaCha8Rng::seed_from_u64(5);
+    let m = &config.mounts;
+    let robot_from_camera = Pose::from_xyz_rpy(m.camera_xyz_m, m.camera_rpy_rad);
+    let mut pipeline = Pipeline::new(config).unwrap();
+    let mut next_wheel = 0_u32;
+    for k in 0..frames {
+        pipeline.push_lidar_frame(frame(k, 0.01, &mut rng)).unwrap();
+        let end_s = (k + 1) as f64 * FRAME_S;
+        while f64::from(next_wheel) * 0.01 <= end_s + 1e-9 {
+            pipeline
+                .push_wheel_odometry(wheel(f64::from(next_wheel) * 0.01, 0.05))
+                .unwrap();
+            next_wheel += 1;
+        }
+        let camera = truth_at(end_s).compose(&robot_from_camera);
+        pipeline
+            .push_depth_frame(visual_odometry::tests::render(&camera, end_s))
+            .unwrap();
+    }
+    pipeline.finish()
+}
+
+#[test]
+fn slip_replay_adds_every_depth_frame_once() {
+    let mut off = PipelineConfig::default();
+    off.fusion.slip_replay_s = 0.0;
+    let without = run_with_depth(off, 45);
+    let with = run_with_depth(PipelineConfig::default(), 45);
+    assert_eq!(with.stats.slip_replays, 1, "{:?}", with.stats);
+    // The depth points the first pass had already put in the cloud are put in again by the
+    // second pass, once: as many as without the replay (the count does not depend on the poses).
+    assert!(without.stats.depth_points > 0, "{:?}", without.stats);
+    assert_eq!(with.stats.depth_points, without.stats.depth_points);
+    assert_eq!(with.stats.depth_frames, 45);
+}
+
 #[test]
 fn laser_only_tracks_the_run() {
     let mut config = PipelineConfig::default();
