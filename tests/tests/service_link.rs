@@ -414,6 +414,12 @@ fn the_handheld_vanishing_mid_run_stops_the_robot() {
     // Wait until the robot moves, then cut the radio.
     let t0 = Instant::now();
     while rig.latest().vx_mps < 0.2 {
+        // A run refused or ended before the robot drove says why (seen once on a loaded
+        // machine as a bare "never drove"; not reproduced since).
+        if handle.is_finished() {
+            let outcome = handle.join().map(|r| r.map(|m| m.result));
+            panic!("the run ended before the robot drove: {outcome:?}");
+        }
         assert!(t0.elapsed() < Duration::from_secs(10), "never drove");
         thread::sleep(Duration::from_millis(20));
     }
