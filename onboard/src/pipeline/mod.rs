@@ -439,9 +439,14 @@ impl Pipeline {
     /// A pipeline with a checked config.
     pub fn new(config: PipelineConfig) -> Result<Self, PipelineError> {
         config.validate()?;
+        Ok(Self::fresh(config))
+    }
+
+    /// A pipeline in its initial state for a checked `config`.
+    fn fresh(config: PipelineConfig) -> Self {
         let m = &config.mounts;
         let robot_from_camera = Pose::from_xyz_rpy(m.camera_xyz_m, m.camera_rpy_rad);
-        Ok(Self {
+        Self {
             robot_from_lidar: Pose::from_xyz_rpy(m.lidar_xyz_m, m.lidar_rpy_rad),
             pending: VecDeque::new(),
             wheel: Vec::new(),
@@ -456,11 +461,16 @@ impl Pipeline {
             robot_from_camera,
             fusion: Fusion::new(config.fusion.clone()),
             previous: None,
-            slip: slip_meter(&config),
+            slip: SlipMeter::new(if config.fusion.use_laser && config.fusion.use_wheel {
+                config.fusion.wheel_scale_baseline_m
+            } else {
+                0.0
+            }),
             last_rate: [0.0; 6],
             map: FeatureMap::new(config.map.feature_voxel_m, config.map.points_per_voxel),
             cloud: CloudAccumulator::new(config.map.output_voxel_m),
-            ground_cloud: ground_cloud(&config),
+            ground_cloud: (config.map.ground_voxel_m > 0.0)
+                .then(|| CloudAccumulator::new(config.map.ground_voxel_m)),
             trajectory: Vec::new(),
             stats: PipelineStats::default(),
             world_ground: None,
@@ -469,7 +479,7 @@ impl Pipeline {
                 ..Replay::default()
             },
             config,
-        })
+        }
     }
 
     /// The trajectory so far.
@@ -618,44 +628,33 @@ impl Pipeline {
 
     /// Steps 2-7 again over the kept frames, from a fresh state whose fusion applies the wheel
     /// scale just found from the first frame on: the travel before the scale was significant is
-    /// then scaled like the rest (the first pass's map, cloud and trajectory are dropped).
+    /// then scaled like the rest (the first pass's map, cloud and trajectory are dropped). The
+    /// inputs not yet used and what was derived from them as they arrived (visual odometry's
+    /// steps) stay.
     fn replay_with_scale(&mut self) {
-        let Replay {
-            frames,
-            depth_points,
-            ..
-        } = std::mem::replace(
-            &mut self.replay,
-            Replay {
-                closed: true,
-                ..Replay::default()
-            },
-        );
-        let scale = self.fusion.wheel_scale();
-        self.fusion = Fusion::new(self.config.fusion.clone());
-        self.fusion.preset_wheel_scale(scale);
-        self.previous = None;
-        self.slip = slip_meter(&self.config);
-        self.last_rate = [0.0; 6];
-        self.map = FeatureMap::new(
-            self.config.map.feature_voxel_m,
-            self.config.map.points_per_voxel,
-        );
-        self.cloud = CloudAccumulator::new(self.config.map.output_voxel_m);
-        self.ground_cloud = ground_cloud(&self.config);
-        self.trajectory.clear();
-        self.world_ground = None;
+        let frames = std::mem::take(&mut self.replay.frames);
+        let flushed_depth = std::mem::take(&mut self.replay.depth_points);
+        let mut fresh = Self::fresh(self.config.clone());
+        fresh.fusion.preset_wheel_scale(self.fusion.wheel_scale());
+        fresh.replay.closed = true;
+        fresh.pending = std::mem::take(&mut self.pending);
+        fresh.wheel = std::mem::take(&mut self.wheel);
+        std::mem::swap(&mut fresh.visual, &mut self.visual);
+        fresh.visual_steps = std::mem::take(&mut self.visual_steps);
+        fresh.last_depth_s = self.last_depth_s;
+        fresh.depth_points = std::mem::take(&mut self.depth_points);
+        for points in flushed_depth.into_iter().rev() {
+            fresh.depth_points.push_front(points);
+        }
         // Message counters stay; the per-frame ones are counted again by the second pass.
-        self.stats = PipelineStats {
+        fresh.stats = PipelineStats {
             depth_frames: self.stats.depth_frames,
             visual_steps: self.stats.visual_steps,
             wheel_messages: self.stats.wheel_messages,
             slip_replays: self.stats.slip_replays + 1,
             ..PipelineStats::default()
         };
-        for points in depth_points.into_iter().rev() {
-            self.depth_points.push_front(points);
-        }
+        *self = fresh;
         for frame in &frames {
             self.process(frame);
         }
@@ -1038,20 +1037,6 @@ impl Pipeline {
             }
         }
     }
-}
-
-/// The slip meter of `config`: off (baseline 0) unless both the laser and the wheels are sources.
-fn slip_meter(config: &PipelineConfig) -> SlipMeter {
-    SlipMeter::new(if config.fusion.use_laser && config.fusion.use_wheel {
-        config.fusion.wheel_scale_baseline_m
-    } else {
-        0.0
-    })
-}
-
-/// The separate accumulator of the output's ground points, if `map.ground-voxel-m` is set.
-fn ground_cloud(config: &PipelineConfig) -> Option<CloudAccumulator> {
-    (config.map.ground_voxel_m > 0.0).then(|| CloudAccumulator::new(config.map.ground_voxel_m))
 }
 
 /// Whether the run's start is kept for a slip replay: the window is set and the long-baseline
