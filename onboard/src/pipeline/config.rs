@@ -322,7 +322,7 @@ pub struct FusionConfig {
     /// wheel scale is first significant, steps 2-7 run again over them with that scale from the
     /// first frame (0: off). The slip of the travel before the scale is significant (about a
     /// metre) otherwise stays in the trajectory and the cloud. Frames are kept until then or
-    /// until this window has passed, whichever is first (a VLP-16 second is about 7 MB).
+    /// until this window has passed, whichever is first (a VLP-16 second is about 7 MB by count: 300,000 points of 24 bytes).
     pub slip_replay_s: f64,
     /// Rotation rates (rx, ry, rz) that no source determines come from the constant-velocity
     /// reference multiplied by this factor per frame: 1 holds the reference's rate (translation
