@@ -304,6 +304,16 @@ impl RunMachine {
         self.abort_with(now_us, "aborted by the operator".to_owned())
     }
 
+    /// The firmware refused a drive command of the active run (`why`: its reason and field, as
+    /// the firmware sent them). Stops the robot and ends the run as aborted, naming the refusal,
+    /// so that it is not mistaken for the operator's abort.
+    pub fn drive_refused(&mut self, now_us: u64, why: &str) -> Vec<Action> {
+        if self.active.is_none() {
+            return vec![Action::Motion(MotionIntent::Stop)];
+        }
+        self.abort_with(now_us, format!("the firmware refused to drive: {why}"))
+    }
+
     fn abort_with(&mut self, now_us: u64, reason: String) -> Vec<Action> {
         let mut out = vec![Action::Motion(MotionIntent::Stop)];
         match self.state.clone() {
@@ -750,6 +760,33 @@ mod tests {
             }
         )));
         assert_eq!(m.phase(), Phase::Aborted);
+    }
+
+    #[test]
+    fn a_refused_drive_stops_and_names_the_firmware_not_the_operator() {
+        let mut m = RunMachine::new(RunConfig::default(), 1);
+        m.start(0, params(0.2, 5.0), 1);
+        let mut obs = healthy();
+        m.tick(10_000, &obs);
+        assert_eq!(m.phase(), Phase::Driving);
+        obs.at_rest = false;
+        let a = m.drive_refused(20_000, "Interlocked esc_feedback");
+        assert_eq!(a[0], Action::Motion(MotionIntent::Stop));
+        obs.at_rest = true;
+        let a = m.tick(40_000, &obs);
+        assert!(
+            a.iter().any(|a| matches!(
+                a,
+                Action::FinishRecording { outcome: Outcome::Aborted(r), .. }
+                    if r == "the firmware refused to drive: Interlocked esc_feedback"
+            )),
+            "{a:?}"
+        );
+        // With no run active it still makes sure the robot stands still.
+        assert_eq!(
+            m.drive_refused(50_000, "OutOfRange vx_mps"),
+            vec![Action::Motion(MotionIntent::Stop)]
+        );
     }
 
     #[test]

@@ -724,16 +724,12 @@ impl Service {
             }
             McuEvent::Status(_) => {}
             McuEvent::Rejected(r) => {
-                let text = format!(
-                    "firmware rejected {:#06x}: {} {}",
-                    r.msg_id,
-                    r.reason,
-                    r.field.as_str()
-                );
+                let why = format!("{} {}", r.reason, r.field.as_str());
+                let text = format!("firmware rejected {:#06x}: {why}", r.msg_id);
                 tracing::warn!("{text}");
                 self.radio.send_log(LogLevel::Warn, &text);
                 if r.msg_id == protocol::ids::DRIVE && self.run.is_active() {
-                    let actions = self.run.abort(now, 0);
+                    let actions = self.run.drive_refused(now, why.trim_end());
                     self.execute(now, actions);
                 }
             }

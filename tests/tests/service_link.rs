@@ -468,6 +468,10 @@ fn the_onboard_killed_mid_run_leaves_an_incomplete_recording_and_the_firmware_st
     });
     let t0 = Instant::now();
     while rig.latest().vx_mps < 0.2 {
+        if handle.is_finished() {
+            let outcome = handle.join().map(|r| r.map(|m| m.result));
+            panic!("the run ended before the robot drove: {outcome:?}");
+        }
         assert!(t0.elapsed() < Duration::from_secs(10), "never drove");
         thread::sleep(Duration::from_millis(20));
     }
