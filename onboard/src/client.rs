@@ -28,6 +28,16 @@ pub enum ClientError {
     /// Nothing answered in time.
     #[error("no answer from the robot within {0:?} (out of range, off, or another pairing key?)")]
     Timeout(Duration),
+    /// The radio gave the command up: none of its retransmissions was acknowledged.
+    #[error(
+        "the robot never acknowledged {what} ({attempts} tries over the radio): out of range, off, or another pairing key?"
+    )]
+    NotDelivered {
+        /// Which command.
+        what: &'static str,
+        /// How many times it was sent.
+        attempts: u32,
+    },
     /// The robot refused the command.
     #[error("the robot refused {what}: {reason} ({detail})")]
     Refused {
@@ -269,7 +279,10 @@ impl Client {
                     return Some(Err(refused("the start", r)));
                 }
                 HandheldEvent::Lost { msg_id, .. } if *msg_id == <SignedStart as Message>::ID => {
-                    return Some(Err(ClientError::Timeout(timeout)));
+                    return Some(Err(ClientError::NotDelivered {
+                        what: "the start",
+                        attempts: HandheldConfig::default().link.max_attempts,
+                    }));
                 }
                 HandheldEvent::Progress(p) => {
                     // Progress is best effort: the run is whichever the first progress of an

@@ -27,7 +27,7 @@ use hil_sim::can_bus::InProcessBus;
 use hil_sim::fil::{Fil, FilConfig, Pacing};
 use hil_sim::pty::MemPipe;
 use hil_sim::robot::PoseSample;
-use onboard::client::{Client, ClientError, Quiet};
+use onboard::client::{Client, ClientError, Observer, Quiet};
 use onboard::cloud::Cloud;
 use onboard::config::{CameraSource, FirmwareConfig, OnboardConfig};
 use onboard::link::sim::{LossyPortPair, PipeConfig};
@@ -37,7 +37,43 @@ use onboard::service::{
 };
 use protocol::auth::{KEY_LEN, Key};
 use protocol::bounded::Text;
-use protocol::radio::{MeasurementResult, ResultWarnings, StartMeasurement, Zone};
+use protocol::common::LogLine;
+use protocol::radio::{MeasurementResult, Progress, ResultWarnings, StartMeasurement, Zone};
+
+/// What the handheld saw, with the time since the trace began: a failed run's panic prints it, so
+/// a run that stalled says in which phase (new phases, logs, preview counts; repeats skipped).
+struct Trace {
+    t0: Instant,
+    lines: Vec<String>,
+}
+
+impl Trace {
+    fn new() -> Self {
+        Self {
+            t0: Instant::now(),
+            lines: Vec::new(),
+        }
+    }
+
+    fn push(&mut self, line: String) {
+        if self.lines.last().is_none_or(|l| !l.ends_with(&line)) {
+            let line = format!("{:.2} s {line}", self.t0.elapsed().as_secs_f64());
+            self.lines.push(line);
+        }
+    }
+}
+
+impl Observer for Trace {
+    fn progress(&mut self, p: &Progress) {
+        self.push(format!("run {} {:?}", p.run_id, p.phase));
+    }
+    fn log(&mut self, l: &LogLine) {
+        self.push(format!("log {:?} {}", l.level, l.text.as_str()));
+    }
+    fn preview(&mut self, received: usize, total: usize) {
+        self.push(format!("preview {received}/{total}"));
+    }
+}
 
 /// A processing double: its "angles" encode what the recording holds.
 struct CountingProcessor {
@@ -301,9 +337,16 @@ fn full_run_over_a_radio_with_20_percent_loss_and_corruption_delivers_the_exact_
     let key = rig.key.clone();
     let mut client = rig.client(key);
     client.connect(Duration::from_secs(10)).unwrap();
+    let mut trace = Trace::new();
     let m = client
-        .measure(params(0.6), 1_000, Duration::from_secs(60), &mut Quiet)
-        .unwrap();
+        .measure(params(0.6), 1_000, Duration::from_secs(60), &mut trace)
+        .unwrap_or_else(|e| {
+            let (up, down) = rig.radio.stats();
+            panic!(
+                "{e}; the handheld saw:\n{}\nradio up {up:?} down {down:?}",
+                trace.lines.join("\n")
+            )
+        });
     let produced = rig.produced.lock().unwrap().clone();
     assert_eq!(produced.len(), 1);
     let mut expect = produced[0].clone();
