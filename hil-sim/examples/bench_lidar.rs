@@ -73,13 +73,13 @@ fn main() -> anyhow::Result<()> {
         let sim = Vlp16Sim::new(
             &scene,
             &scenario.run,
-            scenario.file.lidar.clone(),
+            scenario.lidar_config(),
             scenario.lidar_seed(),
         );
         let full = Vlp16Sim::new(
             &scene,
             &scenario.run,
-            scenario.file.lidar.clone(),
+            scenario.lidar_config(),
             scenario.lidar_seed(),
         )
         .without_culling();

@@ -32,7 +32,7 @@ fn lidar_cloud(scenario: &Scenario, scene: &Scene, every: u64) -> Vec<[f64; 3]> 
     let sim = Vlp16Sim::new(
         scene,
         &scenario.run,
-        scenario.file.lidar.clone(),
+        scenario.lidar_config(),
         scenario.lidar_seed(),
     );
     let mut cloud = Vec::new();

@@ -181,12 +181,7 @@ fn lidar_thread(
     let socket =
         std::net::UdpSocket::bind("127.0.0.1:0").context("binding the lidar's UDP socket")?;
     let scene = crate::world::Scene::from_vehicle(&scenario.vehicle);
-    let sim = Vlp16Sim::new(
-        &scene,
-        live,
-        scenario.file.lidar.clone(),
-        scenario.lidar_seed(),
-    );
+    let sim = Vlp16Sim::new(&scene, live, scenario.lidar_config(), scenario.lidar_seed());
     let mut index = 0u64;
     while !stop.load(Ordering::Relaxed) {
         // Cast a packet once the robot's pose at its time is known (the runner reports every 10 ms).

@@ -23,6 +23,7 @@
 //!
 //! [lidar]                    # crate::vlp16::Vlp16Config, every key optional
 //! rpm = 600
+//! start_azimuth_deg = 90.0   # head azimuth at t = 0; absent: drawn from the seed
 //!
 //! [depth]                    # crate::d435::D435Config, every key optional
 //! fps = 30
@@ -39,7 +40,8 @@
 //!
 //! # Seeds
 //! `seed` feeds independent streams: vibration = `derive_seed(seed, 1)`, lidar = `derive_seed(seed, 2)`,
-//! depth = `derive_seed(seed, 3)`, wheel odometry = `derive_seed(seed, 4)`; changing one sensor's
+//! depth = `derive_seed(seed, 3)`, wheel odometry = `derive_seed(seed, 4)`, the lidar head's
+//! starting azimuth (unless the file sets it) = `derive_seed(seed, 6)`; changing one sensor's
 //! settings never changes another's noise.
 
 use std::path::{Path, PathBuf};
@@ -211,7 +213,7 @@ impl Scenario {
         use onboard::vlp16::{DecoderConfig, FrameAssembler};
 
         use crate::vlp16::{Datagram, Vlp16Sim};
-        let sim = Vlp16Sim::new(scene, &self.run, self.file.lidar.clone(), self.lidar_seed());
+        let sim = Vlp16Sim::new(scene, &self.run, self.lidar_config(), self.lidar_seed());
         // The default decoder configuration is valid; an error here would leave no frames.
         let Ok(mut assembler) = FrameAssembler::new(DecoderConfig::default()) else {
             return Vec::new();
@@ -303,6 +305,18 @@ impl Scenario {
             run,
             duration_s,
         })
+    }
+
+    /// The VLP-16's settings with the head's starting azimuth resolved: the file's
+    /// `start_azimuth_deg`, else drawn uniformly from the seed (so the seeds of a bench sample
+    /// the rotation's phase against the robot's travel, as real passes do).
+    pub fn lidar_config(&self) -> Vlp16Config {
+        let mut c = self.file.lidar.clone();
+        if c.start_azimuth_deg.is_none() {
+            let u = (derive_seed(self.file.seed, 6) >> 11) as f64 / (1u64 << 53) as f64;
+            c.start_azimuth_deg = Some(360.0 * u);
+        }
+        c
     }
 
     /// Seed of the VLP-16's noise.
@@ -474,6 +488,30 @@ fps = 15
         );
         assert!((s.run.heading_rad - std::f64::consts::PI).abs() < 1e-12);
         assert_ne!(s.lidar_seed(), s.depth_seed());
+    }
+
+    #[test]
+    fn the_lidar_phase_is_drawn_per_seed_unless_the_file_sets_it() {
+        let phase = |text: &str, seed: u64| {
+            let mut s = parse(text).expect("valid");
+            s.file.seed = seed;
+            s.lidar_config().start_azimuth_deg.expect("resolved")
+        };
+        let drawn: Vec<f64> = (1..=10).map(|seed| phase(SCENARIO, seed)).collect();
+        assert!(drawn.iter().all(|a| (0.0..360.0).contains(a)), "{drawn:?}");
+        assert_eq!(drawn[2].to_bits(), phase(SCENARIO, 3).to_bits(), "seeded");
+        // Ten draws spread over the circle (not one phase for every seed).
+        let (lo, hi) = drawn
+            .iter()
+            .fold((f64::MAX, f64::MIN), |(l, h), a| (l.min(*a), h.max(*a)));
+        assert!(hi - lo > 180.0, "{drawn:?}");
+        let fixed = SCENARIO.replace("rpm = 1200", "rpm = 1200\nstart_azimuth_deg = 90.0");
+        assert!((phase(&fixed, 1) - 90.0).abs() < 1e-12);
+        assert!((phase(&fixed, 2) - 90.0).abs() < 1e-12);
+        let e = parse(&SCENARIO.replace("rpm = 1200", "rpm = 1200\nstart_azimuth_deg = nan"))
+            .expect_err("not finite")
+            .to_string();
+        assert!(e.contains("lidar.start_azimuth_deg"), "{e}");
     }
 
     #[test]

@@ -243,7 +243,7 @@ pub fn lidar(args: &LidarArgs) -> anyhow::Result<()> {
     let sim = Vlp16Sim::new(
         &scene,
         &motion,
-        scenario.file.lidar.clone(),
+        scenario.lidar_config(),
         scenario.lidar_seed(),
     );
     let mut pcap = match &args.pcap {

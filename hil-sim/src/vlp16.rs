@@ -88,6 +88,11 @@ pub struct Vlp16Config {
     pub clock_offset_us: u64,
     /// One position packet after every this many data packets (0: none).
     pub position_packet_every: u32,
+    /// Head azimuth at simulation time 0, degrees. A real pass starts at whatever phase the
+    /// spinning head has, and the phase decides where the rings' passes land on the vehicle (at
+    /// 5 Hz and 0.35 m/s the robot moves 7 cm per rotation). Absent: a scenario draws it from its
+    /// seed ([`crate::scenario::Scenario::lidar_config`]); the bare sensor starts at 0.
+    pub start_azimuth_deg: Option<f64>,
 }
 
 impl Default for Vlp16Config {
@@ -103,6 +108,7 @@ impl Default for Vlp16Config {
             mount_rpy_deg: [0.0, 0.0, 0.0],
             clock_offset_us: 0,
             position_packet_every: 14,
+            start_azimuth_deg: None,
         }
     }
 }
@@ -136,6 +142,9 @@ impl Vlp16Config {
             .any(|v| !v.is_finite())
         {
             return bad("mount_xyz_m", "mount values must be finite");
+        }
+        if self.start_azimuth_deg.is_some_and(|a| !a.is_finite()) {
+            return bad("start_azimuth_deg", "must be finite");
         }
         Ok(())
     }
@@ -201,6 +210,8 @@ pub struct Vlp16Sim<'a, T: Trajectory> {
     /// Per channel (sequence * 16 + laser): sin and cos of the azimuth turned since the block start.
     channel_offsets: [(f64, f64); 32],
     omega_rad_per_s: f64,
+    /// Head azimuth at t = 0, radians.
+    start_azimuth_rad: f64,
     /// Test only the primitives in the wedge each packet sweeps (see `packet_candidates`).
     culling: bool,
 }
@@ -223,6 +234,7 @@ impl<'a, T: Trajectory> Vlp16Sim<'a, T> {
             robot_from_lidar: config.robot_from_lidar(),
             channel_offsets,
             omega_rad_per_s,
+            start_azimuth_rad: config.start_azimuth_deg.unwrap_or(0.0).to_radians(),
             culling: true,
             config,
             seed,
@@ -237,7 +249,7 @@ impl<'a, T: Trajectory> Vlp16Sim<'a, T> {
 
     /// Sensor azimuth at simulation time `t_s`, radians in `[0, 2 pi)`.
     pub fn azimuth_at(&self, t_s: f64) -> f64 {
-        (self.omega_rad_per_s * t_s).rem_euclid(std::f64::consts::TAU)
+        (self.start_azimuth_rad + self.omega_rad_per_s * t_s).rem_euclid(std::f64::consts::TAU)
     }
 
     /// Data packet `index`, as a repr (emit it with `to_bytes`).
@@ -561,6 +573,29 @@ mod tests {
                     full.data_packet(k),
                     "packet {k} at {rpm} rpm"
                 );
+            }
+        }
+    }
+
+    #[test]
+    fn the_starting_azimuth_turns_every_block() {
+        let scene = Scene::from_vehicle(&test_sedan());
+        let traj = run();
+        let base = Vlp16Sim::new(&scene, &traj, Vlp16Config::default(), 1);
+        let turned = Vlp16Sim::new(
+            &scene,
+            &traj,
+            Vlp16Config {
+                start_azimuth_deg: Some(90.0),
+                ..Vlp16Config::default()
+            },
+            1,
+        );
+        for k in [0, 3, 250] {
+            let (a, b) = (base.data_packet(k), turned.data_packet(k));
+            for (x, y) in a.blocks.iter().zip(&b.blocks) {
+                let d = (i32::from(y.azimuth_raw) - i32::from(x.azimuth_raw)).rem_euclid(36_000);
+                assert!((8_999..=9_001).contains(&d), "packet {k}: {d}");
             }
         }
     }

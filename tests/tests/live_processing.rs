@@ -57,7 +57,7 @@ fn arrivals(duration_s: f64, batched: bool) -> Vec<Arrival> {
     let sim = Vlp16Sim::new(
         &scene,
         &scenario.run,
-        scenario.file.lidar.clone(),
+        scenario.lidar_config(),
         scenario.lidar_seed(),
     );
     let to_us = |s: f64| BASE_US + (s * 1e6) as u64;
