@@ -405,3 +405,36 @@ fn a_noisy_floor_ahead_of_the_vehicle_is_not_underside() {
         );
     }
 }
+
+#[test]
+fn lifted_floor_arcs_are_neither_underside_nor_a_footprint() {
+    // Arcs of floor hits that a frame's small tilt lifted just past the pipeline's 3 cm ground
+    // band (suv-offset seed 6's pipeline cloud: 3.1-3.5 cm up; README "Pipeline"): one across
+    // the band at mid-wheelbase, as dense as a ring's hits; one of single points every 4 cm from
+    // the centreline to the rear right tyre, which chained that tyre's footprint to the centre.
+    let v = synth::sedan();
+    let clean = synth::sample(&v, Scan::noiseless(0.005));
+    let mut lifted = clean.clone();
+    let half = v.body_half_width();
+    for j in 0..=200 {
+        let y = -half + 2.0 * half * f64::from(j) / 200.0;
+        lifted.push([0.3 + 0.002 * f64::from(j % 2), y, 0.033]);
+    }
+    for j in 0..25 {
+        lifted.push([v.rear_x(), -0.04 * f64::from(j), 0.034]);
+    }
+    let a = |c: &[[f64; 3]]| {
+        let r = compute_angles(c, &AnglesConfig::default()).unwrap();
+        assert_eq!(r.tyres.len(), 4, "{:?}", r.warnings);
+        [r.approach, r.breakover, r.departure].map(|f| f.map_or(f64::NAN, |f| f.angle_rad))
+    };
+    let (with, without) = (a(&lifted), a(&clean));
+    for k in 0..3 {
+        assert!(
+            (with[k] - without[k]).abs().to_degrees() < 0.05,
+            "angle {k}: {:.3} deg with the lifted arcs, {:.3} without",
+            with[k].to_degrees(),
+            without[k].to_degrees()
+        );
+    }
+}
