@@ -428,12 +428,14 @@ pub struct MapConfig {
     pub output_max_range_m: f64,
     /// Keep ground points in the output cloud (the angle calculator fits the ground plane).
     pub keep_ground: bool,
-    /// Voxel of the ground points in the output cloud, metres (0: `output-voxel-m`, one
-    /// accumulator for everything). The calculator needs the ground only for its plane, and the
-    /// floor is most of a run's points (about 70 % at 1 cm), so a coarser ground voxel makes the
-    /// cloud, the filter and the calculator several times smaller. 2 cm: the sedan's demo cloud
-    /// 2.7 M -> 1.3 M points, the calculator 3.4 s -> 0.7 s, the same angles within 0.02 degree
-    /// (sedan, van; offline clouds, 2026-11-22).
+    /// Side of the floor's columns in the output cloud, metres: the ground points (each frame's
+    /// plane inliers) become one point per column of this side, their mean
+    /// ([`super::map::FloorAccumulator`]); 0: they go into the output voxels like every other
+    /// point. The calculator needs the ground only for its plane, and the floor is most of a run's
+    /// points (about 70 % at 1 cm), so coarser floor cells make the cloud, the filter and the
+    /// calculator several times smaller. 2 cm (as 3D voxels, before the columns): the sedan's demo
+    /// cloud 2.7 M -> 1.3 M points, the calculator 3.4 s -> 0.7 s, the same angles within 0.02
+    /// degree (sedan, van; offline clouds, 2026-11-22).
     pub ground_voxel_m: f64,
     /// Set each frame's roll, pitch and height from its RANSAC ground plane against the first
     /// frame's (a flat floor is an absolute reference; removes z, roll and pitch drift).

@@ -64,7 +64,7 @@ use self::features::RingPoint;
 use self::fusion::{Fusion, Source, SourceRate};
 use self::geom::{Pose, Twist6, V3, VoxelIndex, norm, voxel_of};
 use self::laser_odometry::{FeatureTarget, GROUND_TAG_BIT};
-use self::map::{CloudAccumulator, FeatureMap};
+use self::map::{CloudAccumulator, FeatureMap, FloorAccumulator};
 use self::registration::{keep_components, register_joint, register_two_step, unaided};
 use self::slip::{Scan, SlipMeter};
 use self::visual_odometry::{VisualOdometry, VisualStep};
@@ -415,7 +415,7 @@ pub struct Pipeline {
     map: FeatureMap,
     cloud: CloudAccumulator,
     /// Ground points of the output when `map.ground-voxel-m` is set (else they go to `cloud`).
-    ground_cloud: Option<CloudAccumulator>,
+    ground_cloud: Option<FloorAccumulator>,
     trajectory: Vec<TrajectoryPoint>,
     stats: PipelineStats,
     /// The ground plane of the first frame, world frame: `(normal, offset)`.
@@ -471,7 +471,7 @@ impl Pipeline {
             map: FeatureMap::new(config.map.feature_voxel_m, config.map.points_per_voxel),
             cloud: CloudAccumulator::new(config.map.output_voxel_m),
             ground_cloud: (config.map.ground_voxel_m > 0.0)
-                .then(|| CloudAccumulator::new(config.map.ground_voxel_m)),
+                .then(|| FloorAccumulator::new(config.map.ground_voxel_m)),
             trajectory: Vec::new(),
             stats: PipelineStats::default(),
             world_ground: None,
@@ -851,7 +851,7 @@ impl Pipeline {
         }
     }
 
-    /// A point of the output cloud, world frame; ground points go to their own voxels if set.
+    /// A point of the output cloud, world frame; ground points go to the floor's columns if set.
     fn add_output(&mut self, p: V3, is_ground: bool) {
         match &mut self.ground_cloud {
             Some(ground) if is_ground => ground.add(p),
