@@ -148,7 +148,16 @@ pub struct RunMeta {
     pub write_errors: Vec<String>,
 }
 
-/// `result.json`: the measurement in radians and, for people, degrees.
+/// A number of `result.json` that JSON has no spelling for (NaN: an angle the calculator could
+/// not determine) is written as `null` by serde_json; read back, `null` is NaN again. Before, such
+/// a `result.json` made the whole run unreadable (`Recording::open_run`: "invalid type: null,
+/// expected f32"), so `passangle replay` and the handheld's fetch refused it.
+fn null_as_nan<'de, D: serde::Deserializer<'de>>(d: D) -> Result<f32, D::Error> {
+    Ok(Option::<f32>::deserialize(d)?.unwrap_or(f32::NAN))
+}
+
+/// `result.json`: the measurement in radians and, for people, degrees; angles that could not be
+/// determined are NaN (`null` in the file).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ResultRecord {
@@ -157,22 +166,31 @@ pub struct ResultRecord {
     /// Vehicle identifier.
     pub vehicle_id: String,
     /// Approach angle, rad.
+    #[serde(deserialize_with = "null_as_nan")]
     pub approach_rad: f32,
     /// Departure angle, rad.
+    #[serde(deserialize_with = "null_as_nan")]
     pub departure_rad: f32,
     /// Ramp breakover angle, rad.
+    #[serde(deserialize_with = "null_as_nan")]
     pub breakover_rad: f32,
     /// Approach angle, degrees (for people; the radians are authoritative).
+    #[serde(deserialize_with = "null_as_nan")]
     pub approach_deg: f32,
     /// Departure angle, degrees.
+    #[serde(deserialize_with = "null_as_nan")]
     pub departure_deg: f32,
     /// Ramp breakover angle, degrees.
+    #[serde(deserialize_with = "null_as_nan")]
     pub breakover_deg: f32,
     /// Smallest ground clearance between the axles, m.
+    #[serde(deserialize_with = "null_as_nan")]
     pub ground_clearance_m: f32,
     /// Wheelbase, m.
+    #[serde(deserialize_with = "null_as_nan")]
     pub wheelbase_m: f32,
     /// Track, m.
+    #[serde(deserialize_with = "null_as_nan")]
     pub track_m: f32,
     /// Points supporting the approach-limiting feature.
     pub approach_support: u16,
@@ -181,6 +199,7 @@ pub struct ResultRecord {
     /// Points supporting the breakover-limiting feature.
     pub breakover_support: u16,
     /// RMS residual of the tyre fits, m.
+    #[serde(deserialize_with = "null_as_nan")]
     pub tyre_fit_rms_m: f32,
     /// Warning names.
     pub warnings: Vec<String>,
@@ -753,6 +772,39 @@ mod tests {
                 .to_string_lossy()
                 .ends_with(".tmp"))
         );
+        fs::remove_dir_all(&root).unwrap();
+    }
+
+    #[test]
+    fn an_undetermined_angle_round_trips_as_null() {
+        let root = tmp("nan");
+        let mut r = RunRecorder::begin(&root, 1, &params(), 1_700_000_000_000_000, "").unwrap();
+        let wire = MeasurementResult {
+            run_id: 1,
+            vehicle_id: Text::truncated("SUV"),
+            approach_rad: f32::NAN,
+            departure_rad: 0.45,
+            breakover_rad: 0.33,
+            ground_clearance_m: 0.25,
+            wheelbase_m: 3.1,
+            track_m: 1.6,
+            approach_support: 0,
+            departure_support: 365,
+            breakover_support: 607,
+            tyre_fit_rms_m: 0.004,
+            warnings: ResultWarnings::LOW_SUPPORT,
+            cloud_points: 1_322_335,
+            preview_chunks: 0,
+        };
+        r.save_result(&ResultRecord::from_wire(&wire));
+        assert!(r.finish(RecordedOutcome::Completed).is_empty());
+        let text = fs::read_to_string(root.join("run-000001/result.json")).unwrap();
+        assert!(text.contains("\"approach_rad\": null"), "{text}");
+        let rec = Recording::open_run(&root, 1).expect("a NaN angle leaves the run readable");
+        let back = rec.result.unwrap().to_wire();
+        assert!(back.approach_rad.is_nan());
+        assert_eq!(back.departure_rad, wire.departure_rad);
+        assert_eq!(back.cloud_points, wire.cloud_points);
         fs::remove_dir_all(&root).unwrap();
     }
 
