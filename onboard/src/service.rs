@@ -733,6 +733,15 @@ impl Service {
                     self.execute(now, actions);
                 }
             }
+            McuEvent::DriveRetried(r) => {
+                let text = format!(
+                    "firmware refused the drive ({} {}): heartbeat late once, sending it again",
+                    r.reason,
+                    r.field.as_str()
+                );
+                tracing::warn!("{text}");
+                self.radio.send_log(LogLevel::Warn, &text);
+            }
             McuEvent::Log(l) => tracing::info!(target: "firmware", "{}", l.text.as_str()),
             McuEvent::Undecodable(e) => tracing::debug!("MCU frame: {e}"),
         }

@@ -10,12 +10,18 @@
 //!   shows `NOT_CONFIGURED`.
 //! - [`MotionIntent::Drive`]: `Drive` is sent at once and again every
 //!   [`McuSessionConfig::resend_us`] while the firmware reports `Idle` (a lost frame). A
-//!   [`Rejected`] drive turns the intent into `Stop` and is reported.
+//!   [`Rejected`] drive turns the intent into `Stop` and is reported, except the first one of an
+//!   intent refused for `HEARTBEAT_LOST` alone: the firmware asks for exactly that (heartbeats
+//!   again, then a new drive command), so the drive is sent once more after `resend_us` and the
+//!   refusal reported as [`McuEvent::DriveRetried`]. A heartbeat that arrived late once (a
+//!   scheduling stall of the onboard over 100 ms) then does not end the run before it started;
+//!   the firmware still moves only on fresh heartbeats.
 //! - [`MotionIntent::Stop`]: `Stop` at once, and again while the firmware reports motion.
 
 use protocol::common::{Heartbeat, Hello, LogLine, Role};
 use protocol::mcu::{
-    Drive, DriveMode, FromFirmware, Interlocks, McuConfig, Odometry, Rejected, Status, Stop,
+    Drive, DriveMode, FromFirmware, Interlocks, McuConfig, Odometry, RejectReason, Rejected,
+    Status, Stop,
 };
 use protocol::{Message, ids};
 
@@ -70,6 +76,8 @@ pub enum McuEvent {
     Status(Status),
     /// A refused command.
     Rejected(Rejected),
+    /// A drive refused for a stale heartbeat, sent once more (see the module docs).
+    DriveRetried(Rejected),
     /// A firmware log line.
     Log(LogLine),
     /// A frame that did not decode (version, id, payload).
@@ -89,6 +97,8 @@ pub struct McuSession {
     next_hello_us: u64,
     next_config_us: u64,
     next_command_us: u64,
+    /// The current drive intent was already sent again after a `HEARTBEAT_LOST` refusal.
+    drive_retried: bool,
 }
 
 impl McuSession {
@@ -105,6 +115,7 @@ impl McuSession {
             next_hello_us: 0,
             next_config_us: 0,
             next_command_us: 0,
+            drive_retried: false,
         }
     }
 
@@ -123,6 +134,7 @@ impl McuSession {
         if intent != self.intent {
             self.intent = intent;
             self.next_command_us = 0;
+            self.drive_retried = false;
         }
     }
 
@@ -186,6 +198,15 @@ impl McuSession {
                     out.push(McuEvent::Status(s));
                 }
                 Ok(FromFirmware::Rejected(r)) => {
+                    let stale_heartbeat = r.reason == RejectReason::Interlocked
+                        && r.field.as_str() == "HEARTBEAT_LOST";
+                    let driving = matches!(self.intent, MotionIntent::Drive { .. });
+                    if r.msg_id == ids::DRIVE && driving && stale_heartbeat && !self.drive_retried {
+                        self.drive_retried = true;
+                        self.next_command_us = now_us + self.config.resend_us;
+                        out.push(McuEvent::DriveRetried(r));
+                        continue;
+                    }
                     if r.msg_id == ids::DRIVE {
                         self.intent = MotionIntent::Stop;
                         self.next_command_us = 0;

@@ -373,6 +373,59 @@ fn rejected_drive_becomes_stop() {
     assert_eq!(s.intent(), MotionIntent::Stop);
 }
 
+#[test]
+fn a_drive_refused_for_a_late_heartbeat_is_sent_once_more() {
+    let heartbeat_lost = |seq| {
+        FromFirmware::Rejected(protocol::mcu::Rejected {
+            msg_id: protocol::ids::DRIVE,
+            seq,
+            reason: protocol::mcu::RejectReason::Interlocked,
+            field: Text::truncated("HEARTBEAT_LOST"),
+        })
+    };
+    let mut s = McuSession::new(mcu_config(), 0);
+    let hello = FromFirmware::Hello(protocol::Hello::new(protocol::Role::Firmware));
+    s.receive(0, &firmware_frame(&hello));
+    s.set_intent(MotionIntent::Drive { vx_mps: 0.3 });
+    let ev = s.receive(1_000, &firmware_frame(&heartbeat_lost(3)));
+    assert!(matches!(&ev[0], McuEvent::DriveRetried(_)), "{ev:?}");
+    assert_eq!(s.intent(), MotionIntent::Drive { vx_mps: 0.3 });
+    // The drive leaves again after `resend_us` (200 ms), not before.
+    let drives_until = |s: &mut McuSession, from: u64, to: u64| {
+        let mut n = 0;
+        for now in (from..to).step_by(1_000) {
+            s.poll(now);
+            let sent = decode_all(&s.transmit(now));
+            n += sent
+                .iter()
+                .filter(|m| matches!(m, ToFirmware::Drive(_)))
+                .count();
+        }
+        n
+    };
+    assert_eq!(drives_until(&mut s, 2_000, 200_000), 0);
+    assert_eq!(drives_until(&mut s, 200_000, 210_000), 1);
+    // The second refusal of the same intent ends it, reported as a rejection.
+    let ev = s.receive(210_000, &firmware_frame(&heartbeat_lost(4)));
+    assert!(matches!(&ev[0], McuEvent::Rejected(_)), "{ev:?}");
+    assert_eq!(s.intent(), MotionIntent::Stop);
+    // A new drive intent gets its own retry; other interlocks get none.
+    s.set_intent(MotionIntent::Drive { vx_mps: 0.3 });
+    let ev = s.receive(220_000, &firmware_frame(&heartbeat_lost(5)));
+    assert!(matches!(&ev[0], McuEvent::DriveRetried(_)), "{ev:?}");
+    s.set_intent(MotionIntent::Stop);
+    s.set_intent(MotionIntent::Drive { vx_mps: 0.3 });
+    let other = FromFirmware::Rejected(protocol::mcu::Rejected {
+        msg_id: protocol::ids::DRIVE,
+        seq: 6,
+        reason: protocol::mcu::RejectReason::Interlocked,
+        field: Text::truncated("ESC_TIMEOUT"),
+    });
+    let ev = s.receive(230_000, &firmware_frame(&other));
+    assert!(matches!(&ev[0], McuEvent::Rejected(_)), "{ev:?}");
+    assert_eq!(s.intent(), MotionIntent::Stop);
+}
+
 // ---- never panics on arbitrary bytes (the fuzz target `link_sessions` does the same) ----
 
 fn all_sessions_eat(data: &[u8], chunk: usize) {
