@@ -281,7 +281,7 @@ impl Client {
                 HandheldEvent::Lost { msg_id, .. } if *msg_id == <SignedStart as Message>::ID => {
                     return Some(Err(ClientError::NotDelivered {
                         what: "the start",
-                        attempts: HandheldConfig::default().link.max_attempts,
+                        attempts: radio.link().config().max_attempts,
                     }));
                 }
                 HandheldEvent::Progress(p) => {

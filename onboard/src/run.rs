@@ -308,9 +308,6 @@ impl RunMachine {
     /// the firmware sent them). Stops the robot and ends the run as aborted, naming the refusal,
     /// so that it is not mistaken for the operator's abort.
     pub fn drive_refused(&mut self, now_us: u64, why: &str) -> Vec<Action> {
-        if self.active.is_none() {
-            return vec![Action::Motion(MotionIntent::Stop)];
-        }
         self.abort_with(now_us, format!("the firmware refused to drive: {why}"))
     }
 
@@ -730,14 +727,20 @@ mod tests {
         ));
     }
 
-    #[test]
-    fn abort_while_driving_stops_first_then_ends_aborted() {
+    /// A machine driving its run since 10 ms, and its observations (robot moving).
+    fn driving() -> (RunMachine, Observations) {
         let mut m = RunMachine::new(RunConfig::default(), 1);
         m.start(0, params(0.2, 5.0), 1);
         let mut obs = healthy();
         m.tick(10_000, &obs);
         assert_eq!(m.phase(), Phase::Driving);
         obs.at_rest = false;
+        (m, obs)
+    }
+
+    #[test]
+    fn abort_while_driving_stops_first_then_ends_aborted() {
+        let (mut m, mut obs) = driving();
         let a = m.abort(20_000, 0);
         assert_eq!(
             a[0],
@@ -764,12 +767,7 @@ mod tests {
 
     #[test]
     fn a_refused_drive_stops_and_names_the_firmware_not_the_operator() {
-        let mut m = RunMachine::new(RunConfig::default(), 1);
-        m.start(0, params(0.2, 5.0), 1);
-        let mut obs = healthy();
-        m.tick(10_000, &obs);
-        assert_eq!(m.phase(), Phase::Driving);
-        obs.at_rest = false;
+        let (mut m, mut obs) = driving();
         let a = m.drive_refused(20_000, "Interlocked esc_feedback");
         assert_eq!(a[0], Action::Motion(MotionIntent::Stop));
         obs.at_rest = true;

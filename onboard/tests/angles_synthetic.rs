@@ -391,15 +391,25 @@ fn a_noisy_floor_ahead_of_the_vehicle_is_not_underside() {
         noise_m: Some(0.012),
         ..AnglesConfig::default()
     };
-    let a = |c: &[[f64; 3]]| {
-        let r = compute_angles(c, &config).unwrap();
-        [r.approach, r.breakover, r.departure].map(|f| f.map_or(f64::NAN, |f| f.angle_rad))
-    };
-    let (with, without) = (a(&smeared), a(&clean));
+    let (with, _) = angles_and_tyres(&smeared, &config);
+    let (without, _) = angles_and_tyres(&clean, &config);
+    assert_same_angles(with, without, 0.15, "the noisy floor");
+}
+
+/// Approach, breakover and departure (radians; NaN where not determined) and the tyres fitted.
+fn angles_and_tyres(cloud: &[[f64; 3]], config: &AnglesConfig) -> ([f64; 3], usize) {
+    let r = compute_angles(cloud, config).unwrap_or_else(|e| panic!("{e}"));
+    let angles =
+        [r.approach, r.breakover, r.departure].map(|f| f.map_or(f64::NAN, |f| f.angle_rad));
+    (angles, r.tyres.len())
+}
+
+/// Each angle `with` `what` added to the cloud within `tol_deg` of the one `without`.
+fn assert_same_angles(with: [f64; 3], without: [f64; 3], tol_deg: f64, what: &str) {
     for k in 0..3 {
         assert!(
-            (with[k] - without[k]).abs().to_degrees() < 0.15,
-            "angle {k}: {:.3} deg with the noisy floor, {:.3} without",
+            (with[k] - without[k]).abs().to_degrees() < tol_deg,
+            "angle {k}: {:.3} deg with {what}, {:.3} without",
             with[k].to_degrees(),
             without[k].to_degrees()
         );
@@ -409,7 +419,8 @@ fn a_noisy_floor_ahead_of_the_vehicle_is_not_underside() {
 #[test]
 fn lifted_floor_arcs_are_neither_underside_nor_a_footprint() {
     // Arcs of floor hits that a frame's small tilt lifted just past the pipeline's 3 cm ground
-    // band (suv-offset seed 6's pipeline cloud: 3.1-3.5 cm up; README "Pipeline"): one across
+    // band (suv-offset seed 6's pipeline cloud: 3.1-3.5 cm up; docs/pipeline-history.md, "The
+    // lidar's phase drawn per seed"): one across
     // the band at mid-wheelbase, as dense as a ring's hits; one of single points every 4 cm from
     // the centreline to the rear right tyre, which chained that tyre's footprint to the centre.
     let v = synth::sedan();
@@ -423,18 +434,9 @@ fn lifted_floor_arcs_are_neither_underside_nor_a_footprint() {
     for j in 0..25 {
         lifted.push([v.rear_x(), -0.04 * f64::from(j), 0.034]);
     }
-    let a = |c: &[[f64; 3]]| {
-        let r = compute_angles(c, &AnglesConfig::default()).unwrap();
-        assert_eq!(r.tyres.len(), 4, "{:?}", r.warnings);
-        [r.approach, r.breakover, r.departure].map(|f| f.map_or(f64::NAN, |f| f.angle_rad))
-    };
-    let (with, without) = (a(&lifted), a(&clean));
-    for k in 0..3 {
-        assert!(
-            (with[k] - without[k]).abs().to_degrees() < 0.05,
-            "angle {k}: {:.3} deg with the lifted arcs, {:.3} without",
-            with[k].to_degrees(),
-            without[k].to_degrees()
-        );
-    }
+    let config = AnglesConfig::default();
+    let (with, tyres) = angles_and_tyres(&lifted, &config);
+    assert_eq!(tyres, 4, "a footprint lost to the chain");
+    let (without, _) = angles_and_tyres(&clean, &config);
+    assert_same_angles(with, without, 0.05, "the lifted arcs");
 }

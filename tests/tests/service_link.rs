@@ -307,6 +307,25 @@ impl Rig {
         *self.truth.lock().unwrap().last().unwrap()
     }
 
+    /// Waits up to 10 s for the robot to cruise; a run that ended before it drove says why
+    /// (under load the firmware once refused the drive for a late heartbeat, which was a bare
+    /// "never drove" before).
+    fn wait_until_driving<R: std::fmt::Debug>(
+        &self,
+        handle: JoinHandle<Result<R, ClientError>>,
+    ) -> JoinHandle<Result<R, ClientError>> {
+        let t0 = Instant::now();
+        while self.latest().vx_mps < 0.2 {
+            if handle.is_finished() {
+                let outcome = handle.join();
+                panic!("the run ended before the robot drove: {outcome:?}");
+            }
+            assert!(t0.elapsed() < Duration::from_secs(10), "never drove");
+            thread::sleep(Duration::from_millis(20));
+        }
+        handle
+    }
+
     fn wait_firmware_ready(&self) {
         // The service needs the firmware's hello, config and a status before checks pass.
         thread::sleep(Duration::from_millis(800));
@@ -455,17 +474,7 @@ fn the_handheld_vanishing_mid_run_stops_the_robot() {
         client.measure(params(5.0), 1_000, Duration::from_secs(30), &mut Quiet)
     });
     // Wait until the robot moves, then cut the radio.
-    let t0 = Instant::now();
-    while rig.latest().vx_mps < 0.2 {
-        // A run refused or ended before the robot drove says why (seen once on a loaded
-        // machine as a bare "never drove"; not reproduced since).
-        if handle.is_finished() {
-            let outcome = handle.join().map(|r| r.map(|m| m.result));
-            panic!("the run ended before the robot drove: {outcome:?}");
-        }
-        assert!(t0.elapsed() < Duration::from_secs(10), "never drove");
-        thread::sleep(Duration::from_millis(20));
-    }
+    let handle = rig.wait_until_driving(handle);
     rig.radio.set_cut(true);
     let cut_at = Instant::now();
     while rig.latest().vx_mps.abs() > 0.005 {
@@ -509,15 +518,7 @@ fn the_onboard_killed_mid_run_leaves_an_incomplete_recording_and_the_firmware_st
     let handle = thread::spawn(move || {
         client.measure(params(5.0), 1_000, Duration::from_secs(8), &mut Quiet)
     });
-    let t0 = Instant::now();
-    while rig.latest().vx_mps < 0.2 {
-        if handle.is_finished() {
-            let outcome = handle.join().map(|r| r.map(|m| m.result));
-            panic!("the run ended before the robot drove: {outcome:?}");
-        }
-        assert!(t0.elapsed() < Duration::from_secs(10), "never drove");
-        thread::sleep(Duration::from_millis(20));
-    }
+    let handle = rig.wait_until_driving(handle);
     thread::sleep(Duration::from_millis(1_500));
     rig.crash.store(true, Ordering::Relaxed);
     let killed_at = Instant::now();

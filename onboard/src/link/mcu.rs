@@ -11,11 +11,13 @@
 //! - [`MotionIntent::Drive`]: `Drive` is sent at once and again every
 //!   [`McuSessionConfig::resend_us`] while the firmware reports `Idle` (a lost frame). A
 //!   [`Rejected`] drive turns the intent into `Stop` and is reported, except the first one of an
-//!   intent refused for `HEARTBEAT_LOST` alone: the firmware asks for exactly that (heartbeats
+//!   intent refused naming `HEARTBEAT_LOST`: the firmware asks for exactly that (heartbeats
 //!   again, then a new drive command), so the drive is sent once more after `resend_us` and the
 //!   refusal reported as [`McuEvent::DriveRetried`]. A heartbeat that arrived late once (a
 //!   scheduling stall of the onboard over 100 ms) then does not end the run before it started;
-//!   the firmware still moves only on fresh heartbeats.
+//!   the firmware still moves only on fresh heartbeats. The firmware names only the first
+//!   interlock that blocks, so if another one blocks too the retry is refused again, and that
+//!   second refusal ends the intent.
 //! - [`MotionIntent::Stop`]: `Stop` at once, and again while the firmware reports motion.
 
 use protocol::common::{Heartbeat, Hello, LogLine, Role};
@@ -199,7 +201,7 @@ impl McuSession {
                 }
                 Ok(FromFirmware::Rejected(r)) => {
                     let stale_heartbeat = r.reason == RejectReason::Interlocked
-                        && r.field.as_str() == "HEARTBEAT_LOST";
+                        && Interlocks::HEARTBEAT_LOST.names().next() == Some(r.field.as_str());
                     let driving = matches!(self.intent, MotionIntent::Drive { .. });
                     if r.msg_id == ids::DRIVE && driving && stale_heartbeat && !self.drive_retried {
                         self.drive_retried = true;

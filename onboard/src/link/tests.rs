@@ -358,36 +358,35 @@ fn mcu_session_hello_config_drive_stop_and_heartbeats() {
     assert!(!s.firmware_ok(2_000_000), "status too old");
 }
 
+/// The firmware's refusal of drive `seq`.
+fn drive_rejected(seq: u16, reason: protocol::mcu::RejectReason, field: &str) -> Vec<u8> {
+    firmware_frame(&FromFirmware::Rejected(protocol::mcu::Rejected {
+        msg_id: protocol::ids::DRIVE,
+        seq,
+        reason,
+        field: Text::truncated(field),
+    }))
+}
+
 #[test]
 fn rejected_drive_becomes_stop() {
     let mut s = McuSession::new(mcu_config(), 0);
     s.set_intent(MotionIntent::Drive { vx_mps: 5.0 });
-    let rej = FromFirmware::Rejected(protocol::mcu::Rejected {
-        msg_id: protocol::ids::DRIVE,
-        seq: 3,
-        reason: protocol::mcu::RejectReason::OutOfRange,
-        field: Text::truncated("vx_mps"),
-    });
-    let ev = s.receive(0, &firmware_frame(&rej));
+    let rej = drive_rejected(3, protocol::mcu::RejectReason::OutOfRange, "vx_mps");
+    let ev = s.receive(0, &rej);
     assert!(matches!(&ev[0], McuEvent::Rejected(r) if r.field.as_str() == "vx_mps"));
     assert_eq!(s.intent(), MotionIntent::Stop);
 }
 
 #[test]
 fn a_drive_refused_for_a_late_heartbeat_is_sent_once_more() {
-    let heartbeat_lost = |seq| {
-        FromFirmware::Rejected(protocol::mcu::Rejected {
-            msg_id: protocol::ids::DRIVE,
-            seq,
-            reason: protocol::mcu::RejectReason::Interlocked,
-            field: Text::truncated("HEARTBEAT_LOST"),
-        })
-    };
+    use protocol::mcu::RejectReason::Interlocked;
+    let heartbeat_lost = |seq| drive_rejected(seq, Interlocked, "HEARTBEAT_LOST");
     let mut s = McuSession::new(mcu_config(), 0);
     let hello = FromFirmware::Hello(protocol::Hello::new(protocol::Role::Firmware));
     s.receive(0, &firmware_frame(&hello));
     s.set_intent(MotionIntent::Drive { vx_mps: 0.3 });
-    let ev = s.receive(1_000, &firmware_frame(&heartbeat_lost(3)));
+    let ev = s.receive(1_000, &heartbeat_lost(3));
     assert!(matches!(&ev[0], McuEvent::DriveRetried(_)), "{ev:?}");
     assert_eq!(s.intent(), MotionIntent::Drive { vx_mps: 0.3 });
     // The drive leaves again after `resend_us` (200 ms), not before.
@@ -406,22 +405,16 @@ fn a_drive_refused_for_a_late_heartbeat_is_sent_once_more() {
     assert_eq!(drives_until(&mut s, 2_000, 200_000), 0);
     assert_eq!(drives_until(&mut s, 200_000, 210_000), 1);
     // The second refusal of the same intent ends it, reported as a rejection.
-    let ev = s.receive(210_000, &firmware_frame(&heartbeat_lost(4)));
+    let ev = s.receive(210_000, &heartbeat_lost(4));
     assert!(matches!(&ev[0], McuEvent::Rejected(_)), "{ev:?}");
     assert_eq!(s.intent(), MotionIntent::Stop);
     // A new drive intent gets its own retry; other interlocks get none.
     s.set_intent(MotionIntent::Drive { vx_mps: 0.3 });
-    let ev = s.receive(220_000, &firmware_frame(&heartbeat_lost(5)));
+    let ev = s.receive(220_000, &heartbeat_lost(5));
     assert!(matches!(&ev[0], McuEvent::DriveRetried(_)), "{ev:?}");
     s.set_intent(MotionIntent::Stop);
     s.set_intent(MotionIntent::Drive { vx_mps: 0.3 });
-    let other = FromFirmware::Rejected(protocol::mcu::Rejected {
-        msg_id: protocol::ids::DRIVE,
-        seq: 6,
-        reason: protocol::mcu::RejectReason::Interlocked,
-        field: Text::truncated("ESC_TIMEOUT"),
-    });
-    let ev = s.receive(230_000, &firmware_frame(&other));
+    let ev = s.receive(230_000, &drive_rejected(6, Interlocked, "ESC_TIMEOUT"));
     assert!(matches!(&ev[0], McuEvent::Rejected(_)), "{ev:?}");
     assert_eq!(s.intent(), MotionIntent::Stop);
 }

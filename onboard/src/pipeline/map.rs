@@ -114,16 +114,16 @@ impl Block {
 /// 3D voxels (the accumulator before 2026-11-25) a column kept one centroid per 2 cm of height,
 /// and floor hits that a frame's small pitch error had lifted 2-3.5 cm kept their own layer
 /// (suv-offset with the lidar phase drawn per seed: up to 570 points 2-5 cm up between the axles
-/// on seeds 4-9, none left with the columns except 70 on seed 6 that were not ground-classified;
-/// such points, 3.1-3.5 cm up, became seed 6's breakover witness at -16 degrees, which the
-/// calculator's 4.5 cm body cut now handles). Averaged into their columns they sink toward the
+/// on seeds 4-9; with the columns at most 11 left 2-3 cm up, and 70 on seed 6 3-5 cm up, which
+/// the averaging did not touch, so they were not ground points; those, 3.1-3.5 cm up, became seed
+/// 6's breakover witness at -16 degrees, which the calculator's 4.5 cm body cut now handles). Averaged into their columns they sink toward the
 /// floor by the share of the column's hits they are.
 ///
 /// Implementation: a column is a voxel of a [`CloudAccumulator`] in coordinates where heights are
 /// compressed into one voxel layer (`z' = cell / 2 + z * cell / (2 * FLOOR_HALF_RANGE_M)`), so
 /// the floor keeps that accumulator's batched, cache-friendly layout. A first version kept the
 /// columns in a hash map with one lookup per point and cost the off-roader's pass 0.8 ms of
-/// CPU per frame more (4.9-5.4 against 4.1-4.5, pinned to one idle core, 2026-11-25). Floor
+/// CPU per frame more (4.9-5.4 against 4.1-4.5, pinned to one core, alternated, 2026-11-25). Floor
 /// more than [`FLOOR_HALF_RANGE_M`] above or below the first frame's ground splits a column in two
 /// points, as the 3D voxels did.
 #[derive(Debug, Clone)]

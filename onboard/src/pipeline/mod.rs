@@ -28,11 +28,11 @@
 //! by then). The frames of the run's start are kept, and once, when the scale first turns
 //! significant, steps 2-7 run again over them from a fresh state whose fusion applies that
 //! scale from the first frame; then the run goes on. Measured on the simulated suv-offset pass
-//! (3 % slip, 10 seeds, exact wheels): approach error -0.63 / 0.24 -> +0.09 / 0.14 degree
-//! (mean / sd), breakover +0.24 / 0.10 -> +0.19 / 0.07, departure +0.42 / 0.12 -> +0.48 / 0.12,
-//! mean ATE 23.9 -> 25.1 mm (the scale reads 0.2-0.6 % short, which the unscaled first metre had
-//! partly cancelled); the slip-free passes' figures are unchanged to the printed digit (README,
-//! "Evidence").
+//! (3 % slip, 10 seeds, exact wheels, when every seed started the lidar at azimuth 0): approach
+//! error -0.63 / 0.24 -> +0.09 / 0.14 degree (mean / sd), breakover +0.24 / 0.10 -> +0.19 /
+//! 0.07, departure +0.42 / 0.12 -> +0.48 / 0.12, mean ATE 23.9 -> 25.1 mm (the scale reads 0.2-0.6 % short, which the unscaled first metre had
+//! partly cancelled); the slip-free passes' figures were unchanged to the printed digit
+//! (docs/pipeline-history.md, "The evidence tables before the slip replay").
 
 // `!(x > 0.0)` is deliberate throughout: it rejects NaN along with the out-of-range values.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
