@@ -8,8 +8,10 @@
 //!    (or 4 x the slice's median step in sparse clouds), and the ends of every run are silhouette
 //!    candidates ([`slice_edges`]). A seeded RANSAC keeps the circle through three candidates that
 //!    stands on the ground (lowest point within 2 cm above to 15 % of the radius below it), lies
-//!    over the footprint, and explains the most candidates; then geometric least squares on its
-//!    inliers, trimmed at 3 sigma. Candidates lower than 30 % of the centre height are not used:
+//!    over the footprint and is no wider than it at the footprint's top, and explains the most
+//!    slices on each side ([`ground_constrained_ransac`]: tall walls beside the tyre, which the
+//!    depth camera sees, must not win); then geometric least squares on its inliers, trimmed at 3
+//!    sigma. Candidates lower than 30 % of the centre height are not used:
 //!    a loaded tyre is flattened and bulges near the road. Rim edges, body faces, sills and mud
 //!    flaps beside the tyre are candidates too, but no ground-standing circle explains them.
 //!    Known bias: range noise along the rays that graze the tyre's front and back widens every
@@ -40,7 +42,14 @@ pub(crate) struct Seed {
     pub count: usize,
     /// Half chord at the top of the seed slice, for the first radius guess.
     pub half_chord_m: f64,
+    /// The x extent of the points within [`SEED_TOP_M`] of the seed slice's top (`None`: fewer
+    /// than two there): where the tyre's side view crosses that height
+    /// ([`ground_constrained_ransac`]).
+    pub top_x: Option<(f64, f64)>,
 }
+
+/// The seed slice's top layer, metres below `h_hi` ([`Seed::top_x`]).
+const SEED_TOP_M: f64 = 0.015;
 
 /// Find footprint clusters among points (x, y, h) with `h_lo < h < h_hi`; largest first.
 pub(crate) fn find_seeds(points: &[V3], h_lo: f64, h_hi: f64) -> (Vec<Seed>, usize) {
@@ -153,7 +162,7 @@ fn seed_from(points: &[V3], members: &[usize], h_hi: f64) -> Option<Seed> {
         y_max = y_max.max(p[1]);
         sx += p[0];
         sy += p[1];
-        if p[2] > h_hi - 0.015 {
+        if p[2] > h_hi - SEED_TOP_M {
             top_min = top_min.min(p[0]);
             top_max = top_max.max(p[0]);
         }
@@ -173,6 +182,7 @@ fn seed_from(points: &[V3], members: &[usize], h_hi: f64) -> Option<Seed> {
         } else {
             0.5 * (x_max - x_min)
         },
+        top_x: (top_max > top_min).then_some((top_min, top_max)),
     })
 }
 
@@ -227,7 +237,13 @@ pub(crate) fn fit_tyre(points: &[V3], seed: &Seed, params: TyreParams) -> Option
     let r0 = ((seed.half_chord_m.powi(2) + h * h) / (2.0 * h)).clamp(0.15, 1.0);
     let centre_x = 0.5 * (seed.x_min + seed.x_max);
     let edges = slice_edges(&cand, 2.0 * r0 + 0.3, params.gap_m);
-    let mut circle = ground_constrained_ransac(&edges, centre_x, params)?;
+    let footprint = Footprint {
+        centre_x,
+        top: seed
+            .top_x
+            .map(|(lo, hi)| (params.h_hi - 0.5 * SEED_TOP_M, lo, hi)),
+    };
+    let mut circle = ground_constrained_ransac(&edges, &footprint, params)?;
     // Least squares on the RANSAC inliers above the bulge zone of the fitted centre height (a
     // loaded tyre is flattened and bulges near the road), trimmed; repeated as the circle moves.
     let mut used = 0;
@@ -291,7 +307,7 @@ pub(crate) fn slice_edges(cand: &[[f64; 2]], z_max: f64, gap_m: f64) -> Vec<[f64
     let mut keyed: Vec<(i64, [f64; 2])> = cand
         .iter()
         .filter(|p| p[1] < z_max)
-        .map(|p| ((p[1] / SLICE_M).floor() as i64, *p))
+        .map(|p| (slice_of(p[1]), *p))
         .collect();
     keyed.sort_unstable_by(|a, b| a.0.cmp(&b.0).then(a.1[0].total_cmp(&b.1[0])));
     let mut out = Vec::new();
@@ -314,13 +330,48 @@ fn inlier_tolerance(noise_m: f64) -> f64 {
     (3.0 * noise_m).max(0.008)
 }
 
+/// How far above the footprint's top the first point of every RANSAC sample lies at most
+/// ([`ground_constrained_ransac`]), metres.
+const LOW_FLANK_M: f64 = 0.15;
+
+/// What the footprint says about the tyre's circle ([`ground_constrained_ransac`]).
+struct Footprint {
+    /// The footprint's centre along x.
+    centre_x: f64,
+    /// `(h, x_lo, x_hi)`: at height `h` the tyre spans at least `x_lo..x_hi` (the seed slice's
+    /// top layer, [`Seed::top_x`]).
+    top: Option<(f64, f64, f64)>,
+}
+
+/// How far a hypothesis's chord at the footprint's top may reach beyond the points there (metres):
+/// the tread's bulge and the noise keep those points on or outside the tyre's circle, so a circle
+/// wider than them by more than this is not the tyre.
+const FOOTPRINT_CHORD_MARGIN_M: f64 = 0.05;
+
 /// RANSAC over silhouette points (seeded): circles through three of them whose centre lies
-/// within 0.3 m of the footprint's centre along x and that stand on the ground (the lowest point
-/// at most 2 cm below it, a deflection of at most 15 % of the radius). The hypothesis with the
-/// most points within [`inlier_tolerance`] wins (ties: the smaller sum of residuals).
+/// within 0.3 m of the footprint's centre along x, that stand on the ground (the lowest point
+/// at most 2 cm below it, a deflection of at most 15 % of the radius) and whose chord at the
+/// footprint's top reaches at most [`FOOTPRINT_CHORD_MARGIN_M`] beyond the footprint's points
+/// there. The hypothesis with the most [`support`] (slices and sides with an edge within
+/// [`inlier_tolerance`]) wins (ties: the smaller sum of residuals). The first point of every
+/// sample is an edge of the tyre's lower flanks, at most [`LOW_FLANK_M`] above the footprint's
+/// top: every sensor under the car sees them, and walls and arches rarely reach that low.
+///
+/// Why the chord, the support per slice and the sampling: a sensor that sees higher than the
+/// lidar (the D435 pitched up, its points in the cloud) sees the wheel arch's vertical walls fore
+/// and aft of the tyre and the body's end faces. A large circle standing on the ground runs
+/// nearly vertical at its sides over 20-30 cm of height, within the inlier tolerance of two such
+/// walls, and a thin wall gives two run ends per slice. On the simulated `suv-offset` pass (seed
+/// 1, the camera's points in the cloud) 136 wall edges lay on a 0.72 m circle centred 21 cm off
+/// the footprint, against 59 on the tyre's circle: the front tyres were fitted at 0.72 m and the
+/// approach was not found. Near the ground that circle is 40 cm wider than the footprint, which
+/// the lidar sees from close by under every tyre. Smaller circles through one wall pass the chord
+/// test; counting each slice and side once keeps them below the tyre, and with most edges on
+/// walls, samples of three edges from anywhere rarely fell on the tyre alone
+/// (`tall_walls_beside_the_tyre_do_not_make_a_larger_circle` fails without any one of the three).
 fn ground_constrained_ransac(
     edges: &[[f64; 2]],
-    centre_x: f64,
+    footprint: &Footprint,
     params: TyreParams,
 ) -> Option<Circle> {
     const HYPOTHESES: usize = 400;
@@ -329,29 +380,68 @@ fn ground_constrained_ransac(
     }
     let mut rng = ChaCha8Rng::seed_from_u64(params.seed);
     let tol = inlier_tolerance(params.noise_m);
+    let plausible = |c: &Circle| {
+        let stands = c.v - c.r <= 0.02 && c.r - c.v <= 0.15 * c.r;
+        stands
+            && (c.u - footprint.centre_x).abs() <= 0.3
+            && (0.1..=1.2).contains(&c.r)
+            && within_footprint(*c, footprint)
+    };
+    // `edges` run up by slice, so the lower flanks are a prefix.
+    let flank_top = footprint.top.map_or(params.h_hi, |t| t.0) + LOW_FLANK_M;
+    let low = edges.partition_point(|p| p[1] <= flank_top);
+    let first = if low >= 3 { &edges[..low] } else { edges };
     let mut best: Option<(usize, f64, Circle)> = None;
     for _ in 0..HYPOTHESES {
-        let [a, b, c] = [0, 1, 2].map(|_| edges[rng.random_range(0..edges.len())]);
-        let Some(circle) = circle_through(a, b, c) else {
+        let a = first[rng.random_range(0..first.len())];
+        let [b, c] = [0, 1].map(|_| edges[rng.random_range(0..edges.len())]);
+        let Some(circle) = circle_through(a, b, c).filter(plausible) else {
             continue;
         };
-        let stands = circle.v - circle.r <= 0.02 && circle.r - circle.v <= 0.15 * circle.r;
-        if !stands || (circle.u - centre_x).abs() > 0.3 || !(0.1..=1.2).contains(&circle.r) {
-            continue;
-        }
-        let (mut count, mut sum) = (0, 0.0);
-        for p in edges {
-            let d = circle_residual(*p, circle).abs();
-            if d < tol {
-                count += 1;
-                sum += d;
-            }
-        }
+        let (count, sum) = support(edges, circle, tol);
         if best.is_none_or(|(n, s, _)| count > n || (count == n && sum < s)) {
             best = Some((count, sum, circle));
         }
     }
     best.filter(|(n, _, _)| *n >= 6).map(|(_, _, c)| c)
+}
+
+/// How many `(slice, side)` pairs of `edges` (in [`slice_edges`]'s order: by slice, then x) have
+/// an edge within `tol` of `circle`, and the sum of the closest such edge's residuals: a slice
+/// crosses a tyre's outline once on each side of its centre, so a thin vertical wall, whose two
+/// run ends lie on the same circle, counts once per slice, as the outline does.
+fn support(edges: &[[f64; 2]], circle: Circle, tol: f64) -> (usize, f64) {
+    let (mut count, mut sum) = (0, 0.0);
+    for slice in edges.chunk_by(|a, b| slice_of(a[1]) == slice_of(b[1])) {
+        for behind in [true, false] {
+            let closest = slice
+                .iter()
+                .filter(|p| (p[0] < circle.u) == behind)
+                .map(|p| circle_residual(*p, circle).abs())
+                .filter(|d| *d < tol)
+                .min_by(f64::total_cmp);
+            if let Some(d) = closest {
+                count += 1;
+                sum += d;
+            }
+        }
+    }
+    (count, sum)
+}
+
+/// The [`SLICE_M`] slice a height falls in.
+fn slice_of(z: f64) -> i64 {
+    (z / SLICE_M).floor() as i64
+}
+
+/// Whether `circle`'s chord at the footprint's top reaches at most [`FOOTPRINT_CHORD_MARGIN_M`]
+/// beyond the footprint's points there (true when the footprint has no top layer).
+fn within_footprint(circle: Circle, footprint: &Footprint) -> bool {
+    footprint.top.is_none_or(|(h, lo, hi)| {
+        let half = (circle.r.powi(2) - (circle.v - h).powi(2)).max(0.0).sqrt();
+        circle.u - half >= lo - FOOTPRINT_CHORD_MARGIN_M
+            && circle.u + half <= hi + FOOTPRINT_CHORD_MARGIN_M
+    })
 }
 
 /// The circle through three points, `None` if they are (nearly) collinear.
@@ -506,6 +596,10 @@ pub(super) mod tests {
     }
 
     fn fit(points: &[V3], noise_m: f64) -> TyreFit {
+        fit_seeded(points, noise_m, 1)
+    }
+
+    fn fit_seeded(points: &[V3], noise_m: f64, seed: u64) -> TyreFit {
         let (seeds, _) = find_seeds(points, 0.025, 0.08);
         let params = TyreParams {
             h_lo: 0.025,
@@ -513,7 +607,7 @@ pub(super) mod tests {
             gap_m: 0.025,
             noise_m,
             inward_sign: -1.0,
-            seed: 1,
+            seed,
         };
         fit_tyre(points, &seeds[0], params).expect("a tyre fit")
     }
@@ -538,6 +632,35 @@ pub(super) mod tests {
         assert!((f.centre_x + 0.2).abs() < 0.002, "{f:?}");
         assert!((f.loaded_radius_m - 0.32).abs() < 0.003, "{f:?}");
         assert!((f.free_radius_m - 0.335).abs() < 0.003, "{f:?}");
+    }
+
+    #[test]
+    fn tall_walls_beside_the_tyre_do_not_make_a_larger_circle() {
+        // What the D435 pitched up adds to the lidar's view (simulated suv-offset, seed 1): the
+        // wheel arch's back wall 0.5 m behind the axle up to 0.8 m, and the body's front face
+        // 0.92 m ahead up to 1.05 m. A 0.72 m circle standing on the ground explained more of
+        // their run ends than the tyre did.
+        let mut pts = seen_tyre(0.0, 0.343, 0.37, 0.01, 0.004);
+        let mut rng = ChaCha8Rng::seed_from_u64(3);
+        for (x, z_lo, z_hi) in [(-0.5, 0.26, 0.8), (0.92, 0.40, 1.05)] {
+            for i in 0..=((z_hi - z_lo) / 0.005) as usize {
+                for j in 0..=20 {
+                    let (y, z) = (0.70 + 0.01 * f64::from(j), z_lo + 0.005 * i as f64);
+                    pts.push([x + 0.004 * gauss(&mut rng), y, z]);
+                }
+            }
+        }
+        // Every RANSAC seed: the walls supply most of the edges, so the sampling must not find
+        // the tyre by luck.
+        for seed in 1..=20 {
+            let f = fit_seeded(&pts, 0.004, seed);
+            assert!(f.centre_x.abs() < 0.01, "seed {seed}: {f:?}");
+            assert!(
+                (f.loaded_radius_m - 0.343).abs() < 0.01,
+                "seed {seed}: {f:?}"
+            );
+            assert!((f.free_radius_m - 0.37).abs() < 0.015, "seed {seed}: {f:?}");
+        }
     }
 
     #[test]
