@@ -259,7 +259,9 @@ fn camera_thread(
 /// sloped front end at grazing incidence; README, "Demo") but broke the SUV: its rear tyres were
 /// fitted at 0.72 m radius instead of 0.37, the approach was not found and the breakover read
 /// 1.2 degrees low (replayed offline: the same run without the camera's points reads within 0.4).
-/// The pickup pass runs at 0.2 m/s instead (its scenario).
+/// The pickup pass runs at 0.2 m/s instead (its scenario). Since 2026-11-25 both switches are
+/// also the pipeline's defaults (README, next step 5); they stay spelled out here so the demo
+/// keeps measuring laser + wheel if the defaults change again.
 const DEMO_PIPELINE: &str = "[processing.pipeline.fusion]\nuse-visual = false\n[processing.pipeline.visual]\nadd-to-cloud = false\n";
 
 /// Runs the demo; prints progress to stderr unless `quiet`.

@@ -678,7 +678,10 @@ mod tests {
 
     #[test]
     fn a_laser_jump_is_replaced_by_the_closest_source() {
-        let mut f = Fusion::new(FusionConfig::default());
+        let mut f = Fusion::new(FusionConfig {
+            use_visual: true,
+            ..FusionConfig::default()
+        });
         let cruise = [0.0, 0.0, 0.0, 0.3, 0.0, 0.0];
         warm(&mut f, cruise);
         let laser = rate([0.0, 0.0, 0.0, 0.9, 0.0, 0.0]);

@@ -272,10 +272,12 @@ fn run_with_depth(config: PipelineConfig, frames: usize) -> BuiltCloud {
 
 #[test]
 fn slip_replay_adds_every_depth_frame_once() {
-    let mut off = PipelineConfig::default();
+    let mut on = PipelineConfig::default();
+    on.visual.add_to_cloud = true;
+    let mut off = on.clone();
     off.fusion.slip_replay_s = 0.0;
     let without = run_with_depth(off, 45);
-    let with = run_with_depth(PipelineConfig::default(), 45);
+    let with = run_with_depth(on, 45);
     assert_eq!(with.stats.slip_replays, 1, "{:?}", with.stats);
     // The depth points the first pass had already put in the cloud are put in again by the
     // second pass, once: as many as without the replay (the count does not depend on the poses).
