@@ -398,10 +398,10 @@ fn ground_constrained_ransac(
     // `edges` run up by slice, so the lower flanks (whole slices) are a prefix.
     let flank_top = slice_of(footprint.top.map_or(params.h_hi, |t| t.0) + LOW_FLANK_M);
     let low = edges.partition_point(|p| slice_of(p[1]) <= flank_top);
-    let first = if low >= 3 { &edges[..low] } else { edges };
+    let flanks = if low >= 3 { &edges[..low] } else { edges };
     let mut best: Option<(usize, f64, Circle)> = None;
     for _ in 0..HYPOTHESES {
-        let [a, b] = [0, 1].map(|_| first[rng.random_range(0..first.len())]);
+        let [a, b] = [0, 1].map(|_| flanks[rng.random_range(0..flanks.len())]);
         let c = edges[rng.random_range(0..edges.len())];
         let Some(circle) = circle_through(a, b, c).filter(plausible) else {
             continue;
