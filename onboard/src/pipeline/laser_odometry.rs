@@ -173,7 +173,7 @@ fn match_corner(target: &FeatureTarget, p: V3, q: V3, radius_m: f64) -> Option<C
 
 /// One source feature's correspondence and where it was searched.
 #[derive(Clone, Copy)]
-struct Match {
+pub(crate) struct Match {
     /// The source point as moved by the pose of its last search (target frame); `None` before
     /// the first.
     searched_at: Option<V3>,
@@ -424,7 +424,7 @@ pub(crate) const RESEARCH_FRACTION: f64 = 0.025;
 /// An LM step whose rotation (rad) and translation (m) are both shorter than this has converged.
 pub(crate) const CONVERGED_STEP: f64 = 1e-6;
 
-/// What [`solve`] returns: the pose, the per-residual normal matrix (zero outside `active`), the
+/// What [`solve_with`] returns: the pose, the per-residual normal matrix (zero outside `active`), the
 /// residual count and the RMS of the last iteration.
 pub(crate) type Solution = (Pose, [[f64; 6]; 6], usize, f64);
 
@@ -439,17 +439,8 @@ pub(crate) struct SolveStats {
     pub iterations: u32,
 }
 
-/// One LM solve over the parameters in `active` (indices into `[rx, ry, rz, tx, ty, tz]`).
-/// Returns the pose, the per-residual normal matrix restricted to `active`, the residual count
-/// and the RMS.
-///
-/// At most `iterations` LM iterations. Each feature's correspondence is searched at the start and
-/// again only once the feature has moved more than [`RESEARCH_FRACTION`] of the correspondence
-/// radius since its last search; the solve ends when a step is shorter than [`CONVERGED_STEP`]
-/// (or the LM finds no better pose) with every feature searched within that distance of where the
-/// final pose puts it. The normal matrix, residual count and RMS are those of the last iteration:
-/// at the final pose up to the converged step, with correspondences searched within that small
-/// move of it.
+/// [`solve_with`] without guides (tests).
+#[cfg(test)]
 pub(crate) fn solve(
     target: &FeatureTarget,
     planes: &[V3],
@@ -462,7 +453,8 @@ pub(crate) fn solve(
     solve_counted(target, planes, corners, init, active, iterations, config).0
 }
 
-/// [`solve`], also returning how many searches and iterations it took.
+/// [`solve`], also returning how many searches and iterations it took (tests).
+#[cfg(test)]
 pub(crate) fn solve_counted(
     target: &FeatureTarget,
     planes: &[V3],
@@ -509,16 +501,53 @@ fn prior_terms(information: &[[f64; 6]; 6], init: &Pose, pose: &Pose) -> (f64, T
 /// A prior's information matrix and the pose it is centred on.
 type PriorRef<'a> = (&'a [[f64; 6]; 6], &'a Pose);
 
-/// [`solve_counted`] with `guides` (a hold on the undetermined directions, a prior).
+/// One LM solve over the parameters in `active` (indices into `[rx, ry, rz, tx, ty, tz]`), held
+/// by `guides` (to the directions the first iteration determines, by a prior). Returns the pose,
+/// the per-residual normal matrix restricted to `active`, the residual count and the RMS, and
+/// what the solve did.
+///
+/// At most `iterations` LM iterations. Each feature's correspondence is searched at the start and
+/// again only once the feature has moved more than [`RESEARCH_FRACTION`] of the correspondence
+/// radius since its last search; the solve ends when a step is shorter than [`CONVERGED_STEP`]
+/// (or the LM finds no better pose) with every feature searched within that distance of where the
+/// final pose puts it. The normal matrix, residual count and RMS are those of the last iteration:
+/// at the final pose up to the converged step, with correspondences searched within that small
+/// move of it.
 pub(crate) fn solve_with(
     target: &FeatureTarget,
-    (planes, corners): (&[V3], &[V3]),
+    features: (&[V3], &[V3]),
     init: Pose,
     active: &[usize],
     iterations: u32,
     config: &LaserOdometryConfig,
     guides: &SolveGuides,
 ) -> (Solution, SolveStats) {
+    let (solution, stats, _) = solve_warm(
+        target,
+        features,
+        init,
+        active,
+        (iterations, config),
+        guides,
+        Vec::new(),
+    );
+    (solution, stats)
+}
+
+/// [`solve_with`] starting from the correspondences `warm` of an earlier solve against the same
+/// `target` (the first `warm.len()` source features, in the same order): a feature whose
+/// correspondence was searched within [`RESEARCH_FRACTION`] of the radius of where `init` puts it
+/// keeps it, as it would between two iterations of one solve. Returns the final correspondences
+/// too (for a later solve's `warm`).
+pub(crate) fn solve_warm(
+    target: &FeatureTarget,
+    (planes, corners): (&[V3], &[V3]),
+    init: Pose,
+    active: &[usize],
+    (iterations, config): (u32, &LaserOdometryConfig),
+    guides: &SolveGuides,
+    warm: Vec<Match>,
+) -> (Solution, SolveStats, Vec<Match>) {
     let k = Kernel::of(config);
     let mut projection: Option<[[f64; 6]; 6]> = None;
     let radius_m = config.max_correspondence_m;
@@ -530,12 +559,20 @@ pub(crate) fn solve_with(
     let mut last_n = 0;
     let mut rms = f64::NAN;
     let mut stats = SolveStats::default();
-    let mut corr = Vec::new();
     let unsearched = Match {
         searched_at: None,
         found: None,
     };
-    let mut matches = vec![unsearched; planes.len() + corners.len()];
+    let mut matches = warm;
+    matches.truncate(planes.len() + corners.len());
+    // The cutoffs depend on the solve's centre: those of kept correspondences are this solve's.
+    for m in &mut matches {
+        if let (Some(q), Some(c)) = (m.searched_at, m.found.as_mut()) {
+            c.cutoff_m = k.cutoff(q, centre, c.direction);
+        }
+    }
+    matches.resize(planes.len() + corners.len(), unsearched);
+    let mut corr: Vec<Correspondence> = matches.iter().filter_map(|m| m.found).collect();
     let features = (planes, corners);
     for _ in 0..iterations {
         let searched = refresh(
@@ -606,7 +643,7 @@ pub(crate) fn solve_with(
             }
         }
     }
-    ((pose, h, last_n, rms), stats)
+    ((pose, h, last_n, rms), stats, matches)
 }
 
 /// One Levenberg-Marquardt step over `active` on a fixed correspondence set (and the prior's
@@ -747,6 +784,41 @@ pub(crate) mod tests {
 
     fn error_of(pose: &Pose, truth: &Pose) -> Twist6 {
         pose.compose(&truth.inverse()).to_increment()
+    }
+
+    #[test]
+    fn a_warm_solve_searches_only_the_features_that_moved() {
+        // A cold solve's correspondences, handed to a second solve from where the first ended:
+        // every feature is where it was searched, so nothing is searched again and the pose holds.
+        let truth = Pose::from_xyz_rpy([0.03, -0.01, 0.004], [0.002, -0.001, 0.01]);
+        let (planes, corners) = scene(true);
+        let target = target_of(&planes, &corners);
+        let (sp, sc) = (moved(&planes, &truth), moved(&corners, &truth));
+        let config = LaserOdometryConfig::default();
+        let guides = SolveGuides::default();
+        let run = |init: Pose, warm: Vec<Match>| {
+            solve_warm(
+                &target,
+                (&sp, &sc),
+                init,
+                &ALL,
+                (30, &config),
+                &guides,
+                warm,
+            )
+        };
+        let ((cold, ..), cold_stats, matches) = run(Pose::IDENTITY, Vec::new());
+        assert!(cold_stats.queries > sp.len() + sc.len(), "{cold_stats:?}");
+        let ((warm, ..), warm_stats, _) = run(cold, matches.clone());
+        assert_eq!(warm_stats.queries, 0, "{warm_stats:?}");
+        let moved_by = error_of(&warm, &cold);
+        assert!(moved_by.iter().all(|e| e.abs() < 1e-4), "{moved_by:?}");
+        // The planes' correspondences alone, from 2 cm further on: the planes (all moved past the
+        // re-search distance) and the corners (never searched) are searched once each.
+        let shifted = Pose::from_xyz_rpy([0.02, 0.0, 0.0], [0.0; 3]).compose(&cold);
+        let planes_only = matches[..sp.len()].to_vec();
+        let (_, stats, _) = run(shifted, planes_only);
+        assert!(stats.queries >= sp.len() + sc.len(), "{stats:?}");
     }
 
     #[test]
