@@ -5,6 +5,7 @@
 //! true increment. No fusion, no map, no feedback: what is left is the registration's own error.
 //!
 //! Run: `cargo run --release -p hil-sim --example diag_laser_odometry -- SCENARIO [--duration-s S]
+//! [--from-s S]
 //! [--prior truth|zero|wheel] [--frames] [--explain [--dump GROUP]] [--no-corners] [--no-planes]
 //! [--mixed-planes] [--stride K] [--straight-deskew] [--map [--free]] [--config FILE]`
 //! (SCENARIO: a file stem under `hil-sim/scenarios`, e.g. `sedan-pass`).
@@ -169,6 +170,12 @@ fn main() -> anyhow::Result<()> {
             .cloned()
     };
     let duration_s: Option<f64> = flag("--duration-s").map(|s| s.parse()).transpose()?;
+    // `--from-s S`: evaluate (and explain) only the frames from S seconds on; the earlier ones
+    // are still prepared, as targets and for the map.
+    let from_s: f64 = flag("--from-s")
+        .map(|s| s.parse())
+        .transpose()?
+        .unwrap_or(0.0);
     let prior_mode = flag("--prior").unwrap_or_else(|| "truth".into());
     let per_frame = args.iter().any(|a| a == "--frames");
     let no_corners = args.iter().any(|a| a == "--no-corners");
@@ -265,6 +272,7 @@ fn main() -> anyhow::Result<()> {
             &config,
         );
         if history.len() == stride.max(1)
+            && frame.stamp_s >= from_s
             && let Some(prev) = history.front()
         {
             let truth_inc = true_increment(prev.stamp_s, current.stamp_s);
