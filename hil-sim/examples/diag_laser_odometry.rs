@@ -5,8 +5,7 @@
 //! true increment. No fusion, no map, no feedback: what is left is the registration's own error.
 //!
 //! Run: `cargo run --release -p hil-sim --example diag_laser_odometry -- SCENARIO [--duration-s S]
-//! [--from-s S]
-//! [--prior truth|zero|wheel] [--frames] [--explain [--dump GROUP]] [--no-corners] [--no-planes]
+//! [--from-s S] [--prior truth|zero|wheel] [--frames] [--explain [--dump GROUP]] [--no-corners] [--no-planes]
 //! [--mixed-planes] [--stride K] [--straight-deskew] [--map [--free]] [--config FILE]`
 //! (SCENARIO: a file stem under `hil-sim/scenarios`, e.g. `sedan-pass`).
 //! `--frames` prints one line per frame; the summary gives the mean (bias) and RMS of the error per

@@ -424,8 +424,8 @@ pub(crate) const RESEARCH_FRACTION: f64 = 0.025;
 /// An LM step whose rotation (rad) and translation (m) are both shorter than this has converged.
 pub(crate) const CONVERGED_STEP: f64 = 1e-6;
 
-/// What [`solve_with`] returns: the pose, the per-residual normal matrix (zero outside `active`), the
-/// residual count and the RMS of the last iteration.
+/// What [`solve_with`] returns: the pose, the per-residual normal matrix (zero outside
+/// `active`), the residual count and the RMS of the last iteration.
 pub(crate) type Solution = (Pose, [[f64; 6]; 6], usize, f64);
 
 /// What one solve did, for tests and diagnostics.
