@@ -74,36 +74,97 @@ const BLOCK_VOXELS: usize = 1 << (3 * BLOCK_BITS);
 /// Points buffered before they are sorted into the blocks (about one 10 Hz VLP-16 frame).
 const BATCH: usize = 16_384;
 
-/// The voxels of one block that hold points: `slots` maps a voxel's index within the block to
-/// 1 + its cell's index in `cells` (0: empty), so a block's cells sit together in memory.
+/// How an accumulator groups its voxels into blocks of [`BLOCK_VOXELS`]: it maps a voxel to
+/// "block space", whose coordinates are grouped `1 << BLOCK_BITS` to a block edge.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Blocking {
+    /// Block space is voxel space: blocks of 8 x 8 x 8 voxels, for surfaces in any direction.
+    Cubes,
+    /// Blocks of 16 x 32 x 1 voxels, for a height field one voxel thick (the floor's columns):
+    /// as cubes it would fill one layer in eight of each block, so a frame's floor points spread
+    /// over eight times the blocks and cache lines. Block space takes the lowest bit of x and
+    /// the lowest two of y into z: `(x >> 1, y >> 2, z * 8 + (x & 1) + 2 * (y & 3))`. A one-to-one
+    /// map for `|z| < 2^28` voxels (the floor's squashed heights are within a few voxels of 0).
+    Sheets,
+}
+
+impl Blocking {
+    fn block_space_of(self, v: [i32; 3]) -> [i32; 3] {
+        match self {
+            Self::Cubes => v,
+            Self::Sheets => [
+                v[0] >> 1,
+                v[1] >> 2,
+                v[2].wrapping_shl(3) | (v[0] & 1) | ((v[1] & 3) << 1),
+            ],
+        }
+    }
+
+    fn voxel_of_block_space(self, b: [i32; 3]) -> [i32; 3] {
+        match self {
+            Self::Cubes => b,
+            Self::Sheets => [
+                b[0].wrapping_shl(1) | (b[2] & 1),
+                b[1].wrapping_shl(2) | ((b[2] >> 1) & 3),
+                b[2] >> 3,
+            ],
+        }
+    }
+}
+
+/// The voxels of one block that hold points: the sum of each one's points and their count.
 #[derive(Debug, Clone)]
 struct Block {
-    slots: Box<[u16; BLOCK_VOXELS]>,
-    /// Per occupied voxel: the sum of its points and their count.
+    /// Sparse blocks (surfaces through 3D space fill a few of a block's voxels): a voxel's index
+    /// within the block to 1 + its cell's index in `cells` (0: empty), so a block's occupied
+    /// cells sit together in memory. `None`: a dense block, `cells[local]` is the voxel at
+    /// `local` (the floor's sheets, which fill most of theirs), one dependent load less per
+    /// point.
+    slots: Option<Box<[u16; BLOCK_VOXELS]>>,
     cells: Vec<(V3, u32)>,
 }
 
 impl Block {
-    fn new() -> Self {
-        Self {
-            slots: Box::new([0; BLOCK_VOXELS]),
-            cells: Vec::new(),
+    fn new(blocking: Blocking) -> Self {
+        match blocking {
+            Blocking::Cubes => Self {
+                slots: Some(Box::new([0; BLOCK_VOXELS])),
+                cells: Vec::new(),
+            },
+            Blocking::Sheets => Self {
+                slots: None,
+                cells: vec![([0.0; 3], 0); BLOCK_VOXELS],
+            },
         }
     }
 
     /// Add `p` to the voxel at `local`; true when that voxel was empty.
     fn add(&mut self, local: usize, p: V3) -> bool {
-        let slot = &mut self.slots[local];
-        let new = *slot == 0;
-        if new {
-            self.cells.push(([0.0; 3], 0));
-            // At most BLOCK_VOXELS (512) cells per block: fits u16.
-            *slot = self.cells.len() as u16;
-        }
-        let cell = &mut self.cells[usize::from(*slot) - 1];
+        let cell = match &mut self.slots {
+            None => &mut self.cells[local],
+            Some(slots) => {
+                let slot = &mut slots[local];
+                if *slot == 0 {
+                    self.cells.push(([0.0; 3], 0));
+                    // At most BLOCK_VOXELS (512) cells per block: fits u16.
+                    *slot = self.cells.len() as u16;
+                }
+                &mut self.cells[usize::from(*slot) - 1]
+            }
+        };
+        let new = cell.1 == 0;
         cell.0 = add(cell.0, p);
         cell.1 += 1;
         new
+    }
+
+    /// The cell of the voxel at `local`, if it holds points.
+    fn cell(&self, local: usize) -> Option<(V3, u32)> {
+        let cell = match &self.slots {
+            None => self.cells[local],
+            Some(slots) => *self.cells.get(usize::from(slots[local]).checked_sub(1)?)?,
+        };
+        (cell.1 > 0).then_some(cell)
     }
 }
 
@@ -116,16 +177,19 @@ impl Block {
 /// (suv-offset with the lidar phase drawn per seed: up to 570 points 2-5 cm up between the axles
 /// on seeds 4-9; with the columns at most 11 left 2-3 cm up, and 70 on seed 6 3-5 cm up, which
 /// the averaging did not touch, so they were not ground points; those, 3.1-3.5 cm up, became seed
-/// 6's breakover witness at -16 degrees, which the calculator's 4.5 cm body cut now handles). Averaged into their columns they sink toward the
-/// floor by the share of the column's hits they are.
+/// 6's breakover witness at -16 degrees, which the calculator's 4.5 cm body cut now handles).
+/// Averaged into their columns they sink toward the floor by the share of the column's hits they
+/// are.
 ///
 /// Implementation: a column is a voxel of a [`CloudAccumulator`] in coordinates where heights are
 /// compressed into one voxel layer (`z' = cell / 2 + z * cell / (2 * FLOOR_HALF_RANGE_M)`), so
 /// the floor keeps that accumulator's batched, cache-friendly layout. A first version kept the
 /// columns in a hash map with one lookup per point and cost the off-roader's pass 0.8 ms of
-/// CPU per frame more (4.9-5.4 against 4.1-4.5, pinned to one core, alternated, 2026-11-25). Floor
-/// more than [`FLOOR_HALF_RANGE_M`] above or below the first frame's ground splits a column in two
-/// points, as the 3D voxels did.
+/// CPU per frame more (4.9-5.4 against 4.1-4.5, pinned to one core, alternated, 2026-11-25). Its
+/// blocks are dense sheets ([`Blocking::Sheets`]): about 3 % less CPU per frame on the pickup's
+/// 5 Hz frames than sparse cubes (seeds 1-3, least of three interleaved runs, 2026-11-26), the
+/// same output. Floor more than [`FLOOR_HALF_RANGE_M`] above or below the first frame's ground
+/// splits a column in two points, as the 3D voxels did.
 #[derive(Debug, Clone)]
 pub struct FloorAccumulator {
     cell_m: f64,
@@ -143,7 +207,7 @@ impl FloorAccumulator {
         Self {
             cell_m,
             squash: cell_m / (2.0 * FLOOR_HALF_RANGE_M),
-            columns: CloudAccumulator::new(cell_m),
+            columns: CloudAccumulator::with_blocking(cell_m, Blocking::Sheets),
         }
     }
 
@@ -188,6 +252,8 @@ impl FloorAccumulator {
 #[derive(Debug, Clone)]
 pub struct CloudAccumulator {
     voxel_m: f64,
+    blocking: Blocking,
+    /// Keyed by block in block space ([`Blocking`]).
     blocks: VoxelMap<Block>,
     /// Occupied voxels in `blocks`.
     len: usize,
@@ -198,8 +264,13 @@ pub struct CloudAccumulator {
 impl CloudAccumulator {
     /// An empty accumulator with voxels of `voxel_m`.
     pub fn new(voxel_m: f64) -> Self {
+        Self::with_blocking(voxel_m, Blocking::Cubes)
+    }
+
+    fn with_blocking(voxel_m: f64, blocking: Blocking) -> Self {
         Self {
             voxel_m,
+            blocking,
             blocks: VoxelMap::default(),
             len: 0,
             pending: Vec::new(),
@@ -210,7 +281,12 @@ impl CloudAccumulator {
     pub fn add(&mut self, p: V3) {
         self.pending.push(p);
         if self.pending.len() >= BATCH {
-            self.len += add_grouped(&mut self.blocks, None, &self.pending, self.voxel_m);
+            self.len += add_grouped(
+                &mut self.blocks,
+                None,
+                &self.pending,
+                (self.voxel_m, self.blocking),
+            );
             self.pending.clear();
         }
     }
@@ -223,7 +299,7 @@ impl CloudAccumulator {
             &mut overlay,
             Some(&self.blocks),
             &self.pending,
-            self.voxel_m,
+            (self.voxel_m, self.blocking),
         );
         (overlay, added)
     }
@@ -257,6 +333,21 @@ impl CloudAccumulator {
             .filter(|(k, _)| !overlay.contains_key(*k));
         let mut blocks: Vec<([i32; 3], &Block)> =
             flushed.chain(&overlay).map(|(k, b)| (*k, b)).collect();
+        if self.blocking != Blocking::Cubes {
+            let mut keyed: Vec<([i32; 3], V3)> = Vec::with_capacity(self.len + added);
+            for (key, block) in blocks {
+                for local in 0..BLOCK_VOXELS {
+                    if let Some(cell) = block.cell(local) {
+                        let voxel = self
+                            .blocking
+                            .voxel_of_block_space(voxel_of_local(key, local));
+                        keyed.push((voxel, centroid(cell)));
+                    }
+                }
+            }
+            keyed.sort_unstable_by_key(|&(voxel, _)| voxel);
+            return keyed.into_iter().map(|(_, p)| p).collect();
+        }
         blocks.sort_unstable_by_key(|(key, _)| *key);
         let mut out = Vec::with_capacity(self.len + added);
         for slab in blocks.chunk_by(|a, b| a.0[0] == b.0[0]) {
@@ -265,12 +356,10 @@ impl CloudAccumulator {
                     for local_y in 0..SIDE {
                         let first = (local_x * SIDE + local_y) * SIDE;
                         for (_, block) in row {
-                            for &slot in &block.slots[first..first + SIDE] {
-                                if slot != 0 {
-                                    let (sum, n) = block.cells[usize::from(slot) - 1];
-                                    out.push(scale(sum, 1.0 / f64::from(n)));
-                                }
-                            }
+                            out.extend(
+                                (first..first + SIDE)
+                                    .filter_map(|local| block.cell(local).map(centroid)),
+                            );
                         }
                     }
                 }
@@ -280,6 +369,11 @@ impl CloudAccumulator {
     }
 }
 
+/// The mean of a cell's points.
+fn centroid((sum, n): (V3, u32)) -> V3 {
+    scale(sum, 1.0 / f64::from(n))
+}
+
 /// Add `points` (in order within each voxel) to `blocks`, block by block; a block not yet in
 /// `blocks` starts as a copy of the one in `base`, if any, else empty. Returns the number of
 /// voxels that were empty before.
@@ -287,7 +381,7 @@ fn add_grouped(
     blocks: &mut VoxelMap<Block>,
     base: Option<&VoxelMap<Block>>,
     points: &[V3],
-    voxel_m: f64,
+    (voxel_m, blocking): (f64, Blocking),
 ) -> usize {
     // Counting sort of the points by block, stable (first-seen block order).
     let mut group_of_block: VoxelMap<u32> = VoxelMap::default();
@@ -298,7 +392,7 @@ fn add_grouped(
     // Consecutive points (one firing's column, neighbours on a ring) often share a block.
     let mut last: Option<([i32; 3], usize)> = None;
     for &p in points {
-        let voxel = voxel_of(p, voxel_m);
+        let voxel = blocking.block_space_of(voxel_of(p, voxel_m));
         let key = voxel.map(|c| c >> BLOCK_BITS);
         let group = match last {
             Some((last_key, group)) if last_key == key => group,
@@ -331,7 +425,7 @@ fn add_grouped(
         let block = blocks.entry(*key).or_insert_with(|| {
             base.and_then(|b| b.get(key))
                 .cloned()
-                .unwrap_or_else(Block::new)
+                .unwrap_or_else(|| Block::new(blocking))
         });
         for &i in &order[starts[group]..starts[group + 1]] {
             added += usize::from(block.add(local_index(voxels[i]), points[i]));
@@ -348,9 +442,7 @@ fn local_index(voxel: [i32; 3]) -> usize {
         .fold(0, |acc, &c| (acc << BLOCK_BITS) | (c & mask) as usize)
 }
 
-/// The voxel at index `local` (see [`local_index`]) of block `block_key` (the inverse the
-/// layout's tests check `local_index` against).
-#[cfg(test)]
+/// The voxel at index `local` (see [`local_index`]) of block `block_key`.
 fn voxel_of_local(block_key: [i32; 3], local: usize) -> [i32; 3] {
     let mask = (1 << BLOCK_BITS) - 1;
     std::array::from_fn(|k| {
@@ -475,6 +567,53 @@ mod tests {
             assert!(local < BLOCK_VOXELS);
             assert_eq!(voxel_of_local(block, local), voxel);
         }
+    }
+
+    #[test]
+    fn sheet_block_space_round_trips() {
+        for voxel in [
+            [0, 0, 0],
+            [-1, -1, -1],
+            [1, 2, 3],
+            [-7, 5, -2],
+            [i32::MIN, i32::MAX, 1 << 27],
+        ] {
+            let b = Blocking::Sheets.block_space_of(voxel);
+            assert_eq!(Blocking::Sheets.voxel_of_block_space(b), voxel);
+        }
+        // A block holds 16 x 32 columns of one layer.
+        let block = |v: [i32; 3]| Blocking::Sheets.block_space_of(v).map(|c| c >> BLOCK_BITS);
+        assert_eq!(block([0, 0, 0]), block([15, 31, 0]));
+        assert_ne!(block([0, 0, 0]), block([16, 0, 0]));
+        assert_ne!(block([0, 0, 0]), block([0, 32, 0]));
+        assert_ne!(block([0, 0, 0]), block([0, 0, 1]));
+        assert_ne!(block([0, 0, 0]), block([-1, 0, 0]));
+    }
+
+    #[test]
+    fn sheet_blocks_give_the_centroids_and_order_of_cube_blocks() {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
+        let mut cubes = CloudAccumulator::new(0.02);
+        let mut sheets = CloudAccumulator::with_blocking(0.02, Blocking::Sheets);
+        for i in 0..2 * BATCH + 100 {
+            // A layer one voxel thick around the origin, a few points above and below it.
+            let z = match i % 50 {
+                0 => rng.random_range(-0.1..0.1),
+                _ => rng.random_range(0.0..0.02),
+            };
+            let p = [rng.random_range(-3.0..3.0), rng.random_range(-2.0..2.0), z];
+            cubes.add(p);
+            sheets.add(p);
+            if i == 1000 || i == BATCH + 7 {
+                assert_eq!(sheets.len(), cubes.len(), "after {i} points");
+                assert_eq!(sheets.points(), cubes.points(), "after {i} points");
+            }
+        }
+        let points = cubes.points();
+        assert!(points.len() > 20_000, "{}", points.len());
+        assert_eq!(sheets.len(), cubes.len());
+        assert_eq!(sheets.points(), points);
     }
 
     #[test]

@@ -37,6 +37,7 @@
 
 use std::collections::VecDeque;
 use std::f64::consts::{PI, TAU};
+use std::sync::Arc;
 
 use super::config::LaserOdometryConfig;
 use super::geom::{Pose, V3};
@@ -61,8 +62,9 @@ struct Keyframe {
     wheel: Pose,
     /// The estimated pose at the scan's start.
     world_from_robot: Pose,
-    /// The scan's features (robot frame), indexed as a registration target.
-    target: FeatureTarget,
+    /// The scan's features (robot frame), indexed as a registration target; shared with the
+    /// pipeline's scan-to-scan target, not copied.
+    target: Arc<FeatureTarget>,
 }
 
 /// One scan's features in its robot frame, as the two-step registration takes them.
@@ -187,7 +189,7 @@ impl SlipMeter {
         (frame, stamp_s): (u64, f64),
         wheel: Pose,
         world_from_robot: Pose,
-        target: FeatureTarget,
+        target: Arc<FeatureTarget>,
     ) {
         self.keyframes.push_back(Keyframe {
             frame,
@@ -229,7 +231,12 @@ mod tests {
         let (planes, corners) = scene(true);
         let mut meter = SlipMeter::new(0.25);
         assert!(meter.wants_keyframe(0, &at(0.0)));
-        meter.add_keyframe((0, 0.0), at(0.0), at(0.0), target_of(&planes, &corners));
+        meter.add_keyframe(
+            (0, 0.0),
+            at(0.0),
+            at(0.0),
+            Arc::new(target_of(&planes, &corners)),
+        );
         // The next keyframe is due a quarter baseline and two frames on.
         assert!(!meter.wants_keyframe(5, &at(0.05)));
         assert!(meter.wants_keyframe(5, &at(0.07)));
@@ -287,7 +294,12 @@ mod tests {
         // (the wheels' own distance) and must not count as a measurement.
         let (planes, corners) = scene(false);
         let mut meter = SlipMeter::new(0.25);
-        meter.add_keyframe((0, 0.0), at(0.0), at(0.0), target_of(&planes, &corners));
+        meter.add_keyframe(
+            (0, 0.0),
+            at(0.0),
+            at(0.0),
+            Arc::new(target_of(&planes, &corners)),
+        );
         let truth = at(0.26);
         let (sp, sc) = (moved(&planes, &truth), moved(&corners, &truth));
         let scan = Scan {
