@@ -1096,12 +1096,9 @@ fn scale_twist(t: &Twist6, s: f64) -> Twist6 {
 
 /// One point per occupied voxel (the first seen).
 fn downsample<T: Copy>(points: &[(V3, T)], voxel_m: f64) -> Vec<(V3, T)> {
-    // Sized for every point up front, so the set never rehashes while it fills.
-    let mut seen: std::collections::HashSet<[i32; 3], _> =
-        std::collections::HashSet::with_capacity_and_hasher(
-            points.len(),
-            std::hash::BuildHasherDefault::<geom::FxHasher>::default(),
-        );
+    let mut seen: std::collections::HashSet<[i32; 3], _> = std::collections::HashSet::with_hasher(
+        std::hash::BuildHasherDefault::<geom::FxHasher>::default(),
+    );
     points
         .iter()
         .copied()
