@@ -5,14 +5,16 @@
 //! true increment. No fusion, no map, no feedback: what is left is the registration's own error.
 //!
 //! Run: `cargo run --release -p hil-sim --example diag_laser_odometry -- SCENARIO [--duration-s S]
-//! [--from-s S] [--prior truth|zero|wheel] [--frames] [--explain [--dump GROUP]] [--no-corners] [--no-planes]
-//! [--mixed-planes] [--stride K] [--straight-deskew] [--map [--free]] [--config FILE]`
+//! [--from-s S] [--prior truth|zero|wheel] [--frames] [--explain [--dump GROUP [--dump-every K]]]
+//! [--no-corners] [--no-planes] [--mixed-planes] [--stride K] [--straight-deskew] [--map [--free]]
+//! [--config FILE]`
 //! (SCENARIO: a file stem under `hil-sim/scenarios`, e.g. `sedan-pass`).
 //! `--frames` prints one line per frame; the summary gives the mean (bias) and RMS of the error per
 //! component `[rx, ry, rz, tx, ty, tz]` in mrad and mm per frame, the summed x error over the run
 //! against the distance travelled, and how often each component was degenerate. `--explain` groups
 //! the step-2 residuals at the TRUE pose by feature kind, normal axis and position and prints which
-//! groups pull x (`--dump GROUP` prints every 20th frame's residuals of groups starting so).
+//! groups pull x (`--dump GROUP` prints every 20th frame's residuals of groups starting so,
+//! `--dump-every K` every K-th), then the plane residuals' pull by the fit's tilt and by |r|.
 //! `--no-corners` / `--no-planes` leave a feature kind out of step 2; `--mixed-planes` tags the
 //! ground like any other plane point (the behaviour before `GROUND_TAG_BIT`). `--stride K`
 //! registers against the frame K back (the slip meter's baseline); `--straight-deskew` deskews
@@ -221,6 +223,18 @@ fn main() -> anyhow::Result<()> {
     // Pull on x at the true pose, per group: sum of e_x * r (positive pushes the estimate back).
     let mut pull: std::collections::BTreeMap<String, (f64, usize)> =
         std::collections::BTreeMap::default();
+    // The plane residuals' pull again, by how far the fit's normal is from the nearest axis and
+    // by |r| (a fit through two surfaces at a depth step has a tilted normal and residuals of
+    // millimetres to centimetres at the true pose: docs/pipeline-history.md, "suv-offset's
+    // exit").
+    let mut by_tilt = [(0.0, 0usize); 2];
+    let mut by_size = [(0.0, 0usize); 5];
+    // `--dump-every K`: with `--dump`, every K-th frame (default 20).
+    let dump_every: usize = flag("--dump-every")
+        .map(|s| s.parse())
+        .transpose()?
+        .unwrap_or(20)
+        .max(1);
     // `--stride K`: register each frame against the one K frames back (the slip meter's long
     // baseline is 10-17 frames).
     // `--straight-deskew`: deskew with the true linear velocity only, no rotation (what the
@@ -312,7 +326,9 @@ fn main() -> anyhow::Result<()> {
                         (r.source[0] * 2.0).round() / 2.0,
                         (r.source[2] * 10.0).round() / 10.0
                     );
-                    if dump.as_ref().is_some_and(|d| key.starts_with(d.as_str())) && i % 20 == 0 {
+                    if dump.as_ref().is_some_and(|d| key.starts_with(d.as_str()))
+                        && i % dump_every == 0
+                    {
                         println!(
                             "frame {i} {key} src {:.3?} at {:.3?} dir {:.3?} r {:+.4} anchor {:.3?}",
                             r.source,
@@ -322,9 +338,22 @@ fn main() -> anyhow::Result<()> {
                             r.anchor
                         );
                     }
+                    let g = r.direction[0] * r.residual_m.clamp(-0.05, 0.05);
                     let e = pull.entry(key).or_default();
-                    e.0 += r.direction[0] * r.residual_m.clamp(-0.05, 0.05);
+                    e.0 += g;
                     e.1 += 1;
+                    if !r.corner {
+                        // cos 18 degrees: within 18 degrees of an axis.
+                        let tilted = r.direction[axis].abs() < 0.95;
+                        let size = [0.002, 0.005, 0.01, 0.03]
+                            .iter()
+                            .take_while(|&&edge| r.residual_m.abs() >= edge)
+                            .count();
+                        for bucket in [&mut by_tilt[usize::from(tilted)], &mut by_size[size]] {
+                            bucket.0 += g;
+                            bucket.1 += 1;
+                        }
+                    }
                 }
             }
             let corners: &[V3] = if no_corners { &[] } else { &current.corners };
@@ -408,6 +437,17 @@ fn main() -> anyhow::Result<()> {
         for (k, (g, count)) in v.iter().take(30) {
             println!("{k:32} pull {g:+.4} m over {count} residuals");
         }
+        let [(g0, n0), (g1, n1)] = by_tilt;
+        println!(
+            "planes by normal: within 18 deg of an axis pull {g0:+.4} m over {n0}, tilted more {g1:+.4} m over {n1}"
+        );
+        let labels = ["< 2 mm", "2-5 mm", "5-10 mm", "1-3 cm", ">= 3 cm"];
+        let sizes: Vec<String> = labels
+            .iter()
+            .zip(by_size)
+            .map(|(l, (g, c))| format!("{l} {g:+.4} ({c})"))
+            .collect();
+        println!("planes by |r|: {}", sizes.join(", "));
     }
     let nf = n.max(1) as f64;
     println!("{name}: {n} increments, prior {prior_mode}, travelled {travelled_m:.3} m");
