@@ -55,7 +55,7 @@ use onboard::pipeline::features::{self, RingPoint};
 use onboard::pipeline::geom::{Pose, V3, VoxelIndex, norm, voxel_of};
 use onboard::pipeline::ground;
 use onboard::pipeline::laser_odometry::{
-    FeatureTarget, GROUND_TAG_BIT, register_two_step, residuals_at,
+    FeatureTarget, GROUND_TAG_BIT, Scan, register_two_step, residuals_at,
 };
 use onboard::pipeline::map::FeatureMap;
 use onboard::pipeline::registration::register_joint;
@@ -373,14 +373,12 @@ fn main() -> anyhow::Result<()> {
                     &map_laser,
                 )
             } else {
-                register_two_step(
-                    target,
-                    &current.step1_planes,
-                    if no_planes { &[] } else { &current.planes },
+                let scan = Scan {
+                    step1_planes: &current.step1_planes,
+                    step2_planes: if no_planes { 0 } else { current.planes.len() },
                     corners,
-                    prior,
-                    &config.laser,
-                )
+                };
+                register_two_step(target, scan, prior, &config.laser)
             };
             // Map mode: the refined pose's error in the robot frame, as an increment from the
             // truth; the "true motion" is the frame's true increment.

@@ -24,7 +24,7 @@
 //! **Degeneracy** and the two registrations built from these solves: [`super::registration`].
 
 use super::config::LaserOdometryConfig;
-pub use super::registration::{Registration, register_joint, register_two_step};
+pub use super::registration::{Registration, Scan, register_joint, register_two_step};
 
 use super::geom::{
     Pose, Twist6, V3, VoxelIndex, add, centroid_covariance, cross, dist2, dot, mat_vec, norm,

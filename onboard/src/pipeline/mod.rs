@@ -66,8 +66,9 @@ use self::fusion::{Fusion, Source, SourceRate};
 use self::geom::{Pose, Twist6, V3, VoxelIndex, norm, voxel_of};
 use self::laser_odometry::{FeatureTarget, GROUND_TAG_BIT};
 use self::map::{CloudAccumulator, FeatureMap, FloorAccumulator};
+use self::registration::Scan;
 use self::registration::{keep_components, register_joint, register_two_step, unaided};
-use self::slip::{Scan, SlipMeter};
+use self::slip::SlipMeter;
 use self::visual_odometry::{VisualOdometry, VisualStep};
 use crate::cloud::Cloud;
 use crate::vlp16::Frame;
@@ -731,12 +732,14 @@ impl Pipeline {
         self.stats.corners += feats.corners.len();
         self.stats.planes += feats.planes.len();
 
-        let ground_sample: Vec<V3> = downsample(&feats.ground_candidates, 0.2)
-            .into_iter()
-            .map(|(p, _)| p)
-            .collect();
+        let step1_planes = step1_planes(&feats);
+        let scan = Scan {
+            step1_planes: &step1_planes,
+            step2_planes: feats.planes.len(),
+            corners: &feats.corners,
+        };
         let (mut world_from_robot, chosen, laser_degenerate, refine_rejected) =
-            self.estimate_pose(frame.stamp_s, &feats, &ground_sample);
+            self.estimate_pose(frame.stamp_s, scan);
         if let Some(s) = &split
             && cfg.map.level_with_ground
         {
@@ -784,7 +787,6 @@ impl Pipeline {
             corners: tagged_index(corner_candidates, self.config.laser.max_correspondence_m),
             planes: tagged_index(plane_candidates, self.config.laser.max_correspondence_m),
         });
-        let scan = (&feats, ground_sample.as_slice());
         self.track_slip(frame_index, frame.stamp_s, scan, world_from_robot, target);
     }
 
@@ -796,14 +798,14 @@ impl Pipeline {
         &mut self,
         frame_index: u64,
         stamp_s: f64,
-        (feats, ground_sample): (&features::Features, &[V3]),
+        scan: Scan<'_>,
         world_from_robot: Pose,
         target: Arc<FeatureTarget>,
     ) {
         self.stats.wheel_scale = self.fusion.wheel_scale();
         self.stats.wheel_yaw_bias_radps = self.fusion.wheel_yaw_bias_radps();
         if let Some(wheel) = wheel_pose_at(&self.wheel, stamp_s) {
-            self.measure_slip((stamp_s, &wheel), (feats, ground_sample), &world_from_robot);
+            self.measure_slip((stamp_s, &wheel), scan, &world_from_robot);
             if self.slip.wants_keyframe(frame_index, &wheel) {
                 self.slip.add_keyframe(
                     (frame_index, stamp_s),
@@ -825,17 +827,10 @@ impl Pipeline {
     fn measure_slip(
         &mut self,
         (stamp_s, wheel): (f64, &Pose),
-        (feats, ground_sample): (&features::Features, &[V3]),
+        scan: Scan<'_>,
         world_from_robot: &Pose,
     ) {
         if self.slip.is_due(wheel) {
-            let mut step1_planes = feats.planes.clone();
-            step1_planes.extend_from_slice(ground_sample);
-            let scan = Scan {
-                step1_planes: &step1_planes,
-                planes: &feats.planes,
-                corners: &feats.corners,
-            };
             let measured =
                 self.slip
                     .measure((stamp_s, wheel), world_from_robot, scan, &self.config.laser);
@@ -866,8 +861,7 @@ impl Pipeline {
     fn estimate_pose(
         &mut self,
         stamp_s: f64,
-        feats: &features::Features,
-        ground_sample: &[V3],
+        scan: Scan<'_>,
     ) -> (Pose, [Source; 6], [bool; 6], [bool; 6]) {
         let Some(prev) = &self.previous else {
             return (Pose::IDENTITY, [Source::Zero; 6], [false; 6], [false; 6]);
@@ -878,8 +872,6 @@ impl Pipeline {
         let visual = self.visual_rate(prev.stamp_s, stamp_s);
         let predicted = self.fusion.predict(visual.as_ref(), wheel.as_ref());
         let prior = Pose::from_increment(scale_twist(&predicted, dt));
-        let mut step1_planes = feats.planes.clone();
-        step1_planes.extend_from_slice(ground_sample);
         // Without a measured prior (no wheel or visual odometry over the interval) the degeneracy
         // thresholds trade the laser against the constant-velocity guess instead.
         let laser_config = if wheel.is_none() && visual.is_none() {
@@ -888,16 +880,11 @@ impl Pipeline {
             self.config.laser.clone()
         };
         // Without the laser in fusion (e.g. the demo's wheel-only pipeline) it is not registered.
-        let laser = self.config.fusion.use_laser.then(|| {
-            register_two_step(
-                &prev.target,
-                &step1_planes,
-                &feats.planes,
-                &feats.corners,
-                prior,
-                &laser_config,
-            )
-        });
+        let laser = self
+            .config
+            .fusion
+            .use_laser
+            .then(|| register_two_step(&prev.target, scan, prior, &laser_config));
         let laser_degenerate = laser.map_or([false; 6], |l| l.degenerate);
         if laser_degenerate.iter().any(|&d| d) {
             self.stats.degenerate_frames += 1;
@@ -923,7 +910,7 @@ impl Pipeline {
             .then(|| self.wheel_prior_information(dt));
         let refined = register_joint(
             self.map.target(),
-            (&step1_planes, &feats.corners),
+            (scan.step1_planes, scan.corners),
             predicted_world,
             prior_information,
             self.config.map.iterations,
@@ -1092,6 +1079,18 @@ fn count(counters: &mut [usize; 6], flags: [bool; 6]) {
 
 fn scale_twist(t: &Twist6, s: f64) -> Twist6 {
     t.map(|v| v * s)
+}
+
+/// The two-step registration's step-1 planes ([`Scan`]): the plane features, then one ground
+/// candidate per 0.2 m voxel.
+fn step1_planes(feats: &features::Features) -> Vec<V3> {
+    let mut planes = feats.planes.clone();
+    planes.extend(
+        downsample(&feats.ground_candidates, 0.2)
+            .into_iter()
+            .map(|(p, _)| p),
+    );
+    planes
 }
 
 /// One point per occupied voxel (the first seen).

@@ -209,23 +209,41 @@ pub fn register_joint(
     }
 }
 
-/// Scan-to-scan two-step registration: `prev_from_cur`, starting from and falling back to `prior`.
-/// `step1_planes` (the plane features plus the ground's) fix z, roll and pitch; `planes` and
-/// `corners` then fix x, y and yaw.
+/// One scan's features in its robot frame, as the two-step registration takes them.
+#[derive(Debug, Clone, Copy)]
+pub struct Scan<'a> {
+    /// Step 1's planes (z, roll, pitch): the plane features, then the ground sample.
+    pub step1_planes: &'a [V3],
+    /// How many of `step1_planes`, from the first, step 2 registers (x, y, yaw): the plane
+    /// features' count.
+    pub step2_planes: usize,
+    /// Corner features (step 2).
+    pub corners: &'a [V3],
+}
+
+impl<'a> Scan<'a> {
+    /// Step 2's planes: the first [`Self::step2_planes`] of step 1's.
+    pub fn planes(&self) -> &'a [V3] {
+        &self.step1_planes[..self.step2_planes.min(self.step1_planes.len())]
+    }
+}
+
+/// Scan-to-scan two-step registration of `scan`: `prev_from_cur`, starting from and falling
+/// back to `prior`. Step 1's planes fix z, roll and pitch; step 2's planes and the corners then
+/// fix x, y and yaw.
 pub fn register_two_step(
     target: &FeatureTarget,
-    step1_planes: &[V3],
-    planes: &[V3],
-    corners: &[V3],
+    scan: Scan<'_>,
     prior: Pose,
     config: &LaserOdometryConfig,
 ) -> Registration {
+    let (planes, corners) = (scan.planes(), scan.corners);
     let thresholds = DegeneracyThresholds::of(config);
     let guides = SolveGuides::default();
     let step1 = [0, 1, 5];
     let ((pose1, h1, n1, _), _, mut matches) = solve_warm(
         target,
-        (step1_planes, &[]),
+        (scan.step1_planes, &[]),
         prior,
         &step1,
         (config.iterations, config),
@@ -233,13 +251,9 @@ pub fn register_two_step(
         Vec::new(),
     );
     let (pose1, deg1) = remap(&pose1, &prior, &h1, &step1, thresholds);
-    // Step 2 starts from step 1's plane correspondences (the plane features lead both lists, same
-    // target): only those the step moved by more than the re-search distance are searched again.
-    if step1_planes.starts_with(planes) {
-        matches.truncate(planes.len());
-    } else {
-        matches.clear();
-    }
+    // Step 2 starts from step 1's plane correspondences (its planes lead step 1's, same target):
+    // only those step 1 moved by more than the re-search distance are searched again.
+    matches.truncate(planes.len());
     let step2 = [2, 3, 4];
     let ((pose2, h2, n2, rms_m), _, _) = solve_warm(
         target,
@@ -260,8 +274,17 @@ pub fn register_two_step(
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
+
+    /// A scan without a ground sample: step 1 and step 2 register the same planes.
+    pub(crate) fn scan_of<'a>(planes: &'a [V3], corners: &'a [V3]) -> Scan<'a> {
+        Scan {
+            step1_planes: planes,
+            step2_planes: planes.len(),
+            corners,
+        }
+    }
     use crate::pipeline::laser_odometry::solve_with;
     use crate::pipeline::laser_odometry::tests::{moved, scene, target_of};
 
@@ -279,7 +302,7 @@ mod tests {
             ..LaserOdometryConfig::default()
         };
         for reg in [
-            register_two_step(&target, &sp, &sp, &sc, Pose::IDENTITY, &config),
+            register_two_step(&target, scan_of(&sp, &sc), Pose::IDENTITY, &config),
             register_joint(&target, (&sp, &sc), Pose::IDENTITY, None, 10, &config),
         ] {
             let err = reg.pose.compose(&truth.inverse()).to_increment();
@@ -511,9 +534,7 @@ mod tests {
         let prior = Pose::from_xyz_rpy([0.03, 0.0, 0.0], [0.0, 0.0, 0.0]);
         let reg = register_two_step(
             &target,
-            &sp,
-            &sp,
-            &[],
+            scan_of(&sp, &[]),
             prior,
             &LaserOdometryConfig::default(),
         );

@@ -40,9 +40,9 @@ use std::f64::consts::{PI, TAU};
 use std::sync::Arc;
 
 use super::config::LaserOdometryConfig;
-use super::geom::{Pose, V3};
+use super::geom::Pose;
 use super::laser_odometry::FeatureTarget;
-use super::registration::register_two_step;
+use super::registration::{Scan, register_two_step};
 
 /// Keyframes kept per baseline: one every `baseline / KEYFRAMES_PER_BASELINE`.
 const KEYFRAMES_PER_BASELINE: f64 = 4.0;
@@ -65,17 +65,6 @@ struct Keyframe {
     /// The scan's features (robot frame), indexed as a registration target; shared with the
     /// pipeline's scan-to-scan target, not copied.
     target: Arc<FeatureTarget>,
-}
-
-/// One scan's features in its robot frame, as the two-step registration takes them.
-#[derive(Debug, Clone, Copy)]
-pub struct Scan<'a> {
-    /// Plane features plus the ground sample (step 1: z, roll, pitch).
-    pub step1_planes: &'a [V3],
-    /// Plane features (step 2: x, y, yaw).
-    pub planes: &'a [V3],
-    /// Corner features (step 2).
-    pub corners: &'a [V3],
 }
 
 /// What one long-baseline registration measured ([`SlipMeter::measure`]).
@@ -138,14 +127,7 @@ impl SlipMeter {
             .world_from_robot
             .inverse()
             .compose(world_from_robot);
-        let laser = register_two_step(
-            &keyframe.target,
-            scan.step1_planes,
-            scan.planes,
-            scan.corners,
-            prior,
-            config,
-        );
+        let laser = register_two_step(&keyframe.target, scan, prior, config);
         let wheel_relative = keyframe.wheel.inverse().compose(wheel);
         let wheel_m = wheel_relative.translation;
         let yaw = (!laser.degenerate[2]).then(|| {
@@ -211,6 +193,7 @@ fn travelled(a: &Pose, b: &Pose) -> f64 {
 mod tests {
     use super::*;
     use crate::pipeline::laser_odometry::tests::{moved, scene, target_of};
+    use crate::pipeline::registration::tests::scan_of;
 
     fn at(x_m: f64) -> Pose {
         Pose::from_xyz_rpy([x_m, 0.0, 0.0], [0.0; 3])
@@ -245,11 +228,7 @@ mod tests {
         // Short of the baseline nothing is measured.
         let truth = at(0.2);
         let (sp, sc) = (moved(&planes, &truth), moved(&corners, &truth));
-        let scan = Scan {
-            step1_planes: &sp,
-            planes: &sp,
-            corners: &sc,
-        };
+        let scan = scan_of(&sp, &sc);
         assert!(!meter.is_due(&at(0.2)));
         assert!(
             meter
@@ -259,11 +238,7 @@ mod tests {
         // The robot moved 0.26 m; the wheels (5 % slip), and the estimate built on them, 0.273 m.
         let truth = at(0.26);
         let (sp, sc) = (moved(&planes, &truth), moved(&corners, &truth));
-        let scan = Scan {
-            step1_planes: &sp,
-            planes: &sp,
-            corners: &sc,
-        };
+        let scan = scan_of(&sp, &sc);
         let wheel = at(0.26 * 1.05);
         assert!(meter.is_due(&wheel));
         let measured = meter.measure((1.0, &wheel), &wheel, scan, &config());
@@ -302,11 +277,7 @@ mod tests {
         );
         let truth = at(0.26);
         let (sp, sc) = (moved(&planes, &truth), moved(&corners, &truth));
-        let scan = Scan {
-            step1_planes: &sp,
-            planes: &sp,
-            corners: &sc,
-        };
+        let scan = scan_of(&sp, &sc);
         let wheel = at(0.273);
         assert!(
             meter
