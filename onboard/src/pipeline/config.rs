@@ -409,9 +409,25 @@ impl Default for FusionConfig {
 pub struct MapConfig {
     /// Refine each fused pose against the local feature map.
     pub refine: bool,
-    /// Voxel of the feature map, metres.
+    /// Voxel of the feature map, metres; at least `laser.max-correspondence-m` (a search looks
+    /// into the query's voxel and its 26 neighbours). The map keeps the first `points-per-voxel`
+    /// points of each voxel. 0.2 (0.5 until 2026-11-26): in 0.5 m voxels those were the points
+    /// seen first, from far, 10-20 cm apart, and the refinement's plane and line fits through
+    /// them missed curved and occluding surfaces seen from nearer later. Registered from the
+    /// true pose against a map built at the true poses (`diag_laser_odometry NAME --map
+    /// --free`), the map pulled each frame back along x by 12-48 mm on the five simulated passes
+    /// and its yaw scattered by 4-15 mrad RMS; at 0.2 m by 5-12 mm and 1.3-5.5 mrad. In the
+    /// pipeline (10 seeds per pass, exact wheels) mean ATE 9.6 / 26.0 / 10.0 / 23.0 / 14.7 ->
+    /// 7.1 / 11.4 / 6.2 / 25.8 / 13.5 mm (off-roader, pickup, sedan, suv-offset, van) and sd <
+    /// 0.15 on 14 of 15 angles instead of 12; with the assumed wheel errors 8 of 15 either way.
+    /// The cost: the pickup's frames take about 9 % more CPU (more voxels visited per search).
+    /// A smaller map voxel also anchors the map less: more voxels are filled from later, drifted
+    /// poses (`pipeline::tests`, 5 % slipping wheels: 62 % of their error left after 0.87 m
+    /// against 32 %, of which part was the coarse map's backward pull). Measurements in
+    /// docs/pipeline-history.md, "The feature map's voxel".
     pub feature_voxel_m: f64,
-    /// Feature points kept per map voxel at most.
+    /// Feature points kept per map voxel at most. 20; at 0.2 m voxels 10 and 40 gave the same
+    /// angle counts within their noise and the same CPU (docs/pipeline-history.md).
     pub points_per_voxel: usize,
     /// Levenberg-Marquardt iterations of the refinement.
     pub iterations: u32,
@@ -465,7 +481,7 @@ impl Default for MapConfig {
     fn default() -> Self {
         Self {
             refine: true,
-            feature_voxel_m: 0.5,
+            feature_voxel_m: 0.2,
             points_per_voxel: 20,
             iterations: 6,
             output_voxel_m: 0.005,

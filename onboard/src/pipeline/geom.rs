@@ -572,8 +572,10 @@ struct Entry {
 /// Queries are exact for any radius. A query visits only the voxels that intersect the box of
 /// side `2 radius` around it: the query's own voxel first, then the others, each skipped without a
 /// hash lookup when its nearest face is farther than the current search bound (the radius, or the
-/// K-th best distance once K points were found). With the pipeline's scan-to-map settings (0.5 m
-/// voxels, 0.2 m radius) that is one to eight voxels instead of 27. Ties in distance are broken by
+/// K-th best distance once K points were found). With a radius up to the voxel (the pipeline's
+/// scan-to-map: 0.2 m voxels and radius) the 26 neighbours are visited by kind (face, edge,
+/// corner), so the bound shrinks early and prunes most of them; with the 0.5 m voxels used until
+/// 2026-11-26 it was one to eight voxels instead of 27. Ties in distance are broken by
 /// the smaller index, so the result does not depend on the order in which voxels are visited.
 #[derive(Debug, Clone)]
 pub struct VoxelIndex {

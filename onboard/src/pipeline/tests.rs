@@ -143,13 +143,20 @@ fn run(config: PipelineConfig, frames: usize, wheel_overshoot: Option<f64>) -> (
 #[test]
 fn laser_and_wheel_track_the_run_and_beat_slipping_wheels() {
     let frames = 30;
+    // Exact wheels: the map must not pull the run off them. The 0.5 m feature map used until
+    // 2026-11-26 (`map.feature-voxel-m`) left 7.7 mm over the 0.87 m run, 0.2 m 1.3 mm.
+    let (exact_err, _) = run(PipelineConfig::default(), frames, Some(0.0));
+    assert!(exact_err < 0.003, "error {exact_err} m with exact wheels");
     let (err, built) = run(PipelineConfig::default(), frames, Some(0.05));
     assert_eq!(built.trajectory.len(), frames);
     assert_eq!(built.stats.frames, frames);
-    // Wheels alone would be 5 % long: 4.4 cm over the 0.87 m run.
+    // Wheels alone would be 5 % long: 4.4 cm over the 0.87 m run. The slip is not yet
+    // significant this early (`fusion.wheel-scale-min-slip`), so what the laser and the map take
+    // off is all there is: 0.62 of it remained at 0.2 m voxels. The 0.5 m map left 0.32, but
+    // part of that was the backward pull that cost it the 7.7 mm above.
     let wheel_only_err = 0.05 * SPEED_MPS * (frames - 1) as f64 * FRAME_S;
     assert!(
-        err < 0.5 * wheel_only_err,
+        err < 0.75 * wheel_only_err,
         "error {err} m vs wheel-only {wheel_only_err} m"
     );
     assert!(built.stats.ground_points > built.stats.points_in / 4);
