@@ -420,7 +420,10 @@ pub struct MapConfig {
     /// pipeline (10 seeds per pass, exact wheels) mean ATE 9.6 / 26.0 / 10.0 / 23.0 / 14.7 ->
     /// 7.1 / 11.4 / 6.2 / 25.8 / 13.5 mm (off-roader, pickup, sedan, suv-offset, van) and sd <
     /// 0.15 on 14 of 15 angles instead of 12; with the assumed wheel errors 8 of 15 either way.
-    /// The cost: the pickup's frames take about 9 % more CPU (more voxels visited per search).
+    /// The cost: 10-16 % more CPU per frame on four of the five passes (ten seeds side by side;
+    /// the pickup 1.09-1.11 in interleaved runs), in the plane searches and fits against the
+    /// denser map; a search index in 0.4 m voxels over the same 0.2 m caps gave the same output
+    /// and no gain (1.004).
     /// A smaller map voxel also anchors the map less: more voxels are filled from later, drifted
     /// poses (`pipeline::tests`, 5 % slipping wheels: 62 % of their error left after 0.87 m
     /// against 32 %, of which part was the coarse map's backward pull). Measurements in

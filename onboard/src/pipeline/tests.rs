@@ -141,7 +141,7 @@ fn run(config: PipelineConfig, frames: usize, wheel_overshoot: Option<f64>) -> (
 }
 
 #[test]
-fn laser_and_wheel_track_the_run_and_beat_slipping_wheels() {
+fn laser_and_wheel_hold_exact_wheels_and_beat_slipping_ones() {
     let frames = 30;
     // Exact wheels: the map must not pull the run off them. The 0.5 m feature map used until
     // 2026-11-26 (`map.feature-voxel-m`) left 7.7 mm over the 0.87 m run, 0.2 m 1.3 mm.
