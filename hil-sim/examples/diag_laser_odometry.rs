@@ -48,33 +48,23 @@ use hil_sim::geometry::Isometry;
 use hil_sim::scenario::Scenario;
 use hil_sim::trajectory::Trajectory;
 use hil_sim::world::Scene;
-use onboard::pipeline::LidarFrame;
 use onboard::pipeline::config::PipelineConfig;
 use onboard::pipeline::deskew::{self, Velocity};
 use onboard::pipeline::features::{self, RingPoint};
-use onboard::pipeline::geom::{Pose, V3, VoxelIndex, norm, voxel_of};
+use onboard::pipeline::geom::{Pose, V3, VoxelIndex, norm};
 use onboard::pipeline::ground;
 use onboard::pipeline::laser_odometry::{
     FeatureTarget, GROUND_TAG_BIT, Scan, register_two_step, residuals_at,
 };
 use onboard::pipeline::map::FeatureMap;
 use onboard::pipeline::registration::register_joint;
+use onboard::pipeline::{LidarFrame, downsample, step1_planes};
 
 fn pose_of(iso: &Isometry) -> Pose {
     Pose {
         rotation: iso.rotation.0,
         translation: [iso.translation.x, iso.translation.y, iso.translation.z],
     }
-}
-
-/// One point per occupied voxel (the first seen), as the pipeline does.
-fn downsample(points: &[(V3, u8)], voxel_m: f64) -> Vec<(V3, u8)> {
-    let mut seen = std::collections::HashSet::new();
-    points
-        .iter()
-        .copied()
-        .filter(|&(p, _)| seen.insert(voxel_of(p, voxel_m)))
-        .collect()
 }
 
 struct Prepared {
@@ -124,12 +114,7 @@ fn prepare(
         })
         .collect();
     let feats = features::extract(&ring_points, &config.features);
-    let mut step1_planes = feats.planes.clone();
-    step1_planes.extend(
-        downsample(&feats.ground_candidates, 0.2)
-            .into_iter()
-            .map(|(p, _)| p),
-    );
+    let step1_planes = step1_planes(&feats);
     let tag = |v: &[(V3, u8)]| -> (Vec<V3>, Vec<u32>) {
         v.iter()
             .map(|&(p, r)| (p, index as u32 * 16 + u32::from(r)))

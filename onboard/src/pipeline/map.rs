@@ -340,7 +340,7 @@ impl CloudAccumulator {
             .filter(|(k, _)| !overlay.contains_key(*k));
         let mut blocks: Vec<([i32; 3], &Block)> =
             flushed.chain(&overlay).map(|(k, b)| (*k, b)).collect();
-        if self.blocking != Blocking::Cubes {
+        if self.blocking == Blocking::Sheets {
             let mut keyed: Vec<([i32; 3], V3)> = Vec::with_capacity(self.len + added);
             for (key, block) in blocks {
                 for local in 0..BLOCK_VOXELS {

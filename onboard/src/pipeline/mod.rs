@@ -66,8 +66,7 @@ use self::fusion::{Fusion, Source, SourceRate};
 use self::geom::{Pose, Twist6, V3, VoxelIndex, norm, voxel_of};
 use self::laser_odometry::{FeatureTarget, GROUND_TAG_BIT};
 use self::map::{CloudAccumulator, FeatureMap, FloorAccumulator};
-use self::registration::Scan;
-use self::registration::{keep_components, register_joint, register_two_step, unaided};
+use self::registration::{Scan, keep_components, register_joint, register_two_step, unaided};
 use self::slip::SlipMeter;
 use self::visual_odometry::{VisualOdometry, VisualStep};
 use crate::cloud::Cloud;
@@ -1082,8 +1081,9 @@ fn scale_twist(t: &Twist6, s: f64) -> Twist6 {
 }
 
 /// The two-step registration's step-1 planes ([`Scan`]): the plane features, then one ground
-/// candidate per 0.2 m voxel.
-fn step1_planes(feats: &features::Features) -> Vec<V3> {
+/// candidate per 0.2 m voxel. Public for the diagnostics, which must register as the pipeline
+/// does.
+pub fn step1_planes(feats: &features::Features) -> Vec<V3> {
     let mut planes = feats.planes.clone();
     planes.extend(
         downsample(&feats.ground_candidates, 0.2)
@@ -1093,8 +1093,8 @@ fn step1_planes(feats: &features::Features) -> Vec<V3> {
     planes
 }
 
-/// One point per occupied voxel (the first seen).
-fn downsample<T: Copy>(points: &[(V3, T)], voxel_m: f64) -> Vec<(V3, T)> {
+/// One point per occupied voxel of `voxel_m` (the first seen), in the input's order.
+pub fn downsample<T: Copy>(points: &[(V3, T)], voxel_m: f64) -> Vec<(V3, T)> {
     let mut seen: std::collections::HashSet<[i32; 3], _> = std::collections::HashSet::with_hasher(
         std::hash::BuildHasherDefault::<geom::FxHasher>::default(),
     );

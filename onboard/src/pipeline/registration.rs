@@ -276,6 +276,8 @@ pub fn register_two_step(
 #[cfg(test)]
 pub(crate) mod tests {
     use super::*;
+    use crate::pipeline::laser_odometry::solve_with;
+    use crate::pipeline::laser_odometry::tests::{moved, scene, target_of};
 
     /// A scan without a ground sample: step 1 and step 2 register the same planes.
     pub(crate) fn scan_of<'a>(planes: &'a [V3], corners: &'a [V3]) -> Scan<'a> {
@@ -285,8 +287,6 @@ pub(crate) mod tests {
             corners,
         }
     }
-    use crate::pipeline::laser_odometry::solve_with;
-    use crate::pipeline::laser_odometry::tests::{moved, scene, target_of};
 
     #[test]
     fn recovers_a_known_motion_in_both_modes() {
