@@ -559,11 +559,27 @@ fn floor_i32(x: f64) -> i32 {
 }
 
 /// One indexed point, stored inline in its voxel's cell so a query reads each cell's points
-/// from one contiguous block: the position and the point's index in insertion order.
+/// from one contiguous block: the position, the point's index in insertion order and its tag (in
+/// what was padding), so a query's caller needs neither the point list nor the tag list.
 #[derive(Debug, Clone, Copy)]
 struct Entry {
     p: V3,
     index: u32,
+    tag: u32,
+}
+
+/// One neighbour found by [`VoxelIndex::neighbours`]: its squared distance to the query, its
+/// index in insertion order, its tag and its position.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Neighbour {
+    /// Squared distance to the query, square metres.
+    pub d2: f64,
+    /// The point's index in insertion order.
+    pub index: u32,
+    /// The point's tag ([`VoxelIndex::new_tagged`]).
+    pub tag: u32,
+    /// The point.
+    pub p: V3,
 }
 
 /// A nearest-neighbour index over a point set: points bucketed by voxel, each voxel's points
@@ -634,11 +650,12 @@ impl VoxelIndex {
     pub fn new_tagged(points: Vec<V3>, mut tags: Vec<u32>, voxel_m: f64) -> Self {
         tags.resize(points.len(), 0);
         let mut cells: VoxelMap<Vec<Entry>> = VoxelMap::default();
-        for (i, &p) in points.iter().enumerate() {
-            cells
-                .entry(voxel_of(p, voxel_m))
-                .or_default()
-                .push(Entry { p, index: i as u32 });
+        for (i, (&p, &tag)) in points.iter().zip(&tags).enumerate() {
+            cells.entry(voxel_of(p, voxel_m)).or_default().push(Entry {
+                p,
+                index: i as u32,
+                tag,
+            });
         }
         Self {
             voxel_m,
@@ -662,6 +679,7 @@ impl VoxelIndex {
         cell.push(Entry {
             p,
             index: self.points.len() as u32,
+            tag,
         });
         self.points.push(p);
         self.tags.push(tag);
@@ -685,6 +703,23 @@ impl VoxelIndex {
         q: V3,
         radius_m: f64,
         out: &mut [(f64, u32); K],
+    ) -> usize {
+        let mut found = [Neighbour::default(); K];
+        let n = self.neighbours(q, radius_m, &mut found);
+        for (o, f) in out.iter_mut().zip(&found[..n]) {
+            *o = (f.d2, f.index);
+        }
+        n
+    }
+
+    /// [`VoxelIndex::nearest`] with each neighbour's tag and position, read from the voxel's
+    /// cell as it is scanned: a caller that fits them needs no lookups in the point and tag
+    /// lists, which for the scan-to-map feature map are scattered reads from megabytes of memory.
+    pub fn neighbours<const K: usize>(
+        &self,
+        q: V3,
+        radius_m: f64,
+        out: &mut [Neighbour; K],
     ) -> usize {
         if K == 0 || !(radius_m >= 0.0) {
             return 0;
@@ -825,9 +860,9 @@ impl VoxelIndex {
     }
 }
 
-/// The K best `(squared distance, index)` pairs so far, sorted.
+/// The K best neighbours so far, sorted by squared distance, then index.
 struct Best<'a, const K: usize> {
-    out: &'a mut [(f64, u32); K],
+    out: &'a mut [Neighbour; K],
     n: usize,
     r2: f64,
 }
@@ -836,7 +871,7 @@ impl<const K: usize> Best<'_, K> {
     /// Squared distance a point must not exceed to enter.
     fn bound(&self) -> f64 {
         if self.n == K {
-            self.out[K - 1].0
+            self.out[K - 1].d2
         } else {
             self.r2
         }
@@ -851,13 +886,18 @@ impl<const K: usize> Best<'_, K> {
             if !(d2 <= bound) {
                 continue;
             }
-            self.insert((d2, e.index));
+            self.insert(Neighbour {
+                d2,
+                index: e.index,
+                tag: e.tag,
+                p: e.p,
+            });
             bound = self.bound();
         }
     }
 
     /// Insert a candidate within the bound, keeping the list sorted and at most K long.
-    fn insert(&mut self, candidate: (f64, u32)) {
+    fn insert(&mut self, candidate: Neighbour) {
         if self.n == K && !before(candidate, self.out[K - 1]) {
             return;
         }
@@ -877,8 +917,8 @@ impl<const K: usize> Best<'_, K> {
 
 /// Order of neighbours: by squared distance, then by index (distances here are never NaN).
 #[allow(clippy::float_cmp)] // Equal distances are exactly the ties to break.
-fn before(a: (f64, u32), b: (f64, u32)) -> bool {
-    a.0 < b.0 || (a.0 == b.0 && a.1 < b.1)
+fn before(a: Neighbour, b: Neighbour) -> bool {
+    a.d2 < b.d2 || (a.d2 == b.d2 && a.index < b.index)
 }
 
 #[cfg(test)]

@@ -27,8 +27,8 @@ use super::config::LaserOdometryConfig;
 pub use super::registration::{Registration, Scan, register_joint, register_two_step};
 
 use super::geom::{
-    Pose, Twist6, V3, VoxelIndex, add, centroid_covariance, cross, dist2, dot, mat_vec, norm,
-    scale, solve_spd, sub, symmetric_eigen,
+    Neighbour, Pose, Twist6, V3, VoxelIndex, add, centroid_covariance, cross, dist2, dot, mat_vec,
+    norm, scale, solve_spd, sub, symmetric_eigen,
 };
 use super::registration::{DegeneracyThresholds, determined_projection};
 
@@ -56,9 +56,8 @@ struct Correspondence {
 /// True when the neighbours come from at least two scan lines (tags). Neighbours on one ring lie
 /// along that ring, so they can define neither a plane nor the edge line across the rings (LOAM
 /// takes its neighbours from adjacent rings for the same reason).
-fn spans_lines(index: &VoxelIndex, nn: &[(f64, u32)]) -> bool {
-    let first = index.tag(nn[0].1);
-    nn.iter().any(|&(_, i)| index.tag(i) != first)
+fn spans_lines(nn: &[Neighbour]) -> bool {
+    nn.iter().any(|n| n.tag != nn[0].tag)
 }
 
 /// Tag bit of ground points in a [`FeatureTarget`]'s plane index (the rest of a tag is the scan
@@ -77,18 +76,18 @@ fn nearest_same_class<const K: usize>(
     index: &VoxelIndex,
     q: V3,
     radius_m: f64,
-    out: &mut [(f64, u32); 5],
+    out: &mut [Neighbour; 5],
 ) -> usize {
-    let mut nn = [(0.0, 0u32); K];
-    let found = index.nearest(q, radius_m, &mut nn);
+    let mut nn = [Neighbour::default(); K];
+    let found = index.neighbours(q, radius_m, &mut nn);
     if found == 0 {
         return 0;
     }
-    let class = index.tag(nn[0].1) & GROUND_TAG_BIT;
+    let class = nn[0].tag & GROUND_TAG_BIT;
     let mut n = 0;
-    for &(d2, i) in &nn[..found] {
-        if index.tag(i) & GROUND_TAG_BIT == class {
-            out[n] = (d2, i);
+    for &candidate in &nn[..found] {
+        if candidate.tag & GROUND_TAG_BIT == class {
+            out[n] = candidate;
             n += 1;
             if n == out.len() {
                 break;
@@ -101,12 +100,11 @@ fn nearest_same_class<const K: usize>(
 /// Plane through the five nearest target points of one class (ground or not), if they are flat
 /// (and not a line).
 fn plane_at(index: &VoxelIndex, q: V3, radius_m: f64) -> Option<(V3, V3)> {
-    let mut nn = [(0.0, 0u32); 5];
-    if nearest_same_class::<8>(index, q, radius_m, &mut nn) < 5 || !spans_lines(index, &nn) {
+    let mut nn = [Neighbour::default(); 5];
+    if nearest_same_class::<8>(index, q, radius_m, &mut nn) < 5 || !spans_lines(&nn) {
         return None;
     }
-    let pts = nn.iter().map(|&(_, i)| index.points()[i as usize]);
-    let (c, cov) = centroid_covariance(pts)?;
+    let (c, cov) = centroid_covariance(nn.iter().map(|n| n.p))?;
     let (values, vectors) = symmetric_eigen(&cov);
     if values[0] > 0.1 * values[1] || values[1] < 0.01 * values[2] {
         return None;
@@ -116,12 +114,11 @@ fn plane_at(index: &VoxelIndex, q: V3, radius_m: f64) -> Option<(V3, V3)> {
 
 /// Line through the five nearest target corners, if they are linear: `(direction, point)`.
 fn line_at(index: &VoxelIndex, q: V3, radius_m: f64) -> Option<(V3, V3)> {
-    let mut nn = [(0.0, 0u32); 5];
-    if index.nearest(q, radius_m, &mut nn) < 5 || !spans_lines(index, &nn) {
+    let mut nn = [Neighbour::default(); 5];
+    if index.neighbours(q, radius_m, &mut nn) < 5 || !spans_lines(&nn) {
         return None;
     }
-    let pts = nn.iter().map(|&(_, i)| index.points()[i as usize]);
-    let (c, cov) = centroid_covariance(pts)?;
+    let (c, cov) = centroid_covariance(nn.iter().map(|n| n.p))?;
     let (values, vectors) = symmetric_eigen(&cov);
     if values[2] < 3.0 * values[1] {
         return None;
