@@ -57,7 +57,7 @@ use onboard::pipeline::laser_odometry::{
     FeatureTarget, GROUND_TAG_BIT, Scan, register_two_step, residuals_at,
 };
 use onboard::pipeline::map::FeatureMap;
-use onboard::pipeline::registration::register_joint;
+use onboard::pipeline::registration::{ALL_SIX, register_joint};
 use onboard::pipeline::{LidarFrame, downsample, step1_planes};
 
 fn pose_of(iso: &Isometry) -> Pose {
@@ -75,6 +75,8 @@ struct Prepared {
     target: FeatureTarget,
     /// The tagged plane candidates (with the ground), for the map.
     tagged_planes: Vec<(V3, u32)>,
+    /// How many of `tagged_planes`, from the first, are not ground.
+    above_ground: usize,
     /// The tagged corner candidates, for the map.
     tagged_corners: Vec<(V3, u32)>,
 }
@@ -114,13 +116,14 @@ fn prepare(
         })
         .collect();
     let feats = features::extract(&ring_points, &config.features);
-    let step1_planes = step1_planes(&feats);
+    let step1_planes = step1_planes(&feats, config.laser.ground_sample_voxel_m);
     let tag = |v: &[(V3, u8)]| -> (Vec<V3>, Vec<u32>) {
         v.iter()
             .map(|&(p, r)| (p, index as u32 * 16 + u32::from(r)))
             .unzip()
     };
     let (mut pp, mut pt) = tag(&downsample(&feats.plane_candidates, 0.05));
+    let above_ground = pp.len();
     let (gp, gt) = tag(&downsample(&feats.ground_candidates, 0.1));
     pp.extend(gp);
     pt.extend(gt.into_iter().map(|t| t | ground_bit));
@@ -128,6 +131,7 @@ fn prepare(
     let voxel = config.laser.max_correspondence_m;
     Prepared {
         tagged_planes: pp.iter().copied().zip(pt.iter().copied()).collect(),
+        above_ground,
         tagged_corners: cp.iter().copied().zip(ct.iter().copied()).collect(),
         stamp_s: frame.stamp_s,
         step1_planes,
@@ -343,19 +347,26 @@ fn main() -> anyhow::Result<()> {
             }
             let corners: &[V3] = if no_corners { &[] } else { &current.corners };
             let reg = if map.is_some() {
-                // The refinement's step-1 planes with the ground sample, as the pipeline passes.
-                let planes: Vec<V3> = if no_planes {
-                    current.step1_planes[current.planes.len()..].to_vec()
-                } else {
-                    current.step1_planes.clone()
-                };
+                // As the pipeline: levelled by the floor, x, y and yaw from the plane features
+                // and corners; else all six, with the ground sample. The floor's roll, pitch and
+                // height are here the prior's: the truth's with `--prior truth`, the previous
+                // frame's true ones with `zero` and `wheel`.
+                let (planes, active): (&[V3], &[usize]) =
+                    match (config.map.level_with_ground, no_planes) {
+                        (true, true) => (&[], &[2, 3, 4]),
+                        (true, false) => (&current.planes, &[2, 3, 4]),
+                        (false, true) => (
+                            &current.step1_planes[current.planes.len()..],
+                            &[0, 1, 2, 3, 4, 5],
+                        ),
+                        (false, false) => (&current.step1_planes, &ALL_SIX),
+                    };
                 register_joint(
                     target,
-                    (&planes, corners),
-                    prior,
-                    None,
-                    config.map.iterations,
-                    &map_laser,
+                    (planes, corners),
+                    (prior, None),
+                    active,
+                    (config.map.iterations, &map_laser),
                 )
             } else {
                 let scan = Scan {
@@ -403,9 +414,15 @@ fn main() -> anyhow::Result<()> {
             }
         }
         if let Some(m) = &mut map {
+            // As the pipeline: levelled by the floor, the map keeps no ground.
+            let planes = if config.map.level_with_ground {
+                &current.tagged_planes[..current.above_ground]
+            } else {
+                &current.tagged_planes[..]
+            };
             m.add(
                 &world_truth(current.stamp_s),
-                &current.tagged_planes,
+                planes,
                 &current.tagged_corners,
             );
         }

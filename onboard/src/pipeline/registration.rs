@@ -167,8 +167,13 @@ pub fn keep_components(estimate: &Pose, prior: &Pose, keep: [bool; 6]) -> Pose {
     about(centre, &delta).compose(prior)
 }
 
-/// Register source features to `target` with all six parameters in one LM problem (the scan-to-map
-/// refinement), starting from and falling back to `prior` = `target_from_source`.
+/// Every parameter of a registration, in increment order: roll, pitch, yaw, x, y, z.
+pub const ALL_SIX: [usize; 6] = [0, 1, 2, 3, 4, 5];
+
+/// Register source features to `target` with the `active` parameters (increment order: roll,
+/// pitch, yaw, x, y, z; the others stay at `prior`'s) in one LM problem (the scan-to-map
+/// refinement: all six, or x, y and yaw once the floor has levelled `prior`), starting from and
+/// falling back to `prior` = `target_from_source`.
 ///
 /// `prior_information`: the prior as a Gaussian too (its information matrix on the increment,
 /// in the residuals' units): the solve weighs the scan against it, and a direction counts as
@@ -177,12 +182,10 @@ pub fn keep_components(estimate: &Pose, prior: &Pose, keep: [bool; 6]) -> Pose {
 pub fn register_joint(
     target: &FeatureTarget,
     (planes, corners): (&[V3], &[V3]),
-    prior: Pose,
-    prior_information: Option<[[f64; 6]; 6]>,
-    iterations: u32,
-    config: &LaserOdometryConfig,
+    (prior, prior_information): (Pose, Option<[[f64; 6]; 6]>),
+    active: &[usize],
+    (iterations, config): (u32, &LaserOdometryConfig),
 ) -> Registration {
-    let active = [0, 1, 2, 3, 4, 5];
     let thresholds = DegeneracyThresholds::of(config);
     // The steps are held to the directions the first linearisation determines (LOAM's in-solve
     // remapping): the joint solve against the map otherwise wanders along the undetermined ones,
@@ -192,7 +195,7 @@ pub fn register_joint(
         target,
         (planes, corners),
         prior,
-        &active,
+        active,
         iterations,
         config,
         &SolveGuides {
@@ -200,7 +203,7 @@ pub fn register_joint(
             prior_information,
         },
     );
-    let (pose, degenerate) = remap(&pose, &prior, &h, &active, thresholds);
+    let (pose, degenerate) = remap(&pose, &prior, &h, active, thresholds);
     Registration {
         pose,
         degenerate,
@@ -303,7 +306,13 @@ pub(crate) mod tests {
         };
         for reg in [
             register_two_step(&target, scan_of(&sp, &sc), Pose::IDENTITY, &config),
-            register_joint(&target, (&sp, &sc), Pose::IDENTITY, None, 10, &config),
+            register_joint(
+                &target,
+                (&sp, &sc),
+                (Pose::IDENTITY, None),
+                &ALL_SIX,
+                (10, &config),
+            ),
         ] {
             let err = reg.pose.compose(&truth.inverse()).to_increment();
             assert!(err.iter().all(|e| e.abs() < 3e-3), "{err:?} {reg:?}");
@@ -324,7 +333,13 @@ pub(crate) mod tests {
             let shifted =
                 |v: &[V3]| -> Vec<V3> { v.iter().map(|&p| world_from_target.apply(p)).collect() };
             let target = target_of(&shifted(&planes), &shifted(&corners));
-            let reg = register_joint(&target, (&sp, &sc), world_from_target, None, 10, &config);
+            let reg = register_joint(
+                &target,
+                (&sp, &sc),
+                (world_from_target, None),
+                &ALL_SIX,
+                (10, &config),
+            );
             let in_target = world_from_target.inverse().compose(&reg.pose);
             (
                 reg.degenerate,
@@ -498,7 +513,7 @@ pub(crate) mod tests {
                 l[3][3] = v;
                 l
             });
-            register_joint(&target, (&sp, &sc), prior, l, 20, &config)
+            register_joint(&target, (&sp, &sc), (prior, l), &ALL_SIX, (20, &config))
                 .pose
                 .translation[0]
         };
