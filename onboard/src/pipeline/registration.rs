@@ -321,6 +321,38 @@ pub(crate) mod tests {
     }
 
     #[test]
+    fn a_levelled_refinement_moves_x_y_yaw_only() {
+        // The pipeline's refinement once the floor has levelled the prior: only x, y and yaw
+        // move; roll, pitch and height stay exactly the prior's, even where the features would
+        // move them (here the prior's are off the truth's by 3, 4 mrad and 5 mm).
+        let (planes, corners) = scene(true);
+        let target = target_of(&planes, &corners);
+        let truth = Pose::from_xyz_rpy([0.04, 0.01, 0.005], [0.003, -0.004, 0.01]);
+        let (sp, sc) = (moved(&planes, &truth), moved(&corners, &truth));
+        let config = LaserOdometryConfig {
+            degeneracy_eigen_min: 0.01,
+            degeneracy_rotation_eigen_min_m2: 0.01,
+            ..LaserOdometryConfig::default()
+        };
+        let prior = Pose::IDENTITY;
+        let reg = register_joint(
+            &target,
+            (&sp, &sc),
+            (prior, None),
+            &[2, 3, 4],
+            (10, &config),
+        );
+        let moved_by = increment_about(prior.translation, &reg.pose.compose(&prior.inverse()));
+        for k in [0, 1, 5] {
+            assert!(moved_by[k].abs() < 1e-12, "{moved_by:?}");
+        }
+        // x, y and yaw towards the truth's 0.04 m, 0.01 m and 0.01 rad.
+        assert!((moved_by[3] - 0.04).abs() < 0.01, "{moved_by:?}");
+        assert!((moved_by[4] - 0.01).abs() < 0.01, "{moved_by:?}");
+        assert!((moved_by[2] - 0.01).abs() < 0.005, "{moved_by:?}");
+    }
+
+    #[test]
     fn degeneracy_does_not_depend_on_the_distance_from_the_target_origin() {
         // The scan-to-map target is the world frame: late in a run the robot is metres from its
         // origin. The same registration there must find the same degenerate directions.
