@@ -57,8 +57,8 @@ use onboard::pipeline::laser_odometry::{
     FeatureTarget, GROUND_TAG_BIT, Scan, register_two_step, residuals_at,
 };
 use onboard::pipeline::map::FeatureMap;
-use onboard::pipeline::registration::{ALL_SIX, register_joint};
-use onboard::pipeline::{LidarFrame, downsample, step1_planes};
+use onboard::pipeline::registration::register_joint;
+use onboard::pipeline::{Candidates, LidarFrame, step1_planes};
 
 fn pose_of(iso: &Isometry) -> Pose {
     Pose {
@@ -73,12 +73,8 @@ struct Prepared {
     planes: Vec<V3>,
     corners: Vec<V3>,
     target: FeatureTarget,
-    /// The tagged plane candidates (with the ground), for the map.
-    tagged_planes: Vec<(V3, u32)>,
-    /// How many of `tagged_planes`, from the first, are not ground.
-    above_ground: usize,
-    /// The tagged corner candidates, for the map.
-    tagged_corners: Vec<(V3, u32)>,
+    /// The tagged candidates, for the map.
+    candidates: Candidates,
 }
 
 /// The pipeline's steps 1-4 for one frame, deskewed with `velocity`.
@@ -117,30 +113,25 @@ fn prepare(
         .collect();
     let feats = features::extract(&ring_points, &config.features);
     let step1_planes = step1_planes(&feats, config.laser.ground_sample_voxel_m);
-    let tag = |v: &[(V3, u8)]| -> (Vec<V3>, Vec<u32>) {
-        v.iter()
-            .map(|&(p, r)| (p, index as u32 * 16 + u32::from(r)))
-            .unzip()
-    };
-    let (mut pp, mut pt) = tag(&downsample(&feats.plane_candidates, 0.05));
-    let above_ground = pp.len();
-    let (gp, gt) = tag(&downsample(&feats.ground_candidates, 0.1));
-    pp.extend(gp);
-    pt.extend(gt.into_iter().map(|t| t | ground_bit));
-    let (cp, ct) = tag(&feats.corner_candidates);
+    let mut candidates = Candidates::of(&feats, index);
+    for (_, t) in &mut candidates.planes[candidates.above_ground..] {
+        *t = (*t & !GROUND_TAG_BIT) | ground_bit;
+    }
     let voxel = config.laser.max_correspondence_m;
+    let index_of = |v: &[(V3, u32)]| {
+        let (p, t) = v.iter().copied().unzip();
+        VoxelIndex::new_tagged(p, t, voxel)
+    };
     Prepared {
-        tagged_planes: pp.iter().copied().zip(pt.iter().copied()).collect(),
-        above_ground,
-        tagged_corners: cp.iter().copied().zip(ct.iter().copied()).collect(),
         stamp_s: frame.stamp_s,
         step1_planes,
+        target: FeatureTarget {
+            corners: index_of(&candidates.corners),
+            planes: index_of(&candidates.planes),
+        },
         planes: feats.planes,
         corners: feats.corners,
-        target: FeatureTarget {
-            corners: VoxelIndex::new_tagged(cp, ct, voxel),
-            planes: VoxelIndex::new_tagged(pp, pt, voxel),
-        },
+        candidates,
     }
 }
 
@@ -351,19 +342,16 @@ fn main() -> anyhow::Result<()> {
                 // and corners; else all six, with the ground sample. The floor's roll, pitch and
                 // height are here the prior's: the truth's with `--prior truth`, the previous
                 // frame's true ones with `zero` and `wheel`.
-                let (planes, active): (&[V3], &[usize]) =
-                    match (config.map.level_with_ground, no_planes) {
-                        (true, true) => (&[], &[2, 3, 4]),
-                        (true, false) => (&current.planes, &[2, 3, 4]),
-                        (false, true) => (
-                            &current.step1_planes[current.planes.len()..],
-                            &[0, 1, 2, 3, 4, 5],
-                        ),
-                        (false, false) => (&current.step1_planes, &ALL_SIX),
-                    };
+                let first = if no_planes { current.planes.len() } else { 0 };
+                let scan = Scan {
+                    step1_planes: &current.step1_planes[first..],
+                    step2_planes: current.planes.len() - first,
+                    corners,
+                };
+                let (features, active) = scan.for_refinement(config.map.level_with_ground);
                 register_joint(
                     target,
-                    (planes, corners),
+                    features,
                     (prior, None),
                     active,
                     (config.map.iterations, &map_laser),
@@ -414,16 +402,10 @@ fn main() -> anyhow::Result<()> {
             }
         }
         if let Some(m) = &mut map {
-            // As the pipeline: levelled by the floor, the map keeps no ground.
-            let planes = if config.map.level_with_ground {
-                &current.tagged_planes[..current.above_ground]
-            } else {
-                &current.tagged_planes[..]
-            };
             m.add(
                 &world_truth(current.stamp_s),
-                planes,
-                &current.tagged_corners,
+                current.candidates.map_planes(config.map.level_with_ground),
+                &current.candidates.corners,
             );
         }
         history.push_back(current);

@@ -239,10 +239,11 @@ impl Default for LaserOdometryConfig {
             iterations: 8,
             max_correspondence_m: 0.2,
             // 0.2 until 2026-11-26 (docs/pipeline-history.md, "The refinement levelled by the
-            // floor"): at 0.4 the pickup's 5 Hz frames carry about 330 ground samples instead of
-            // 810, half of them from the one ring that reaches the floor 7 m away. Since the floor
-            // levels every pose (`map.level-with-ground`), step 1 only starts step 2; with the
-            // levelled refinement, 10 seeds per pass: angle sds and ATE equal within their noise.
+            // floor"): at 0.4 the pickup's 5 Hz frames carry 397 ground samples instead of 812
+            // (seed 1, mean per frame; at 0.2 half of them came from the one ring that reaches
+            // the floor 6-8 m away, at 0.4 still 222). Since the floor levels every pose
+            // (`map.level-with-ground`), step 1 only starts step 2; with the levelled
+            // refinement, 10 seeds per pass: angle sds and ATE equal within their noise.
             ground_sample_voxel_m: 0.4,
             huber_m: 0.05,
             // 0.03 m and 0.1 rad (docs/pipeline-history.md, "The map's pull cut off"): 10 seeds

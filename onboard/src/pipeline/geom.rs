@@ -598,8 +598,6 @@ pub struct VoxelIndex {
     voxel_m: f64,
     cells: VoxelMap<Vec<Entry>>,
     points: Vec<V3>,
-    /// A caller-defined tag per point (the pipeline's scan-line id).
-    tags: Vec<u32>,
 }
 
 /// The 26 neighbours of a voxel: the 6 sharing a face, the 12 sharing an edge, the 8 sharing a
@@ -642,15 +640,16 @@ impl VoxelIndex {
     /// Index `points` with voxels of `voxel_m`. Any query radius works; radii up to the voxel size
     /// visit at most the 27 voxels around the query.
     pub fn new(points: Vec<V3>, voxel_m: f64) -> Self {
-        let tags = vec![0; points.len()];
-        Self::new_tagged(points, tags, voxel_m)
+        Self::new_tagged(points, Vec::new(), voxel_m)
     }
 
-    /// Like [`VoxelIndex::new`] with a tag per point (`tags` shorter than `points` pads with 0).
-    pub fn new_tagged(points: Vec<V3>, mut tags: Vec<u32>, voxel_m: f64) -> Self {
-        tags.resize(points.len(), 0);
+    /// Like [`VoxelIndex::new`] with a caller-defined tag per point (the pipeline's scan-line
+    /// id), which queries return with the point ([`Neighbour`]); `tags` shorter than `points`
+    /// pads with 0.
+    pub fn new_tagged(points: Vec<V3>, tags: Vec<u32>, voxel_m: f64) -> Self {
+        let tags = tags.into_iter().chain(std::iter::repeat(0));
         let mut cells: VoxelMap<Vec<Entry>> = VoxelMap::default();
-        for (i, (&p, &tag)) in points.iter().zip(&tags).enumerate() {
+        for (i, (&p, tag)) in points.iter().zip(tags).enumerate() {
             cells.entry(voxel_of(p, voxel_m)).or_default().push(Entry {
                 p,
                 index: i as u32,
@@ -661,13 +660,7 @@ impl VoxelIndex {
             voxel_m,
             cells,
             points,
-            tags,
         }
-    }
-
-    /// The tag of point `i` (0 if out of range).
-    pub fn tag(&self, i: u32) -> u32 {
-        self.tags.get(i as usize).copied().unwrap_or(0)
     }
 
     /// Add `p` unless its voxel already holds `cap` points; returns whether it was added.
@@ -682,7 +675,6 @@ impl VoxelIndex {
             tag,
         });
         self.points.push(p);
-        self.tags.push(tag);
         true
     }
 

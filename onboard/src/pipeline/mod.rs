@@ -751,18 +751,13 @@ impl Pipeline {
         if let Some(plane) = floor {
             world_from_robot = self.level(&world_from_robot, plane);
         }
-        let (plane_candidates, plane_candidates_above_ground, corner_candidates) =
-            tagged_candidates(&feats, frame_index);
+        let candidates = Candidates::of(&feats, frame_index);
         if cfg.map.refine {
-            // Levelled by the floor, the refinement registers no ground (`estimate_pose`): the
-            // map keeps none either.
-            let map_planes = if cfg.map.level_with_ground {
-                &plane_candidates[..plane_candidates_above_ground]
-            } else {
-                &plane_candidates[..]
-            };
-            self.map
-                .add(&world_from_robot, map_planes, &corner_candidates);
+            self.map.add(
+                &world_from_robot,
+                candidates.map_planes(cfg.map.level_with_ground),
+                &candidates.corners,
+            );
         }
         let keep_ground = self.config.map.keep_ground;
         for i in 0..n {
@@ -783,8 +778,8 @@ impl Pipeline {
         });
         self.flush_depth_points(frame.stamp_s);
         let target = Arc::new(FeatureTarget {
-            corners: tagged_index(corner_candidates, self.config.laser.max_correspondence_m),
-            planes: tagged_index(plane_candidates, self.config.laser.max_correspondence_m),
+            corners: tagged_index(candidates.corners, self.config.laser.max_correspondence_m),
+            planes: tagged_index(candidates.planes, self.config.laser.max_correspondence_m),
         });
         self.track_slip(frame_index, frame.stamp_s, scan, world_from_robot, target);
     }
@@ -910,20 +905,14 @@ impl Pipeline {
             .then(|| self.wheel_prior_information(dt));
         // With the frame's floor, roll, pitch and height are the floor's whatever the map says
         // (`process` levels the pose): the prediction is levelled first and the refinement solves
-        // x, y and yaw only, from the plane features and the corners; the ground sample, which
-        // constrains only the other three, is not registered. Without it, all six with the
-        // ground sample. (Measured in docs/pipeline-history.md, "The refinement levelled by the
-        // floor": the same accuracy, 13 % less CPU on the pickup.)
-        let (planes, active): (&[V3], &[usize]) = match floor {
-            Some(plane) => {
-                predicted_world = self.level(&predicted_world, plane);
-                (scan.planes(), &[2, 3, 4])
-            }
-            None => (scan.step1_planes, &registration::ALL_SIX),
-        };
+        // the other three ([`Scan::for_refinement`]).
+        if let Some(plane) = floor {
+            predicted_world = self.level(&predicted_world, plane);
+        }
+        let (features, active) = scan.for_refinement(floor.is_some());
         let refined = register_joint(
             self.map.target(),
-            (planes, scan.corners),
+            features,
             (predicted_world, prior_information),
             active,
             (self.config.map.iterations, &laser_config),
@@ -1125,27 +1114,53 @@ pub fn downsample<T: Copy>(points: &[(V3, T)], voxel_m: f64) -> Vec<(V3, T)> {
         .collect()
 }
 
-/// Points with their scan-line tags.
-type Tagged = Vec<(V3, u32)>;
+/// A frame's registration target points (the next frame's scan-to-scan target, the feature
+/// map's additions, the slip meter's keyframes) with their scan-line tags: frame index * 16 +
+/// ring, unique over the run. Public for the diagnostics, which must build targets as the
+/// pipeline does.
+#[derive(Debug, Clone)]
+pub struct Candidates {
+    /// The plane candidates one per 5 cm voxel, then the ground candidates one per 10 cm voxel,
+    /// tagged with [`GROUND_TAG_BIT`] too (plane fits never mix them with the underbody).
+    pub planes: Vec<(V3, u32)>,
+    /// How many of `planes`, from the first, are not ground.
+    pub above_ground: usize,
+    /// The corner candidates.
+    pub corners: Vec<(V3, u32)>,
+}
 
-/// A frame's registration target points with their scan-line tags (frame index * 16 + ring,
-/// unique over the run): the plane candidates one per 5 cm voxel, then the ground candidates one
-/// per 10 cm voxel, tagged with [`GROUND_TAG_BIT`] too (plane fits never mix them with the
-/// underbody); how many of those are not ground; and the corner candidates.
-fn tagged_candidates(feats: &features::Features, frame_index: u64) -> (Tagged, usize, Tagged) {
-    let tagged = |v: &[(V3, u8)]| -> Tagged {
-        v.iter()
-            .map(|&(p, ring)| (p, frame_index as u32 * 16 + u32::from(ring)))
-            .collect()
-    };
-    let mut planes = tagged(&downsample(&feats.plane_candidates, 0.05));
-    let above_ground = planes.len();
-    planes.extend(
-        tagged(&downsample(&feats.ground_candidates, 0.1))
-            .into_iter()
-            .map(|(p, t)| (p, t | GROUND_TAG_BIT)),
-    );
-    (planes, above_ground, tagged(&feats.corner_candidates))
+impl Candidates {
+    /// The candidates of `feats`, frame `frame_index`.
+    pub fn of(feats: &features::Features, frame_index: u64) -> Self {
+        let tagged = |v: &[(V3, u8)]| -> Vec<(V3, u32)> {
+            v.iter()
+                .map(|&(p, ring)| (p, frame_index as u32 * 16 + u32::from(ring)))
+                .collect()
+        };
+        let mut planes = tagged(&downsample(&feats.plane_candidates, 0.05));
+        let above_ground = planes.len();
+        planes.extend(
+            tagged(&downsample(&feats.ground_candidates, 0.1))
+                .into_iter()
+                .map(|(p, t)| (p, t | GROUND_TAG_BIT)),
+        );
+        Self {
+            planes,
+            above_ground,
+            corners: tagged(&feats.corner_candidates),
+        }
+    }
+
+    /// The plane candidates the feature map keeps: without the ground when the floor levels the
+    /// poses (`map.level-with-ground`), since the levelled refinement registers none
+    /// ([`Scan::for_refinement`]).
+    pub fn map_planes(&self, level_with_ground: bool) -> &[(V3, u32)] {
+        if level_with_ground {
+            &self.planes[..self.above_ground]
+        } else {
+            &self.planes
+        }
+    }
 }
 
 fn tagged_index(points: Vec<(V3, u32)>, voxel_m: f64) -> VoxelIndex {
