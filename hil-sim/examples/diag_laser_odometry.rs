@@ -230,10 +230,13 @@ fn main() -> anyhow::Result<()> {
     // starting from the TRUE pose (or the `--prior`); the error is the refined pose's against the
     // truth, in the robot frame, per frame (it does not accumulate here; in the pipeline the next
     // frame starts from it).
-    let mut map = args
-        .iter()
-        .any(|a| a == "--map")
-        .then(|| FeatureMap::new(config.map.feature_voxel_m, config.map.points_per_voxel));
+    let mut map = args.iter().any(|a| a == "--map").then(|| {
+        FeatureMap::with_spacing(
+            config.map.feature_voxel_m,
+            config.map.points_per_voxel,
+            config.map.min_point_spacing_m,
+        )
+    });
     // `--free`: the map solve without the degeneracy test (no direction held at the prior), to
     // see where the map alone pulls.
     let mut map_laser = config.laser.clone();

@@ -442,6 +442,18 @@ pub struct MapConfig {
     /// Feature points kept per map voxel at most. 20; at 0.2 m voxels 10 and 40 gave the same
     /// angle counts within their noise and the same CPU (docs/pipeline-history.md).
     pub points_per_voxel: usize,
+    /// A feature point is added to the map only where no point of its voxel lies nearer than
+    /// this, metres (0: off; KISS-ICP's rule, the voxel over the square root of the points per
+    /// voxel). 0.045 (off until 2026-11-26): the first points of a voxel are those seen first,
+    /// often the same few centimetres of a surface from many frames, and the voxel was full
+    /// before the robot saw the near side of the same part (a differential, a tyre, a face
+    /// behind a depth step); a frame's fits then went through the far side and pulled x back.
+    /// Registered from the true pose against a map built at the true poses (`diag_laser_odometry
+    /// NAME --map --free`), the mean x pull per frame (off-roader, pickup, sedan, suv-offset,
+    /// van) -9.8 / -3.5 / -3.6 / -10.9 / -10.8 mm -> -4.6 / -1.0 / -1.7 / -3.3 / -2.7; with the
+    /// map that much less biased it is also weighted more against the wheels
+    /// (`residual-sigma-m`). Measurements in docs/pipeline-history.md, "The map's points spaced".
+    pub min_point_spacing_m: f64,
     /// Levenberg-Marquardt iterations of the refinement.
     pub iterations: u32,
     /// Voxel of the output cloud (centroid per voxel), metres. 5 mm: on lidar-only clouds the
@@ -486,7 +498,13 @@ pub struct MapConfig {
     pub wheel_prior: bool,
     /// The map residuals' noise for the wheel prior's weighting, metres. The solve counts its
     /// residuals as independent, which they are not (many points on few surfaces), so this is a
-    /// tuning value rather than the lidar's range noise.
+    /// tuning value rather than the lidar's range noise. 0.01 (0.02 until 2026-11-26). With the
+    /// map's points unspaced, 0.01 let the map's backward pull through (the off-roader's approach
+    /// -0.39 degree on exact wheels, 10 seeds); with them spaced (`min-point-spacing-m`) it holds
+    /// wandering wheels better (20 seeds per pass with the assumed errors: sd < 0.15 on 10 of 15
+    /// angles instead of 8, mean ATE lower on all five passes) at a cost on exact wheels (mean
+    /// ATE higher on three of five; 6.1 mm instead of 1.3 over `pipeline::tests`' garage run),
+    /// and 0.005 let the pull through again (the off-roader's departure -0.40).
     pub residual_sigma_m: f64,
 }
 
@@ -496,6 +514,7 @@ impl Default for MapConfig {
             refine: true,
             feature_voxel_m: 0.2,
             points_per_voxel: 20,
+            min_point_spacing_m: 0.045,
             iterations: 6,
             output_voxel_m: 0.005,
             output_max_range_m: 4.0,
@@ -509,8 +528,7 @@ impl Default for MapConfig {
             // 12 of 15, but the pickup's ATE 7.7 -> 23 mm and suv-offset's departure +0.17 ->
             // +0.69 (docs/pipeline-history.md, "Wheel errors and the wheel prior").
             wheel_prior: true,
-            // 0.01 and 0.04 tried on seeds 1-3 with the wheel errors: neither better on most.
-            residual_sigma_m: 0.02,
+            residual_sigma_m: 0.01,
         }
     }
 }

@@ -665,8 +665,14 @@ impl VoxelIndex {
 
     /// Add `p` unless its voxel already holds `cap` points; returns whether it was added.
     pub fn insert_capped(&mut self, p: V3, tag: u32, cap: usize) -> bool {
+        self.insert_spaced(p, tag, cap, 0.0)
+    }
+
+    /// [`Self::insert_capped`], and only if no point of the voxel lies nearer than `spacing_m`.
+    pub fn insert_spaced(&mut self, p: V3, tag: u32, cap: usize, spacing_m: f64) -> bool {
         let cell = self.cells.entry(voxel_of(p, self.voxel_m)).or_default();
-        if cell.len() >= cap {
+        let s2 = spacing_m * spacing_m;
+        if cell.len() >= cap || cell.iter().any(|e| dist2(e.p, p) < s2) {
             return false;
         }
         cell.push(Entry {

@@ -2,8 +2,10 @@
 //! the accumulator that fuses all frames into one cloud.
 //!
 //! The feature map is a voxel hash map (as in KISS-ICP) of corner and plane points in the world
-//! frame with at most `points_per_voxel` per voxel, so its size grows with the area covered, not
-//! with the number of frames. Each frame's features are registered to it
+//! frame with at most `points_per_voxel` per voxel, none nearer than `min_spacing_m` to another
+//! of its voxel (KISS-ICP's rule too: the voxel's room goes to the whole of what it holds, not
+//! to the first few centimetres seen), so its size grows with the area covered, not with the
+//! number of frames. Each frame's features are registered to it
 //! ([`super::laser_odometry::register_joint`]) before they are added.
 //!
 //! The output accumulator keeps one centroid per `output_voxel_m` voxel: repeated views of a
@@ -18,17 +20,24 @@ use super::laser_odometry::FeatureTarget;
 pub struct FeatureMap {
     target: FeatureTarget,
     points_per_voxel: usize,
+    min_spacing_m: f64,
 }
 
 impl FeatureMap {
     /// An empty map with voxels of `voxel_m` (also the largest correspondence distance).
     pub fn new(voxel_m: f64, points_per_voxel: usize) -> Self {
+        Self::with_spacing(voxel_m, points_per_voxel, 0.0)
+    }
+
+    /// [`Self::new`], adding a point only where its voxel holds none nearer than `min_spacing_m`.
+    pub fn with_spacing(voxel_m: f64, points_per_voxel: usize, min_spacing_m: f64) -> Self {
         Self {
             target: FeatureTarget {
                 corners: VoxelIndex::new(Vec::new(), voxel_m),
                 planes: VoxelIndex::new(Vec::new(), voxel_m),
             },
             points_per_voxel,
+            min_spacing_m,
         }
     }
 
@@ -49,17 +58,14 @@ impl FeatureMap {
 
     /// Add a frame's features (robot frame) at `world_from_robot`, each with its scan-line tag.
     pub fn add(&mut self, world_from_robot: &Pose, planes: &[(V3, u32)], corners: &[(V3, u32)]) {
+        let (cap, spacing) = (self.points_per_voxel, self.min_spacing_m);
         for &(p, tag) in planes {
-            self.target
-                .planes
-                .insert_capped(world_from_robot.apply(p), tag, self.points_per_voxel);
+            let p = world_from_robot.apply(p);
+            self.target.planes.insert_spaced(p, tag, cap, spacing);
         }
         for &(p, tag) in corners {
-            self.target.corners.insert_capped(
-                world_from_robot.apply(p),
-                tag,
-                self.points_per_voxel,
-            );
+            let p = world_from_robot.apply(p);
+            self.target.corners.insert_spaced(p, tag, cap, spacing);
         }
     }
 }
@@ -642,5 +648,35 @@ mod tests {
             &[([0.0; 3], 1)],
         );
         assert_eq!(map.len(), 7);
+    }
+
+    #[test]
+    fn a_spaced_map_leaves_room_for_surfaces_seen_later() {
+        // The far side of a part, seen first and often: 30 frames of the same 19 points, 1 cm
+        // apart. Then its near side, 10 cm away in the same 0.2 m voxel.
+        let line = |z: f64, tag: u32| -> Vec<(V3, u32)> {
+            (1..20)
+                .map(|i| ([f64::from(i) * 0.01, 0.05, z], tag))
+                .collect()
+        };
+        let (far, near) = (line(0.05, 0), line(0.15, 1));
+        let near_held = |map: &FeatureMap| {
+            let planes = &map.target().planes;
+            planes.points().iter().filter(|p| p[2] > 0.1).count()
+        };
+        let mut first = FeatureMap::new(0.2, 20);
+        let mut spaced = FeatureMap::with_spacing(0.2, 20, 0.045);
+        for map in [&mut first, &mut spaced] {
+            for _ in 0..30 {
+                map.add(&Pose::IDENTITY, &far, &[]);
+            }
+            map.add(&Pose::IDENTITY, &near, &[]);
+        }
+        // Without spacing the voxel is full of the far side; with it each side holds a point
+        // every 5 cm (x 0.01, 0.06, 0.11, 0.16).
+        assert_eq!(first.len(), 20);
+        assert_eq!(near_held(&first), 0);
+        assert_eq!(spaced.len(), 8);
+        assert_eq!(near_held(&spaced), 4);
     }
 }

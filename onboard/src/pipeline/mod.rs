@@ -383,6 +383,14 @@ impl PipelineConfig {
                 "features.window-half-width and visual.pixel-stride must be >= 1".into(),
             ));
         }
+        let spacing = self.map.min_point_spacing_m;
+        if !(spacing >= 0.0 && spacing < self.map.feature_voxel_m) {
+            return Err(PipelineError::InvalidConfig(format!(
+                "map.min-point-spacing-m = {spacing}: must be 0 (off) or positive and under \
+                 map.feature-voxel-m ({})",
+                self.map.feature_voxel_m
+            )));
+        }
         if self.laser.max_correspondence_m > self.map.feature_voxel_m {
             return Err(PipelineError::InvalidConfig(
                 "laser.max-correspondence-m must not exceed map.feature-voxel-m".into(),
@@ -473,7 +481,11 @@ impl Pipeline {
                 0.0
             }),
             last_rate: [0.0; 6],
-            map: FeatureMap::new(config.map.feature_voxel_m, config.map.points_per_voxel),
+            map: FeatureMap::with_spacing(
+                config.map.feature_voxel_m,
+                config.map.points_per_voxel,
+                config.map.min_point_spacing_m,
+            ),
             cloud: CloudAccumulator::new(config.map.output_voxel_m),
             ground_cloud: (config.map.ground_voxel_m > 0.0)
                 .then(|| FloorAccumulator::new(config.map.ground_voxel_m)),

@@ -143,10 +143,12 @@ fn run(config: PipelineConfig, frames: usize, wheel_overshoot: Option<f64>) -> (
 #[test]
 fn laser_and_wheel_hold_exact_wheels_and_beat_slipping_ones() {
     let frames = 30;
-    // Exact wheels: the map must not pull the run off them. The 0.5 m feature map used until
-    // 2026-11-26 (`map.feature-voxel-m`) left 7.7 mm over the 0.87 m run, 0.2 m 1.3 mm.
+    // Exact wheels: the map must not pull the run far off them. The 0.5 m feature map used until
+    // 2026-11-26 (`map.feature-voxel-m`) left 7.7 mm over the 0.87 m run, 0.2 m 1.3 mm. With the
+    // map weighted twice as much against the wheels (`map.residual-sigma-m` 0.01 instead of
+    // 0.02, with its points spaced) 6.1 mm: what holding wandering wheels costs exact ones.
     let (exact_err, _) = run(PipelineConfig::default(), frames, Some(0.0));
-    assert!(exact_err < 0.003, "error {exact_err} m with exact wheels");
+    assert!(exact_err < 0.008, "error {exact_err} m with exact wheels");
     let (err, built) = run(PipelineConfig::default(), frames, Some(0.05));
     assert_eq!(built.trajectory.len(), frames);
     assert_eq!(built.stats.frames, frames);
@@ -214,10 +216,16 @@ fn position_errors(built: &BuiltCloud) -> Vec<f64> {
 
 #[test]
 fn slip_replay_scales_the_travel_before_the_scale_was_significant() {
-    let mut off = PipelineConfig::default();
+    // The map weighted against the wheels as before 2026-11-26 (`map.residual-sigma-m` 0.02):
+    // the frames before the scale was significant then follow the slipping wheels wherever the
+    // laser does not hold x, the case the replay is for. (At the default 0.01 the map holds
+    // most of it itself here: RMS 4.5 mm without the replay, 3.9 with.)
+    let mut on = PipelineConfig::default();
+    on.map.residual_sigma_m = 0.02;
+    let mut off = on.clone();
     off.fusion.slip_replay_s = 0.0;
     let (_, without) = run(off.clone(), 45, Some(0.05));
-    let (_, with) = run(PipelineConfig::default(), 45, Some(0.05));
+    let (_, with) = run(on.clone(), 45, Some(0.05));
     assert_eq!(without.stats.slip_replays, 0);
     assert_eq!(with.stats.slip_replays, 1, "{:?}", with.stats);
     // The second pass counts every frame once and ends with the same scale.
@@ -241,7 +249,7 @@ fn slip_replay_scales_the_travel_before_the_scale_was_significant() {
     );
     // Exact wheels: the scale never turns significant, nothing is replayed, and the output is
     // the same to the bit as with the replay off.
-    let (_, exact) = run(PipelineConfig::default(), 45, Some(0.0));
+    let (_, exact) = run(on, 45, Some(0.0));
     let (_, exact_off) = run(off, 45, Some(0.0));
     assert_eq!(exact.stats.slip_replays, 0);
     assert_eq!(exact.points_in_world, exact_off.points_in_world);
@@ -392,6 +400,12 @@ fn a_config_text_is_parsed_and_checked_and_errors_name_the_key() {
         .unwrap_err()
         .to_string();
     assert!(e.contains("laser.max-residual-rad"), "{e}");
+    for spacing in ["-0.01", "0.2", "nan"] {
+        let e = PipelineConfig::from_toml(&format!("[map]\nmin-point-spacing-m = {spacing}\n"))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("map.min-point-spacing-m"), "{spacing}: {e}");
+    }
     let e = PipelineConfig::from_toml("[map]\nwheel-priors = true\n")
         .unwrap_err()
         .to_string();
