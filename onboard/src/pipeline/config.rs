@@ -421,8 +421,9 @@ pub struct MapConfig {
     pub refine: bool,
     /// Voxel of the feature map, metres; at least `laser.max-correspondence-m` (a search looks
     /// into the query's voxel and its 26 neighbours). The map keeps the first `points-per-voxel`
-    /// points of each voxel (at least `min-point-spacing-m` apart since 2026-11-26). 0.2 (0.5 until 2026-11-26): in 0.5 m voxels those were the points
-    /// seen first, from far, 10-20 cm apart, and the refinement's plane and line fits through
+    /// points of each voxel (at least `min-point-spacing-m` apart since 2026-11-26). 0.2 (0.5
+    /// until 2026-11-26): in 0.5 m voxels those were the points seen first, from far, 10-20 cm
+    /// apart, and the refinement's plane and line fits through
     /// them missed curved and occluding surfaces seen from nearer later. Registered from the
     /// true pose against a map built at the true poses (`diag_laser_odometry NAME --map
     /// --free`), the map pulled each frame back along x by 12-48 mm on the five simulated passes

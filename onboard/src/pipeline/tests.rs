@@ -154,11 +154,12 @@ fn laser_and_wheel_hold_exact_wheels_and_beat_slipping_ones() {
     assert_eq!(built.stats.frames, frames);
     // Wheels alone would be 5 % long: 4.4 cm over the 0.87 m run. The slip is not yet
     // significant this early (`fusion.wheel-scale-min-slip`), so what the laser and the map take
-    // off is all there is: 0.62 of it remained at 0.2 m voxels. The 0.5 m map left 0.32, but
-    // part of that was the backward pull that cost it the 7.7 mm above.
+    // off is all there is: 0.62 of it remained at 0.2 m voxels, 0.13 with the spaced map
+    // weighted at 0.01. The 0.5 m map left 0.32, but part of that was the backward pull that
+    // cost it the 7.7 mm above.
     let wheel_only_err = 0.05 * SPEED_MPS * (frames - 1) as f64 * FRAME_S;
     assert!(
-        err < 0.75 * wheel_only_err,
+        err < 0.25 * wheel_only_err,
         "error {err} m vs wheel-only {wheel_only_err} m"
     );
     assert!(built.stats.ground_points > built.stats.points_in / 4);
