@@ -51,14 +51,14 @@ use hil_sim::world::Scene;
 use onboard::pipeline::config::PipelineConfig;
 use onboard::pipeline::deskew::{self, Velocity};
 use onboard::pipeline::features::{self, RingPoint};
-use onboard::pipeline::geom::{Pose, V3, VoxelIndex, norm};
+use onboard::pipeline::geom::{Pose, V3, norm};
 use onboard::pipeline::ground;
 use onboard::pipeline::laser_odometry::{
     FeatureTarget, GROUND_TAG_BIT, Scan, register_two_step, residuals_at,
 };
 use onboard::pipeline::map::FeatureMap;
 use onboard::pipeline::registration::register_joint;
-use onboard::pipeline::{Candidates, LidarFrame, step1_planes};
+use onboard::pipeline::{Candidates, LidarFrame, step1_planes, tagged_index};
 
 fn pose_of(iso: &Isometry) -> Pose {
     Pose {
@@ -118,16 +118,12 @@ fn prepare(
         *t = (*t & !GROUND_TAG_BIT) | ground_bit;
     }
     let voxel = config.laser.max_correspondence_m;
-    let index_of = |v: &[(V3, u32)]| {
-        let (p, t) = v.iter().copied().unzip();
-        VoxelIndex::new_tagged(p, t, voxel)
-    };
     Prepared {
         stamp_s: frame.stamp_s,
         step1_planes,
         target: FeatureTarget {
-            corners: index_of(&candidates.corners),
-            planes: index_of(&candidates.planes),
+            corners: tagged_index(candidates.corners.clone(), voxel),
+            planes: tagged_index(candidates.planes.clone(), voxel),
         },
         planes: feats.planes,
         corners: feats.corners,
@@ -231,7 +227,7 @@ fn main() -> anyhow::Result<()> {
     // truth, in the robot frame, per frame (it does not accumulate here; in the pipeline the next
     // frame starts from it).
     let mut map = args.iter().any(|a| a == "--map").then(|| {
-        FeatureMap::with_spacing(
+        FeatureMap::new(
             config.map.feature_voxel_m,
             config.map.points_per_voxel,
             config.map.min_point_spacing_m,

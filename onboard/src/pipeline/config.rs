@@ -502,10 +502,12 @@ pub struct MapConfig {
     /// tuning value rather than the lidar's range noise. 0.01 (0.02 until 2026-11-26). With the
     /// map's points unspaced, 0.01 let the map's backward pull through (the off-roader's approach
     /// -0.39 degree on exact wheels, 10 seeds); with them spaced (`min-point-spacing-m`) it holds
-    /// wandering wheels better (20 seeds per pass with the assumed errors: sd < 0.15 on 10 of 15
-    /// angles instead of 8, mean ATE lower on all five passes) at a cost on exact wheels (mean
-    /// ATE higher on three of five; 6.1 mm instead of 1.3 over `pipeline::tests`' garage run),
-    /// and 0.005 let the pull through again (the off-roader's departure -0.40).
+    /// wandering wheels better: against the unspaced 0.02, over 20 seeds per pass with the
+    /// assumed errors, sd < 0.15 on 10 of 15 angles instead of 8 and mean ATE lower on all five
+    /// passes. The cost is on exact wheels: against the spaced map at 0.02 (10 seeds) mean ATE
+    /// higher on four of five passes (the van 5.4 -> 10.6 mm), and 6.1 mm instead of 1.3 over
+    /// `pipeline::tests`' garage run. 0.005 let the pull through again (the off-roader's
+    /// departure -0.40).
     pub residual_sigma_m: f64,
 }
 

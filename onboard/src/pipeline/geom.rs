@@ -663,13 +663,9 @@ impl VoxelIndex {
         }
     }
 
-    /// Add `p` unless its voxel already holds `cap` points; returns whether it was added.
-    pub fn insert_capped(&mut self, p: V3, tag: u32, cap: usize) -> bool {
-        self.insert_spaced(p, tag, cap, 0.0)
-    }
-
-    /// [`Self::insert_capped`], and only if no point of the voxel lies nearer than `spacing_m`.
-    pub fn insert_spaced(&mut self, p: V3, tag: u32, cap: usize, spacing_m: f64) -> bool {
+    /// Add `p` unless its voxel already holds `cap` points or one nearer than `spacing_m` (0: any
+    /// distance); returns whether it was added.
+    pub fn insert_capped(&mut self, p: V3, tag: u32, cap: usize, spacing_m: f64) -> bool {
         let cell = self.cells.entry(voxel_of(p, self.voxel_m)).or_default();
         let s2 = spacing_m * spacing_m;
         if cell.len() >= cap || cell.iter().any(|e| dist2(e.p, p) < s2) {
@@ -1124,7 +1120,7 @@ mod tests {
             // The same points inserted one by one give the same index.
             let mut grown = VoxelIndex::new(Vec::new(), voxel_m);
             for &p in &points {
-                assert!(grown.insert_capped(p, 0, usize::MAX));
+                assert!(grown.insert_capped(p, 0, usize::MAX, 0.0));
             }
             for case in 0..300 {
                 let q = if case % 3 == 0 {

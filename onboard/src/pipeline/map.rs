@@ -24,13 +24,10 @@ pub struct FeatureMap {
 }
 
 impl FeatureMap {
-    /// An empty map with voxels of `voxel_m` (also the largest correspondence distance).
-    pub fn new(voxel_m: f64, points_per_voxel: usize) -> Self {
-        Self::with_spacing(voxel_m, points_per_voxel, 0.0)
-    }
-
-    /// [`Self::new`], adding a point only where its voxel holds none nearer than `min_spacing_m`.
-    pub fn with_spacing(voxel_m: f64, points_per_voxel: usize, min_spacing_m: f64) -> Self {
+    /// An empty map with voxels of `voxel_m` (also the largest correspondence distance), adding
+    /// a point only where its voxel holds fewer than `points_per_voxel` and none nearer than
+    /// `min_spacing_m` (0: any distance).
+    pub fn new(voxel_m: f64, points_per_voxel: usize, min_spacing_m: f64) -> Self {
         Self {
             target: FeatureTarget {
                 corners: VoxelIndex::new(Vec::new(), voxel_m),
@@ -61,11 +58,11 @@ impl FeatureMap {
         let (cap, spacing) = (self.points_per_voxel, self.min_spacing_m);
         for &(p, tag) in planes {
             let p = world_from_robot.apply(p);
-            self.target.planes.insert_spaced(p, tag, cap, spacing);
+            self.target.planes.insert_capped(p, tag, cap, spacing);
         }
         for &(p, tag) in corners {
             let p = world_from_robot.apply(p);
-            self.target.corners.insert_spaced(p, tag, cap, spacing);
+            self.target.corners.insert_capped(p, tag, cap, spacing);
         }
     }
 }
@@ -636,7 +633,7 @@ mod tests {
 
     #[test]
     fn feature_map_caps_points_per_voxel() {
-        let mut map = FeatureMap::new(0.5, 3);
+        let mut map = FeatureMap::new(0.5, 3, 0.0);
         let planes: Vec<(V3, u32)> = (0..10)
             .map(|i| ([f64::from(i) * 0.01, 0.0, 0.0], 0))
             .collect();
@@ -664,8 +661,8 @@ mod tests {
             let planes = &map.target().planes;
             planes.points().iter().filter(|p| p[2] > 0.1).count()
         };
-        let mut first = FeatureMap::new(0.2, 20);
-        let mut spaced = FeatureMap::with_spacing(0.2, 20, 0.045);
+        let mut first = FeatureMap::new(0.2, 20, 0.0);
+        let mut spaced = FeatureMap::new(0.2, 20, 0.045);
         for map in [&mut first, &mut spaced] {
             for _ in 0..30 {
                 map.add(&Pose::IDENTITY, &far, &[]);

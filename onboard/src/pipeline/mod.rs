@@ -481,7 +481,7 @@ impl Pipeline {
                 0.0
             }),
             last_rate: [0.0; 6],
-            map: FeatureMap::with_spacing(
+            map: FeatureMap::new(
                 config.map.feature_voxel_m,
                 config.map.points_per_voxel,
                 config.map.min_point_spacing_m,
@@ -1115,7 +1115,7 @@ pub fn step1_planes(feats: &features::Features, ground_voxel_m: f64) -> Vec<V3> 
 }
 
 /// One point per occupied voxel of `voxel_m` (the first seen), in the input's order.
-pub fn downsample<T: Copy>(points: &[(V3, T)], voxel_m: f64) -> Vec<(V3, T)> {
+fn downsample<T: Copy>(points: &[(V3, T)], voxel_m: f64) -> Vec<(V3, T)> {
     let mut seen: std::collections::HashSet<[i32; 3], _> = std::collections::HashSet::with_hasher(
         std::hash::BuildHasherDefault::<geom::FxHasher>::default(),
     );
@@ -1175,7 +1175,9 @@ impl Candidates {
     }
 }
 
-fn tagged_index(points: Vec<(V3, u32)>, voxel_m: f64) -> VoxelIndex {
+/// The voxel index of tagged points ([`Candidates`]) as the registrations search it. Public for
+/// the diagnostics, which must build targets as the pipeline does.
+pub fn tagged_index(points: Vec<(V3, u32)>, voxel_m: f64) -> VoxelIndex {
     let (p, t) = points.into_iter().unzip();
     VoxelIndex::new_tagged(p, t, voxel_m)
 }
