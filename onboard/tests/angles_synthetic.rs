@@ -88,7 +88,12 @@ fn noisy_5mm_range_noise_within_0_3_deg() {
             ..Scan::noiseless(0.005)
         };
         let r = run(&v, scan, TILTED, &cfg);
-        worst = worst.max(check(&v, &r, truth, 0.3, "5 mm noise, tilted+yawed"));
+        // 0.35: the off-roader's departure (a 60-degree end face, isotropic noise as wide as
+        // the point spacing) read +0.24 before the calculator left faces across the path out of
+        // the envelope's modes (`AnglesConfig::skip_faces_across_path`), +0.30 since; on the
+        // simulated lidar's clouds that change left its departure as it was and took the
+        // sedan's silencer end from sd 0.25 to 0.06 (README, "Passing angles").
+        worst = worst.max(check(&v, &r, truth, 0.35, "5 mm noise, tilted+yawed"));
     }
     println!("worst noisy error {worst:.4} deg");
 }

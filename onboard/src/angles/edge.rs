@@ -67,7 +67,7 @@ const MAX_REFERENCE_M: f64 = 0.12;
 /// nearly noiseless cloud's extreme samples lie on its last points (the synthetic noiseless
 /// vehicles, whose estimated sigma comes from tyre-fit residuals of a millimetre or less, are
 /// exact that way), and there is no blur to count back.
-const MIN_NOISE_BINS: f64 = 0.4;
+pub(crate) const MIN_NOISE_BINS: f64 = 0.4;
 /// The density trend is measured over this many reference stretch lengths.
 const TREND_STRETCHES: f64 = 2.0;
 /// Largest share of the count a face rising from the edge may explain before the end is left to

@@ -127,6 +127,10 @@ pub struct AnglesConfig {
     pub min_support: usize,
     /// RANSAC seed.
     pub seed: u64,
+    /// Leave the overhangs' points on faces across the path (a part's end cap, e.g. an exhaust
+    /// silencer's) out of the envelope's lowest modes (true; see `envelope::across_path`). The
+    /// body's ends are placed from all points either way.
+    pub skip_faces_across_path: bool,
     /// Where the sensor was during the scan (robot positions along the pipeline's trajectory),
     /// cloud coordinates, metres; empty: unknown. With it, the calculator refuses a scan whose
     /// path does not reach both axles and within [`PATH_REACH_M`] of both ends of the underside
@@ -151,6 +155,7 @@ impl Default for AnglesConfig {
             noise_m: None,
             min_support: 5,
             seed: 0x5eed,
+            skip_faces_across_path: true,
             scan_path_in_cloud: Vec::new(),
         }
     }
@@ -656,8 +661,27 @@ fn classify(
         .unwrap_or_else(|| auto_bin(&band_points, config.min_support));
     // At least 0.4 bin: a surface sloping up to 0.8 keeps both of a bin's point columns in its mode.
     let half_window_m = (2.5 * noise_sigma_m).max(0.4 * bin_m);
+    // Faces across the path (a part's end cap) stay out of the modes; the body's ends are
+    // still placed from all points (`refine_ends`).
+    let axles_x = fits.iter().fold((f64::MAX, f64::MIN), |(lo, hi), (_, f)| {
+        (lo.min(f.centre_x), hi.max(f.centre_x))
+    });
+    // Without noise there is no smear to leave out, and a face's lowest points are the exact
+    // end of the surface below it (the synthetic noiseless vehicles' bumpers; `edge` leaves
+    // such ends alone by the same rule).
+    let across = if config.skip_faces_across_path && noise_sigma_m >= edge::MIN_NOISE_BINS * bin_m {
+        envelope::across_path(&band_points, axles_x)
+    } else {
+        vec![false; band_points.len()]
+    };
+    let mode_points: Vec<V3> = band_points
+        .iter()
+        .zip(&across)
+        .filter(|&(_, &a)| !a)
+        .map(|(p, _)| *p)
+        .collect();
     let env = lower_envelope(
-        &band_points,
+        &mode_points,
         EnvelopeParams {
             bin_m,
             half_window_m,
