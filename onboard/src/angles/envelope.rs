@@ -129,8 +129,8 @@ const ACROSS_REACH_M: f64 = 0.08;
 /// [`ACROSS_CELL_M`] around a point's cell: each cell's moments are summed once (one hash lookup
 /// per point), then added up over the nine columns of cells around each column (nine lookups per
 /// column). A neighbour search per point, the first version, cost the calculator a second on a
-/// 2.8 M-point cloud; 27 lookups per cell 0.35-0.5 s per grid; this about 40 ms per grid on a
-/// million-point cloud. The cube is tied to a grid, so a cube straddling
+/// 2.8 M-point cloud, 27 lookups per cell 0.35-0.5 s for one grid; this, both grids, 45-60 ms
+/// on the pipeline's million-point clouds. The cube is tied to a grid, so a cube straddling
 /// the corner of a part mixes the faces and whether a point is marked depended on where the grid
 /// fell (the sedan's departure sd moved between 0.13 and 0.23 with the cell size on the
 /// pipeline's clouds); a point is marked if either of two grids, offset by half a cell, marks it.
@@ -222,7 +222,9 @@ fn faces_across(points: &[[f64; 3]], offset_m: f64) -> Vec<bool> {
         .collect()
 }
 
-/// Count, sum and second moments (xx, xy, xz, yy, yz, zz) of points about `origin`.
+/// Count, sum and second moments (xx, xy, xz, yy, yz, zz) of points about `origin`: the
+/// mergeable form of `pipeline::geom::centroid_covariance`, so 27 cells' points are summed from
+/// their cells' moments instead of being gathered again.
 #[derive(Clone, Copy)]
 struct Moments {
     origin: [f64; 3],
@@ -558,7 +560,7 @@ mod tests {
     }
 
     #[test]
-    fn absurd_coordinates_neither_panic_nor_mark() {
+    fn absurd_coordinates_do_not_panic() {
         // Keys saturate at the ends of i32 (1e12 m / 1 cm); their neighbours must not overflow.
         let mut points = Vec::new();
         for k in 0..30 {

@@ -434,9 +434,12 @@ pub fn compute_angles(
         .map(|(_, f)| f.residual_rms_m)
         .fold(0.0, f64::max);
     let band_y_m = band(&fits, config.band, &mut warnings);
+    // The overhangs, where faces across the path are left out of the envelope's modes.
+    let (front_x, rear_x) = zone_limits(front, rear, Zone::Axle);
     let body = classify(
         &settled.in_frame,
         &fits,
+        (rear_x, front_x),
         config,
         config.noise_m.unwrap_or(settled.sigma.max(tyre_sigma)),
         band_y_m,
@@ -624,6 +627,7 @@ struct Body {
 fn classify(
     in_frame: &[V3],
     fits: &[(TyrePosition, TyreFit)],
+    axles_x_m: (f64, f64),
     config: &AnglesConfig,
     noise_sigma_m: f64,
     band_y_m: (f64, f64),
@@ -663,14 +667,11 @@ fn classify(
     let half_window_m = (2.5 * noise_sigma_m).max(0.4 * bin_m);
     // Faces across the path (a part's end cap) stay out of the modes; the body's ends are
     // still placed from all points (`refine_ends`).
-    let axles_x = fits.iter().fold((f64::MAX, f64::MIN), |(lo, hi), (_, f)| {
-        (lo.min(f.centre_x), hi.max(f.centre_x))
-    });
     // Without noise there is no smear to leave out, and a face's lowest points are the exact
     // end of the surface below it (the synthetic noiseless vehicles' bumpers; `edge` leaves
     // such ends alone by the same rule).
     let across = if config.skip_faces_across_path && noise_sigma_m >= edge::MIN_NOISE_BINS * bin_m {
-        envelope::across_path(&band_points, axles_x)
+        envelope::across_path(&band_points, axles_x_m)
     } else {
         vec![false; band_points.len()]
     };
