@@ -91,7 +91,7 @@ pub fn run(args: &ReplayArgs, out: &mut impl Write) -> anyhow::Result<()> {
         std::fs::File::create(&path).with_context(|| format!("creating {}", path.display()))?;
     write_ply(
         std::io::BufWriter::new(file),
-        &built.to_cloud(),
+        &onboard::cloud::Cloud::from(&built),
         PlyEncoding::BinaryLittleEndian,
     )
     .with_context(|| format!("writing {}", path.display()))?;

@@ -82,7 +82,7 @@ enum Mode {
 /// their stage out of laser + wheel instead of the full configuration (and say so in the name).
 fn variants(mode: Mode, depth: bool, base: &PipelineConfig) -> Vec<Variant> {
     // "laser+visual+wheel": the camera fused and its points in the cloud (both off in the
-    // pipeline's defaults since 2026-11-25), as the ablation table was measured.
+    // pipeline's defaults), as the ablation table measures it.
     let mut full = base.clone();
     full.fusion.use_visual = true;
     full.visual.add_to_cloud = true;

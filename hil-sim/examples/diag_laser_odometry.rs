@@ -16,7 +16,7 @@
 //! groups pull x (`--dump GROUP` prints every 20th frame's residuals of groups starting so,
 //! `--dump-every K` every K-th), then the plane residuals' pull by the fit's tilt and by |r|.
 //! `--no-corners` / `--no-planes` leave a feature kind out of step 2; `--mixed-planes` tags the
-//! ground like any other plane point (the behaviour before `GROUND_TAG_BIT`). `--stride K`
+//! ground like any other plane point (as without `GROUND_TAG_BIT`). `--stride K`
 //! registers against the frame K back (the slip meter's baseline); `--straight-deskew` deskews
 //! without the rotation (as the pipeline's wheel deskew does). `--map` registers each frame
 //! against the scan-to-map refinement's feature map built from the earlier frames at their TRUE
@@ -29,7 +29,7 @@
 //! every increment towards zero motion: x bias -2.87 mm per 30 mm frame (-9.7 %); with the classes
 //! kept apart -0.02 mm (-0.07 %).
 //!
-//! Later (6f362b8): corners alone read 3.5-4 % short scan-to-scan on the off-roader and the
+//! Also: corners alone read 3.5-4 % short scan-to-scan on the off-roader and the
 //! sedan, planes alone 0.2 % at the slip baseline (`--stride 10 --no-corners`); and the map
 //! refinement left free (`--map --free`) pulls every frame back along x, by 4 (sedan) to 66
 //! (off-roader) mm on average from the true pose, through plane and corner fits with normals
@@ -201,8 +201,7 @@ fn main() -> anyhow::Result<()> {
         std::collections::BTreeMap::default();
     // The plane residuals' pull again, by how far the fit's normal is from the nearest axis and
     // by |r| (a fit through two surfaces at a depth step has a tilted normal and residuals of
-    // millimetres to centimetres at the true pose: docs/pipeline-history.md, "suv-offset's
-    // exit").
+    // millimetres to centimetres at the true pose: decision record 018).
     let mut by_tilt = [(0.0, 0usize); 2];
     let mut by_size = [(0.0, 0usize); 5];
     // `--dump-every K`: with `--dump`, every K-th frame (default 20).

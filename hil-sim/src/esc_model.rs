@@ -1,4 +1,4 @@
-//! DJI C620 ESC + M3508 motor models (DESIGN.md section 7), one per wheel.
+//! DJI C620 ESC + M3508 motor models (docs/architecture.md section 7), one per wheel.
 //!
 //! What one [`Esc`] does, per simulated millisecond:
 //! - holds the last current command it received in a 0x200/0x1FF frame (a real C620 does too: the

@@ -1,6 +1,6 @@
 //! Small, dependency-free 3-D geometry for the simulator: vectors, rotations and rigid transforms.
 //!
-//! Everything is `f64` and `Copy`. Frames follow DESIGN.md section 8: right-handed, z up, metres and
+//! Everything is `f64` and `Copy`. Frames follow docs/architecture.md section 8: right-handed, z up, metres and
 //! radians. A transform named `world_from_robot` maps points expressed in the robot frame into the
 //! world frame (`world_from_robot.apply(p_in_robot) == p_in_world`).
 

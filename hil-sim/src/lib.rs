@@ -1,4 +1,4 @@
-//! passangle software-in-the-loop simulator (DESIGN.md section 7): a parametric vehicle over a flat
+//! passangle software-in-the-loop simulator (docs/architecture.md section 7): a parametric vehicle over a flat
 //! ground, true passing angles from its geometry, and simulated VLP-16 and D435 sensors that see it
 //! from a robot driving underneath.
 //!
@@ -13,7 +13,7 @@
 //! - [`d435`]: the D435 depth camera model producing Z16 frames.
 //! - [`wheel_odometry`]: the wheel odometry the firmware would report, with a mecanum error model.
 //!
-//! Firmware in the loop (README, "Firmware in the loop"): [`esc_model`] (C620 + M3508 with injectable faults),
+//! Firmware in the loop (docs/simulator.md): [`esc_model`] (C620 + M3508 with injectable faults),
 //! [`robot`] (mecanum chassis dynamics with slip; its [`robot::PoseHistory`] is the odometry
 //! truth), [`can_bus`] (the bus trait: in-process, SocketCAN), [`pty`] (the MCU link's byte pipe:
 //! in memory, pseudo-terminal), [`fil`] (the runner stepping `control::Controller` on a 1 ms

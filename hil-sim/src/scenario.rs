@@ -223,7 +223,7 @@ impl Scenario {
         let take = |a: &mut FrameAssembler, frames: &mut Vec<onboard::pipeline::LidarFrame>| {
             while let Some(f) = a.pop_frame() {
                 if f.is_complete() {
-                    frames.push(onboard::pipeline::LidarFrame::from_vlp16(
+                    frames.push(onboard::frames::lidar_frame(
                         &f,
                         f.start_sensor_us * 1e-6 - offset_s,
                     ));

@@ -19,7 +19,7 @@
 //!
 //! Outline points come from [`Vehicle::outline_points`]; points inside a tyre circle (hidden in the
 //! wheel) are skipped. The tests cross-check this stepping search against the closed form
-//! `a = asin(r / hypot(d, r - z)) - atan2(r - z, d)` (DESIGN.md section 6 step 8).
+//! `a = asin(r / hypot(d, r - z)) - atan2(r - z, d)` (docs/architecture.md section 6 step 8).
 
 use crate::vehicle::{OutlinePoint, Vehicle};
 
@@ -187,7 +187,7 @@ fn breakover(points: &[OutlinePoint], r: f64, front_x: f64, rear_x: f64) -> True
     best
 }
 
-/// The closed form of DESIGN.md section 6 step 8, used only to cross-check the brute force: slope of
+/// The closed form of docs/architecture.md section 6 step 8, used only to cross-check the brute force: slope of
 /// the plane tangent to a tyre of radius `r` through a point at horizontal distance `d` from the wheel
 /// centre and height `z`.
 pub fn closed_form_rad(d: f64, z: f64, r: f64) -> f64 {

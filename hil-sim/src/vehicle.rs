@@ -3,7 +3,7 @@
 //!
 //! # Frame
 //! The vehicle frame is right-handed, z up, x toward the vehicle's front, y to its left, metres
-//! (DESIGN.md section 8). Its origin is **on the ground, under the centre of the front axle**: the
+//! (docs/architecture.md section 8). Its origin is **on the ground, under the centre of the front axle**: the
 //! front wheel centres are at `(0, ±track/2, r)` and the rear ones at `(-wheelbase, ±track/2, r)`.
 //! The ground is the plane z = 0.
 //!

@@ -2,8 +2,8 @@
 //! assertions), against two peers measured in the same run on the same points and queries:
 //! - `brute`: a linear scan over every point (the reference answer; every result of the index is
 //!   checked against it and mismatches are counted and printed);
-//! - `old27`: the index as it was before the speed work (a hash of voxel -> point indices with the
-//!   byte-at-a-time FxHash, all 27 voxels around the query scanned, ties by visiting order).
+//! - `old27`: a plain voxel hash (voxel -> point indices with the byte-at-a-time FxHash, all 27
+//!   voxels around the query scanned, ties by visiting order), the straightforward design.
 //!
 //! ```text
 //! cargo run --release -p onboard --example bench_voxel_index [-- QUERIES]

@@ -216,7 +216,7 @@ impl Timed {
                 d.stamp_s = secs(wall_us);
                 Item::Depth(d)
             }
-            Timed::Lidar(ns, f) => Item::Lidar(LidarFrame::from_vlp16(
+            Timed::Lidar(ns, f) => Item::Lidar(crate::frames::lidar_frame(
                 &f,
                 (ns as f64 - t0_ns as f64) * 1e-9,
             )),

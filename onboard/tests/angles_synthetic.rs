@@ -4,7 +4,8 @@
 mod synth;
 
 use onboard::angles::{
-    AnglesConfig, AnglesError, AnglesResult, ExclusionBox, TyrePosition, Zone, compute_angles,
+    AngleFinding, AnglesConfig, AnglesError, AnglesResult, ExclusionBox, TyrePosition, Zone,
+    compute_angles,
 };
 use synth::{Pose, Scan, Truth, Vehicle};
 
@@ -18,8 +19,7 @@ fn run(v: &Vehicle, scan: Scan, pose: Pose, config: &AnglesConfig) -> AnglesResu
 
 /// Errors in degrees: (approach, departure, breakover).
 fn errors_deg(r: &AnglesResult, t: Truth) -> [f64; 3] {
-    let got =
-        |f: &Option<onboard::angles::AngleFinding>| f.as_ref().map_or(f64::NAN, |f| f.angle_rad);
+    let got = |f: &Option<AngleFinding>| f.as_ref().map_or(f64::NAN, |f| f.angle_rad);
     [
         (got(&r.approach) - t.approach_rad).to_degrees(),
         (got(&r.departure) - t.departure_rad).to_degrees(),
@@ -88,11 +88,11 @@ fn noisy_5mm_range_noise_within_0_3_deg() {
             ..Scan::noiseless(0.005)
         };
         let r = run(&v, scan, TILTED, &cfg);
-        // 0.35: the off-roader's departure (a 60-degree end face, isotropic noise as wide as
-        // the point spacing) read +0.24 before the calculator left faces across the path out of
-        // the envelope's modes (`AnglesConfig::skip_faces_across_path`), +0.30 since; on the
-        // simulated lidar's clouds that change left its departure as it was and took the
-        // sedan's silencer end from sd 0.25 to 0.06 (README, "Passing angles").
+        // 0.35: with isotropic noise as wide as the point spacing, leaving faces across the path
+        // out of the envelope's modes (`AnglesConfig::skip_faces_across_path`) also drops some
+        // of the off-roader's 60-degree end face, whose departure reads about +0.3; on lidar
+        // clouds, where the noise is along the rays, the rule removes the end caps' smear
+        // (decision record 026).
         worst = worst.max(check(&v, &r, truth, 0.35, "5 mm noise, tilted+yawed"));
     }
     println!("worst noisy error {worst:.4} deg");
@@ -424,8 +424,7 @@ fn assert_same_angles(with: [f64; 3], without: [f64; 3], tol_deg: f64, what: &st
 #[test]
 fn lifted_floor_arcs_are_neither_underside_nor_a_footprint() {
     // Arcs of floor hits that a frame's small tilt lifted just past the pipeline's 3 cm ground
-    // band (suv-offset seed 6's pipeline cloud: 3.1-3.5 cm up; docs/pipeline-history.md, "The
-    // lidar's phase drawn per seed"): one across
+    // band (as on a pipeline cloud of suv-offset: 3.1-3.5 cm up; decision record 010): one across
     // the band at mid-wheelbase, as dense as a ring's hits; one of single points every 4 cm from
     // the centreline to the rear right tyre, which chained that tyre's footprint to the centre.
     let v = synth::sedan();

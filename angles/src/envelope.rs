@@ -15,7 +15,7 @@
 //! toward the mean x (noise spreads points outward; with no noise the extremes are exact), heights
 //! clamped to the mode's height range. On noiseless piecewise-flat surfaces both samples lie exactly on the surface, so
 //! corners are kept to the point spacing; on noisy ones each sample averages the whole mode.
-//! Known bias (measured in the tests and the README section "Passing angles"): at a convex corner the mode mixes both
+//! Known bias (measured in the tests and docs/method/calculator.md): at a convex corner the mode mixes both
 //! faces within `w`, which lifts the envelope there by up to about `w / 2`.
 
 /// One envelope sample in the side view (vehicle frame x forward, z up).
@@ -122,8 +122,7 @@ const ACROSS_REACH_M: f64 = 0.08;
 /// Why: the end cap of a part along the path (the sedan's exhaust silencer) is such a face. The
 /// lidar smears its points along the rays, over the last few centimetres of the part, and there
 /// they lift the bins' lowest modes by 1-2.5 cm, in some bins and not in others, so the
-/// departure witness moved by 2.5 cm along x between seeds (oracle clouds: +0.76 / 0.25 degree).
-/// Without the cap's points: +0.48 / 0.06 (docs/pipeline-history.md, "The silencer's end cap").
+/// departure witness moves by centimetres along x between seeds (decision record 026).
 ///
 /// The local surface is the smallest principal axis of the points in the 3 x 3 x 3 cells of
 /// [`ACROSS_CELL_M`] around a point's cell: each cell's moments are summed once (one hash lookup
@@ -135,7 +134,7 @@ const ACROSS_REACH_M: f64 = 0.08;
 /// fell (the sedan's departure sd moved between 0.13 and 0.23 with the cell size on the
 /// pipeline's clouds); a point is marked if either of two grids, offset by half a cell, marks it.
 pub(crate) fn across_path(points: &[[f64; 3]], inner_x_m: (f64, f64)) -> Vec<bool> {
-    use crate::pipeline::geom::{VoxelMap, voxel_of};
+    use passangle_geom::{VoxelMap, voxel_of};
     let candidate = |p: &[f64; 3]| p[0] < inner_x_m.0 || p[0] > inner_x_m.1;
     // The lowest candidate point per column of one cell along x.
     let column = |p: &[f64; 3]| [voxel_of(*p, ACROSS_CELL_M)[0], 0, 0];
@@ -162,7 +161,7 @@ pub(crate) fn across_path(points: &[[f64; 3]], inner_x_m: (f64, f64)) -> Vec<boo
 
 /// [`across_path`]'s test on one grid, shifted by `offset_m` along every axis.
 fn faces_across(points: &[[f64; 3]], offset_m: f64) -> Vec<bool> {
-    use crate::pipeline::geom::{VoxelMap, voxel_of};
+    use passangle_geom::{VoxelMap, voxel_of};
     // Each cell's moments, about its first point (so the sums stay small).
     let mut index: VoxelMap<u32> = VoxelMap::default();
     let mut cells: Vec<([i32; 3], Moments)> = Vec::new();
@@ -282,7 +281,7 @@ impl Moments {
         });
         let cov = [[c[0], c[1], c[2]], [c[1], c[3], c[4]], [c[2], c[4], c[5]]];
         // Eigenvalues ascending, eigenvectors as columns: the normal is column 0.
-        crate::pipeline::geom::symmetric_eigen3(&cov)
+        passangle_geom::symmetric_eigen3(&cov)
             .is_some_and(|(_, vectors)| vectors[0][0].abs() > ACROSS_MIN_NORMAL_X)
     }
 }

@@ -76,9 +76,8 @@ const BLOCK_VOXELS: usize = 1 << (3 * BLOCK_BITS);
 
 /// Points buffered before they are sorted into the blocks: several frames' worth (a 10 Hz VLP-16
 /// frame adds about 16 000), since consecutive frames see the same surfaces and a batch touches
-/// each block's slots and cells once. Against one frame's worth (16 384), the pickup's 5 Hz frames
-/// took 0.971 of the CPU with 65 536 and 0.953 of that with 262 144 (least of three interleaved
-/// runs, seeds 1-3, 2026-11-26; 1 048 576 was no better). Cost (computed, not measured): 6.3 MB
+/// each block's slots and cells once; larger batches gain nothing more (decision record 020).
+/// Cost (computed, not measured): 6.3 MB
 /// of pending points per accumulator and about 7 MB more while a batch is sorted in; the last
 /// batch is sorted in when the cloud is read ([`CloudAccumulator::points`]).
 const BATCH: usize = 262_144;
@@ -181,24 +180,17 @@ impl Block {
 /// The floor of the output cloud: one point per `cell_m` x `cell_m` column of the world's x-y
 /// grid, the mean of the ground points (each frame's RANSAC plane inliers) that fell in it.
 ///
-/// The floor is a height field, so its columns are averaged over every frame that saw them. As
-/// 3D voxels (the accumulator before 2026-11-25) a column kept one centroid per 2 cm of height,
-/// and floor hits that a frame's small pitch error had lifted 2-3.5 cm kept their own layer
-/// (suv-offset with the lidar phase drawn per seed: up to 570 points 2-5 cm up between the axles
-/// on seeds 4-9; with the columns at most 11 left 2-3 cm up, and 70 on seed 6 3-5 cm up, which
-/// the averaging did not touch, so they were not ground points; those, 3.1-3.5 cm up, became seed
-/// 6's breakover witness at -16 degrees, which the calculator's 4.5 cm body cut now handles).
-/// Averaged into their columns they sink toward the floor by the share of the column's hits they
-/// are.
+/// The floor is a height field, so its columns are averaged over every frame that saw them. In 3D
+/// voxels a column keeps one centroid per voxel of height, and floor hits that a frame's small
+/// pitch error lifted 2-3.5 cm keep their own layer, which the calculator can take for underside
+/// (decision record 010). Averaged into their columns they sink toward the floor by the share of
+/// the column's hits they are.
 ///
 /// Implementation: a column is a voxel of a [`CloudAccumulator`] in coordinates where heights are
 /// compressed into one voxel layer (`z' = cell / 2 + z * cell / (2 * FLOOR_HALF_RANGE_M)`), so
-/// the floor keeps that accumulator's batched, cache-friendly layout. A first version kept the
-/// columns in a hash map with one lookup per point and cost the off-roader's pass 0.8 ms of
-/// CPU per frame more (4.9-5.4 against 4.1-4.5, pinned to one core, alternated, 2026-11-25). Its
-/// blocks are dense sheets ([`Blocking::Sheets`]): about 3 % less CPU per frame on the pickup's
-/// 5 Hz frames than sparse cubes (seeds 1-3, least of three interleaved runs, 2026-11-26), the
-/// same output. Floor more than [`FLOOR_HALF_RANGE_M`] above or below the first frame's ground
+/// the floor keeps that accumulator's batched, cache-friendly layout (a hash map with one lookup
+/// per point costs measurably more per frame). Its blocks are dense sheets ([`Blocking::Sheets`]),
+/// slightly cheaper than sparse cubes for a floor, with the same output (decision record 006). Floor more than [`FLOOR_HALF_RANGE_M`] above or below the first frame's ground
 /// splits a column in two points, as the 3D voxels did.
 #[derive(Debug, Clone)]
 pub struct FloorAccumulator {

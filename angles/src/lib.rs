@@ -1,4 +1,4 @@
-//! Passing-angle calculator (DESIGN.md section 6 step 8): approach, departure and ramp breakover
+//! Passing-angle calculator (docs/architecture.md section 6 step 8): approach, departure and ramp breakover
 //! angles of a vehicle from a point cloud of its underside and tyres, per the standard definitions
 //! (`notes/domain.md` part A) and the paper's section 3.6 / Algorithm 2.
 //!

@@ -44,7 +44,7 @@
 //! would rest on the face's shape), or when the count reaches past the outermost layer point
 //! (it counted more than the surface: a part's sides or faces in the layer, e.g. a ball mount).
 //!
-//! Known limits (measured, docs/pipeline-history.md, "Where the angle spread comes from"):
+//! Known limits (measured in decision record 004):
 //! clouds reduced to voxel centroids over-represent sparse points (one centroid per lone smeared
 //! point, one per several points inside the surface), so the count places a strongly blurred
 //! edge a few millimetres outward (the off-roader's front bumper: +4..+8 mm, its height lifted
@@ -381,9 +381,9 @@ mod tests {
     use rand_chacha::ChaCha8Rng;
 
     use super::*;
-    use crate::angles::envelope::{EnvelopeParams, lower_envelope};
+    use crate::envelope::{EnvelopeParams, lower_envelope};
 
-    use crate::angles::tyres::tests::gauss as gaussian;
+    use crate::tyres::tests::gauss as gaussian;
 
     /// The lower envelope in 5 mm bins (half window 5 mm, support 5), sorted by x.
     fn envelope_5mm(points: &[V3], noise_m: f64) -> Vec<EnvelopeSample> {

@@ -143,10 +143,9 @@ fn run(config: PipelineConfig, frames: usize, wheel_overshoot: Option<f64>) -> (
 #[test]
 fn laser_and_wheel_hold_exact_wheels_and_beat_slipping_ones() {
     let frames = 30;
-    // Exact wheels: the map must not pull the run far off them. The 0.5 m feature map used until
-    // 2026-11-26 (`map.feature-voxel-m`) left 7.7 mm over the 0.87 m run, 0.2 m 1.3 mm. With the
-    // map weighted twice as much against the wheels (`map.residual-sigma-m` 0.01 instead of
-    // 0.02, with its points spaced) 6.1 mm: what holding wandering wheels costs exact ones.
+    // Exact wheels: the map must not pull the run far off them. Weighing the map against the
+    // wheels (`map.residual-sigma-m`) so that it holds wandering wheels costs exact ones a few
+    // millimetres over this 0.87 m run; the bound allows that and no more.
     let (exact_err, _) = run(PipelineConfig::default(), frames, Some(0.0));
     assert!(exact_err < 0.008, "error {exact_err} m with exact wheels");
     let (err, built) = run(PipelineConfig::default(), frames, Some(0.05));
@@ -217,10 +216,9 @@ fn position_errors(built: &BuiltCloud) -> Vec<f64> {
 
 #[test]
 fn slip_replay_scales_the_travel_before_the_scale_was_significant() {
-    // The map weighted against the wheels as before 2026-11-26 (`map.residual-sigma-m` 0.02):
-    // the frames before the scale was significant then follow the slipping wheels wherever the
-    // laser does not hold x, the case the replay is for. (At the default 0.01 the map holds
-    // most of it itself here: RMS 4.5 mm without the replay, 3.9 with.)
+    // The map weighted less against the wheels (`map.residual-sigma-m` 0.02): the frames before
+    // the scale is significant then follow the slipping wheels wherever the laser does not hold
+    // x, the case the replay is for. (At the default the map holds most of it itself here.)
     let mut on = PipelineConfig::default();
     on.map.residual_sigma_m = 0.02;
     let mut off = on.clone();

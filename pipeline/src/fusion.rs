@@ -22,10 +22,10 @@
 //!    closest to the reference, else from the reference itself (constant velocity), else zero.
 //!    A rotation rate taken from the reference is multiplied by `rotation_gap_decay` (the same
 //!    factor applies to the prediction, [`Fusion::predict`]): the reference is the mean of the last
-//!    fused rates, so holding it (factor 1, the behaviour before) keeps whatever rotation rate the
+//!    fused rates, so holding it (factor 1) keeps whatever rotation rate the
 //!    laser last reported, noise included, and integrates it for as long as the laser stays
 //!    degenerate (laser only under a car: tens of degrees of yaw over a pass). The robot drives
-//!    straight by design (DESIGN.md's run), so without a source the best guess of a rotation rate
+//!    straight by design (docs/architecture.md, section 1), so without a source the best guess of a rotation rate
 //!    is zero; a factor below 1 decays the held rate towards it frame by frame. Translation keeps
 //!    the reference as it is (the robot does keep driving at its speed).
 //!
@@ -185,9 +185,8 @@ impl Fusion {
     /// Unlike the scale's, this standard error counts overlapping measurements as independent:
     /// their error is mostly the registrations' own yaw noise, one per registration, and the
     /// wheels' yaw wander decorrelates within a baseline (0.3 s in the assumed model against
-    /// 0.8-1 s). Counted like the scale's, the estimate was never applied on the simulated
-    /// passes with the assumed wheel errors (it had been on 13 of 50, and lowered their mean
-    /// ATE; see docs/pipeline-history.md).
+    /// 0.8-1 s). Counted like the scale's, the estimate would almost never become significant on
+    /// the simulated passes with the assumed wheel errors (decision record 001).
     pub fn wheel_yaw_bias_radps(&self) -> f64 {
         if !self.config.wheel_yaw_bias || self.yaw_measurements.len() < MIN_YAW_MEASUREMENTS {
             return 0.0;

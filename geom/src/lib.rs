@@ -5,7 +5,12 @@
 //!
 //! Increments are `[rx, ry, rz, tx, ty, tz]`: a rotation vector (radians, axis times angle) and a
 //! translation (metres). [`Pose::from_increment`] maps one to `(exp(r), t)`; robot-frame names
-//! follow DESIGN.md section 8 (x forward, y left, z up), so `rx` is roll, `ry` pitch, `rz` yaw.
+//! follow docs/architecture.md section 8 (x forward, y left, z up), so `rx` is roll, `ry` pitch, `rz` yaw.
+
+// `!(x > 0.0)` is deliberate throughout: it rejects NaN along with the out-of-range values.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+// Small fixed-size matrix code reads best with explicit indices.
+#![allow(clippy::needless_range_loop)]
 
 use std::collections::HashMap;
 use std::hash::{BuildHasherDefault, Hasher};
@@ -590,8 +595,8 @@ pub struct Neighbour {
 /// hash lookup when its nearest face is farther than the current search bound (the radius, or the
 /// K-th best distance once K points were found). With a radius up to the voxel (the pipeline's
 /// scan-to-map: 0.2 m voxels and radius) the 26 neighbours are visited by kind (face, edge,
-/// corner), so the bound shrinks early and prunes most of them; with the 0.5 m voxels used until
-/// 2026-11-26 it was one to eight voxels instead of 27. Ties in distance are broken by
+/// corner), so the bound shrinks early and prunes most of them; with a radius well under the voxel
+/// only one to eight voxels are visited. Ties in distance are broken by
 /// the smaller index, so the result does not depend on the order in which voxels are visited.
 #[derive(Debug, Clone)]
 pub struct VoxelIndex {

@@ -28,16 +28,14 @@
 //! laser x still beats a guessed speed; at 0.3 the simulated van's laser-only run stood still for
 //! its first 3 s and lost 0.8 m) and `unaided-degeneracy-rotation-eigen-min-m2` (1.0 m^2: a weak
 //! laser yaw is worse than the straight-driving prior, which fusion then fills with zero rate).
-//! Measured on the five simulated passes; see docs/pipeline-history.md, "Laser odometry".
+//! The thresholds and their measurements: decision record 005.
 //!
 //! **Step 2 from step 1's correspondences.** Both steps register the same plane features (step 1
 //! with the ground sample after them) against the same target, and step 1 moves them by
 //! millimetres (z, roll, pitch). Step 2 keeps a plane feature's step-1 correspondence while the
 //! feature is within the re-search distance of where it was searched, as either step does between
-//! its own iterations. About 10 % less CPU per frame on the five simulated passes (mean over ten
-//! seeds, two benches side by side; 5 % on seed 1 alone, alternated); the angles moved per seed
-//! by a third to all of their spread and the 10-seed figures stayed within their sampling
-//! noise (docs/pipeline-history.md, "Step 2 from step 1's correspondences").
+//! its own iterations. This saves searches without changing the result beyond its seed-to-seed
+//! spread (decision record 017).
 //!
 //! **Gating a registration by another source** ([`keep_components`]): the pipeline may reject
 //! some components of a registration after the fact (the scan-to-map refinement against wheel
@@ -238,8 +236,8 @@ impl<'a> Scan<'a> {
     /// solves ([`register_joint`]). `levelled`: the frame's floor has set the prior's roll, pitch
     /// and height, which it also sets on the result, so only yaw, x and y are solved, from step
     /// 2's planes and the corners; the ground sample, which constrains only the other three, is
-    /// not registered (about half the refinement's queries; docs/pipeline-history.md, "The
-    /// refinement levelled by the floor": the same accuracy, 0.87 of the CPU on the pickup).
+    /// not registered (about half the refinement's queries, for the same accuracy; decision record
+    /// 022).
     /// Else all six, from step 1's planes (with the ground sample) and the corners.
     pub fn for_refinement(&self, levelled: bool) -> ((&'a [V3], &'a [V3]), &'static [usize]) {
         if levelled {
@@ -298,8 +296,8 @@ pub fn register_two_step(
 #[cfg(test)]
 pub(crate) mod tests {
     use super::*;
-    use crate::pipeline::laser_odometry::solve_with;
-    use crate::pipeline::laser_odometry::tests::{moved, scene, target_of};
+    use crate::laser_odometry::solve_with;
+    use crate::laser_odometry::tests::{moved, scene, target_of};
 
     /// A scan without a ground sample: step 1 and step 2 register the same planes.
     pub(crate) fn scan_of<'a>(planes: &'a [V3], corners: &'a [V3]) -> Scan<'a> {

@@ -192,8 +192,8 @@ fn travelled(a: &Pose, b: &Pose) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::pipeline::laser_odometry::tests::{moved, scene, target_of};
-    use crate::pipeline::registration::tests::scan_of;
+    use crate::laser_odometry::tests::{moved, scene, target_of};
+    use crate::registration::tests::scan_of;
 
     fn at(x_m: f64) -> Pose {
         Pose::from_xyz_rpy([x_m, 0.0, 0.0], [0.0; 3])

@@ -9,11 +9,11 @@
 //! window-half-width = 5
 //! ```
 
-use serde::Deserialize;
+use serde::{Deserialize, Serialize};
 
 /// Every stage's settings. `PipelineConfig::default()` is the tuned configuration (every stage's
 /// own default, except that the bilateral filter is off: see its `Default` impl).
-#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, rename_all = "kebab-case", default)]
 pub struct PipelineConfig {
     /// Sensor mounts on the robot.
@@ -37,12 +37,10 @@ pub struct PipelineConfig {
 }
 
 impl Default for PipelineConfig {
-    /// Each stage's default, but the bilateral filter off. On lidar-only simulator clouds (wheel
-    /// odometry, 1.5 cm range noise) it pulls small parts that hang a few centimetres below the
-    /// underside into it: the sedan's exhaust silencer and the van's spare wheel limit their
-    /// departure angles, which read +1.4 and +0.5 degrees off with the filter at 1 cm voxels (+3.7
-    /// and +4.4 at 2 cm) against +0.7 and +0.2 without it (wheel-odometry clouds). A `[filter]` section turns it on (its
-    /// keys default to [`FilterConfig::default`], which is enabled).
+    /// Each stage's default, but the bilateral filter off: on lidar-only clouds it pulls small
+    /// parts that hang a few centimetres below the underside (an exhaust silencer, a spare
+    /// wheel) into it and lifts the witnesses of the departure angle. A `[filter]` section turns
+    /// it on (its keys default to [`FilterConfig::default`], which is enabled).
     fn default() -> Self {
         Self {
             mounts: MountConfig::default(),
@@ -63,7 +61,7 @@ impl Default for PipelineConfig {
 
 /// Where the sensors sit on the robot (robot frame: x forward, y left, z up, origin on the ground
 /// below the robot's centre).
-#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, rename_all = "kebab-case", default)]
 pub struct MountConfig {
     /// VLP-16 optical centre in the robot frame, metres.
@@ -93,7 +91,7 @@ impl Default for MountConfig {
 }
 
 /// RANSAC ground plane per frame.
-#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, rename_all = "kebab-case", default)]
 pub struct GroundConfig {
     /// Remove ground points from the features used for registration (the ablation switch).
@@ -127,7 +125,7 @@ impl Default for GroundConfig {
 }
 
 /// Motion compensation.
-#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, rename_all = "kebab-case", default)]
 pub struct DeskewConfig {
     /// Compensate motion at all.
@@ -150,7 +148,7 @@ impl Default for DeskewConfig {
 }
 
 /// Feature extraction per ring.
-#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, rename_all = "kebab-case", default)]
 pub struct FeatureConfig {
     /// N: neighbours on each side of the window's centre (|W| = 2N).
@@ -197,7 +195,7 @@ impl Default for FeatureConfig {
 }
 
 /// Scan-to-scan registration.
-#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, rename_all = "kebab-case", default)]
 pub struct LaserOdometryConfig {
     /// Levenberg-Marquardt iterations per step.
@@ -238,18 +236,13 @@ impl Default for LaserOdometryConfig {
         Self {
             iterations: 8,
             max_correspondence_m: 0.2,
-            // 0.2 until 2026-11-26 (docs/pipeline-history.md, "The refinement levelled by the
-            // floor"): at 0.4 the pickup's 5 Hz frames carry 397 ground samples instead of 812
-            // (seed 1, mean per frame; at 0.2 half of them came from the one ring that reaches
-            // the floor 6-8 m away, at 0.4 still 222). Since the floor levels every pose
-            // (`map.level-with-ground`), step 1 only starts step 2; with the levelled
-            // refinement, 10 seeds per pass: angle sds and ATE equal within their noise.
+            // The floor levels every pose (`map.level-with-ground`), so step 1 only starts step
+            // 2; a coarse ground sample keeps the one ring that reaches the far floor from
+            // dominating it (decision record 022).
             ground_sample_voxel_m: 0.4,
             huber_m: 0.05,
-            // 0.03 m and 0.1 rad (docs/pipeline-history.md, "The map's pull cut off"): 10 seeds
-            // per pass against Huber alone, mean ATE lower on all five with exact wheels; with
-            // the assumed wheel errors lower on three, the off-roader the same, the sedan 21.9 ->
-            // 23.7 mm.
+            // A residual beyond what a 3 cm offset plus a 0.1 rad attitude error explain is
+            // another surface, not this one (decision record 003).
             max_residual_m: 0.03,
             max_residual_rad: 0.1,
             lm_lambda: 1e-3,
@@ -262,7 +255,7 @@ impl Default for LaserOdometryConfig {
 }
 
 /// D435 depth odometry (projective point-to-plane ICP between consecutive depth frames).
-#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, rename_all = "kebab-case", default)]
 pub struct VisualOdometryConfig {
     /// Use depth frames at all.
@@ -278,10 +271,8 @@ pub struct VisualOdometryConfig {
     /// Largest point-to-plane residual accepted, metres.
     pub max_residual_m: f64,
     /// Add depth points to the output cloud. Off by default: on the simulated passes the
-    /// camera's points moved the angles away from the truth more often than towards it (seeds
-    /// 1-3 per pass, 2026-11-25: the pickup's approach +0.16 -> +0.41 mean, the off-roader's
-    /// departure sd 0.05 -> 0.35; the SUV's and the van's tyres were misfitted until cb8b3c5), and
-    /// the figures in the README are all without them (README, next step 5).
+    /// camera's points moved the angles away from the truth more often than towards it
+    /// (decision record 011).
     pub add_to_cloud: bool,
 }
 
@@ -302,19 +293,16 @@ impl Default for VisualOdometryConfig {
 /// Odometry fusion (Algorithm 1).
 // Independent on/off switches of a config file, not a state machine.
 #[allow(clippy::struct_excessive_bools)]
-#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, rename_all = "kebab-case", default)]
 pub struct FusionConfig {
     /// Use laser odometry as a source (off only for baselines).
     pub use_laser: bool,
     /// Use wheel odometry as a source.
     pub use_wheel: bool,
-    /// Use visual odometry as a source. Off by default: fused on the simulated passes (seeds 1-3
-    /// per pass, its points not in the cloud, 2026-11-25) it lowered the mean ATE on two passes
-    /// (sedan 7.1 -> 6.1 mm, suv-offset 23.5 -> 22.1), raised it on the off-roader (9.0 -> 11.8)
-    /// and read the pickup's approach higher (+0.17 -> +0.45 mean); the README's figures and the
-    /// demo are laser + wheel. Visual odometry still runs when `visual.enabled` is set (its
-    /// figures are in the run's statistics).
+    /// Use visual odometry as a source. Off by default: fused on the simulated passes it lowered
+    /// the trajectory error on some and raised it on others (decision record 011). Visual
+    /// odometry still runs when `visual.enabled` is set (its figures are in the run's statistics).
     pub use_visual: bool,
     /// The laser must also agree with the wheel odometry (within the tolerances) to win a group.
     pub gate_laser_by_wheel: bool,
@@ -382,30 +370,26 @@ impl Default for FusionConfig {
             reference_frames: 10,
             rotation_tolerance_radps: [0.01, 0.01, 0.01],
             translation_tolerance_mps: [0.02, 0.02, 0.02],
-            // Off: on the slip-free simulated passes the per-frame estimate drifted off 1 (the
-            // scan-to-scan x is too noisy for a few per cent); the long-baseline estimator below
-            // replaces it. See `slip` and docs/pipeline-history.md, "Slip".
+            // Off: the scan-to-scan x is too noisy to measure a slip of a few per cent per frame;
+            // the long-baseline estimator (`wheel-scale-baseline-m`) replaces it (`slip`,
+            // decision record 005).
             wheel_scale_frames: 0,
             wheel_scale_baseline_m: 0.25,
             wheel_scale_min_slip: 0.025,
             slip_replay_s: 8.0,
-            // Zero: held laser yaw rates integrated to 50 degrees on the simulated offroader
-            // (laser only); see `fusion` and docs/pipeline-history.md, "Yaw under a car".
+            // Zero: the robot drives straight by design, and a held laser yaw rate integrates
+            // to large headings over a gap (`fusion`, decision record 005).
             rotation_gap_decay: 0.0,
-            // Off: on the simulated passes (laser + wheel, seed 1, 9e49f69) it cut the largest yaw
-            // error (suv-offset 2.8 -> 0.35 degrees) but rejected some of the map's drift
-            // corrections: ATE offroader 2.48 -> 2.56 cm, pickup 0.45 -> 1.00 cm, van 1.68 -> 1.09.
+            // Off: gating the whole refined increment by the wheels also rejects the map's
+            // drift corrections (decision record 005).
             gate_refinement_by_wheel: false,
-            // On: the refinement's yaw jumped by up to 1-2 degrees a frame where the map
-            // determined it weakly (suv-offset leaving the car); seeds 1-3 of all five passes,
-            // ATE equal or lower, largest yaw error suv-offset 1.2-2.3 -> 0.3-0.7 degrees.
+            // On: where the map determines the yaw weakly (leaving the car) the refinement's
+            // yaw can jump by degrees in a frame; the wheels bound it (decision record 005).
             gate_refinement_rotation_by_wheel: true,
             wheel_speed_sigma_mps: 0.003,
             wheel_yaw_rate_sigma_radps: 0.004,
-            // On: with the assumed mecanum wheel errors (`bench_pipeline 10 --wheel-noise`, map
-            // wheel prior on) mean ATE 33/27/27/39/32 -> 30/27/22/35/28 mm (offroader, pickup,
-            // sedan, suv-offset, van); on the exact simulated wheels it found a false bias of
-            // 0.03-0.08 deg/s in 3 of 50 runs, angles within 0.03 degree, ATE within 0.8 mm.
+            // On: mecanum wheels have a yaw-rate bias; the slip meter's long-baseline
+            // registrations measure it (decision record 001).
             wheel_yaw_bias: true,
         }
     }
@@ -414,79 +398,48 @@ impl Default for FusionConfig {
 /// Scan-to-map refinement and the output cloud.
 // Independent on/off switches of a config file, not a state machine.
 #[allow(clippy::struct_excessive_bools)]
-#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, rename_all = "kebab-case", default)]
 pub struct MapConfig {
     /// Refine each fused pose against the local feature map.
     pub refine: bool,
     /// Voxel of the feature map, metres; at least `laser.max-correspondence-m` (a search looks
     /// into the query's voxel and its 26 neighbours). The map keeps the first `points-per-voxel`
-    /// points of each voxel (at least `min-point-spacing-m` apart since 2026-11-26). 0.2 (0.5
-    /// until 2026-11-26): in 0.5 m voxels those were the points seen first, from far, 10-20 cm
-    /// apart, and the refinement's plane and line fits through
-    /// them missed curved and occluding surfaces seen from nearer later. Registered from the
-    /// true pose against a map built at the true poses (`diag_laser_odometry NAME --map
-    /// --free`), the map pulled each frame back along x by 12-48 mm on the five simulated passes
-    /// and its yaw scattered by 4-15 mrad RMS; at 0.2 m by 5-12 mm and 1.3-5.5 mrad. In the
-    /// pipeline (10 seeds per pass, exact wheels) mean ATE 9.6 / 26.0 / 10.0 / 23.0 / 14.7 ->
-    /// 7.1 / 11.4 / 6.2 / 25.8 / 13.5 mm (off-roader, pickup, sedan, suv-offset, van) and sd <
-    /// 0.15 on 14 of 15 angles instead of 12; with the assumed wheel errors 8 of 15 either way.
-    /// The cost: 10-16 % more CPU per frame on four of the five passes (ten seeds side by side;
-    /// the pickup 1.09-1.11 in interleaved runs), in the plane searches and fits against the
-    /// denser map; a search index in 0.4 m voxels over the same 0.2 m caps gave the same output
-    /// and no gain (1.004).
-    /// A smaller map voxel also anchors the map less: more voxels are filled from later, drifted
-    /// poses (`pipeline::tests`, 5 % slipping wheels: 62 % of their error left after 0.87 m
-    /// against 32 %, of which part was the coarse map's backward pull). Measurements in
-    /// docs/pipeline-history.md, "The feature map's voxel".
+    /// points of each voxel, at least `min-point-spacing-m` apart. Small voxels keep the plane
+    /// and line fits on the surfaces seen from near rather than on the points seen first from
+    /// far; too small a voxel anchors the map less, as more voxels fill from later, drifted
+    /// poses (decision record 021).
     pub feature_voxel_m: f64,
-    /// Feature points kept per map voxel at most. 20; at 0.2 m voxels 10 and 40 gave the same
-    /// angle counts within their noise and the same CPU (docs/pipeline-history.md).
+    /// Feature points kept per map voxel at most (decision record 021).
     pub points_per_voxel: usize,
     /// A feature point is added to the map only where no point of its voxel lies nearer than
     /// this, metres (0: off; KISS-ICP's rule, the voxel over the square root of the points per
-    /// voxel). 0.045 (off until 2026-11-26): the first points of a voxel are those seen first,
-    /// often the same few centimetres of a surface from many frames, and the voxel was full
-    /// before the robot saw the near side of the same part (a differential, a tyre, a face
-    /// behind a depth step); a frame's fits then went through the far side and pulled x back.
-    /// Registered from the true pose against a map built at the true poses (`diag_laser_odometry
-    /// NAME --map --free`), the mean x pull per frame (off-roader, pickup, sedan, suv-offset,
-    /// van) -9.8 / -3.5 / -3.6 / -10.9 / -10.8 mm -> -4.6 / -1.0 / -1.7 / -3.3 / -2.7; with the
-    /// map that much less biased it is also weighted more against the wheels
-    /// (`residual-sigma-m`). Measurements in docs/pipeline-history.md, "The map's points spaced".
+    /// voxel). Without spacing, a voxel fills with the same few centimetres of a surface seen
+    /// from many frames before the robot sees the near side of the same part, and the fits go
+    /// through the far side and pull x back (decision record 025).
     pub min_point_spacing_m: f64,
     /// Levenberg-Marquardt iterations of the refinement.
     pub iterations: u32,
-    /// Voxel of the output cloud (centroid per voxel), metres. 5 mm: on lidar-only clouds the
-    /// angles need the density for small parts. The sedan's exhaust silencer limits its departure
-    /// angle and hangs only 1.7-6.5 cm below the underside; at 1 cm voxels it keeps too few points
-    /// per envelope bin and the departure read +0.6 and +1.7 degrees off in two demo runs, at 5 mm
-    /// +0.6 (wheel-odometry clouds of four vehicles: within 0.6 degree at 5 mm, 0.7 at 1 cm). The
-    /// cost: about 2.9 M points instead of 1.2 M for a 7 m pass (the calculator needs about 1.2 s
-    /// per million points).
+    /// Voxel of the output cloud (centroid per voxel), metres. The calculator's envelope needs
+    /// the density for small low parts (an exhaust silencer a few centimetres below the
+    /// underside keeps too few points per envelope bin at 1 cm).
     pub output_voxel_m: f64,
     /// Lidar points farther than this from the sensor are not added to the output, metres.
     ///
-    /// 4 m: a frame's pose is its attitude averaged over the 100 ms sweep, so a 3-15 Hz
-    /// vibration of the robot (0.2 degree RMS in the simulated suv-offset pass) tilts each
-    /// firing by up to half a degree against it, which is 3-4 cm of height on the floor 4-8 m
-    /// away. At the former 8 m those floor points rose 4-5 cm above the fitted ground, past the
-    /// calculator's body threshold, and became the approach and departure witnesses: suv-offset
-    /// seeds 1-5 read -22.6 / +0.3 / +0.5 / -0.2 / -23.6 (approach) and -23.1 / +1.0 / +0.8 /
-    /// -23.1 / -24.4 (departure); at 4 m -0.2 / 0.16 and +0.7 / 0.5 (mean / sd). The robot passes
-    /// under the whole vehicle, so every part of it comes within 4 m; seeds 1-3 of the other four
-    /// passes moved within their seed-to-seed spread (README, "The point-cloud pipeline").
+    /// A frame's pose is its attitude averaged over the 100 ms sweep, so a vibration of the
+    /// robot tilts each firing by up to half a degree against it: 3-4 cm of height on the floor
+    /// 4-8 m away, enough to lift far floor points past the calculator's body threshold. The
+    /// robot passes under the whole vehicle, so every part of it comes within 4 m
+    /// (decision record 010).
     pub output_max_range_m: f64,
     /// Keep ground points in the output cloud (the angle calculator fits the ground plane).
     pub keep_ground: bool,
     /// Side of the floor's columns in the output cloud, metres: the ground points (each frame's
     /// plane inliers) become one point per column of this side, their mean
     /// ([`super::map::FloorAccumulator`]); 0: they go into the output voxels like every other
-    /// point. The calculator needs the ground only for its plane, and the floor is most of a run's
-    /// points (about 70 % at 1 cm), so coarser floor cells make the cloud, the filter and the
-    /// calculator several times smaller. 2 cm (as 3D voxels, before the columns): the sedan's demo
-    /// cloud 2.7 M -> 1.3 M points, the calculator 3.4 s -> 0.7 s, the same angles within 0.02
-    /// degree (sedan, van; offline clouds, 2026-11-22).
+    /// point. The calculator needs the ground only for its plane, and the floor is most of a
+    /// run's points, so coarser floor cells make the cloud, the filter and the calculator
+    /// several times smaller without moving the angles.
     pub ground_voxel_m: f64,
     /// Set each frame's roll, pitch and height from its RANSAC ground plane against the first
     /// frame's (a flat floor is an absolute reference; removes z, roll and pitch drift).
@@ -499,15 +452,8 @@ pub struct MapConfig {
     pub wheel_prior: bool,
     /// The map residuals' noise for the wheel prior's weighting, metres. The solve counts its
     /// residuals as independent, which they are not (many points on few surfaces), so this is a
-    /// tuning value rather than the lidar's range noise. 0.01 (0.02 until 2026-11-26). With the
-    /// map's points unspaced, 0.01 let the map's backward pull through (the off-roader's approach
-    /// -0.39 degree on exact wheels, 10 seeds); with them spaced (`min-point-spacing-m`) it holds
-    /// wandering wheels better: against the unspaced 0.02, over 20 seeds per pass with the
-    /// assumed errors, sd < 0.15 on 10 of 15 angles instead of 8 and mean ATE lower on all five
-    /// passes. The cost is on exact wheels: against the spaced map at 0.02 (10 seeds) mean ATE
-    /// higher on four of five passes (the van 5.4 -> 10.6 mm), and 6.1 mm instead of 1.3 over
-    /// `pipeline::tests`' garage run. 0.005 let the pull through again (the off-roader's
-    /// departure -0.40).
+    /// tuning value rather than the lidar's range noise, chosen on the simulated passes with
+    /// the assumed wheel errors (decision records 001 and 025).
     pub residual_sigma_m: f64,
 }
 
@@ -524,12 +470,8 @@ impl Default for MapConfig {
             keep_ground: true,
             ground_voxel_m: 0.02,
             level_with_ground: true,
-            // On: the robot's mecanum wheels are not exact. With the assumed wheel errors
-            // (`bench_pipeline 10 --wheel-noise`, 10 seeds) mean ATE 36/25/49/51/55 -> 33/27/27/
-            // 39/32 mm (offroader, pickup, sedan, suv-offset, van), angle sd below 0.15 on 6 of 15
-            // instead of 5; on the simulator's exact wheels (with `fusion.wheel-yaw-bias`) 10 ->
-            // 12 of 15, but the pickup's ATE 7.7 -> 23 mm and suv-offset's departure +0.17 ->
-            // +0.69 (docs/pipeline-history.md, "Wheel errors and the wheel prior").
+            // On: the robot's mecanum wheels are not exact; weighing the map against them
+            // bounds both (decision record 001).
             wheel_prior: true,
             residual_sigma_m: 0.01,
         }
@@ -537,7 +479,7 @@ impl Default for MapConfig {
 }
 
 /// Edge-preserving bilateral filter of the output cloud.
-#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, rename_all = "kebab-case", default)]
 pub struct FilterConfig {
     /// Filter at all.

@@ -1,4 +1,4 @@
-//! The point-cloud building pipeline (DESIGN.md section 6, steps 2-7; paper sections 3.1-3.5).
+//! The point-cloud building pipeline (docs/architecture.md section 6, steps 2-7; paper sections 3.1-3.5).
 //!
 //! [`Pipeline`] takes sensor data one message at a time and returns the fused cloud at the end. It
 //! is pure: no clocks, files or unseeded randomness; every stamp is an input (seconds on one common
@@ -27,12 +27,9 @@
 //! metre of travel, and the frames before it were placed with the unscaled wheels (3 % slip: 3 cm
 //! by then). The frames of the run's start are kept, and once, when the scale first turns
 //! significant, steps 2-7 run again over them from a fresh state whose fusion applies that
-//! scale from the first frame; then the run goes on. Measured on the simulated suv-offset pass
-//! (3 % slip, 10 seeds, exact wheels, when every seed started the lidar at azimuth 0): approach
-//! error -0.63 / 0.24 -> +0.09 / 0.14 degree (mean / sd), breakover +0.24 / 0.10 -> +0.19 /
-//! 0.07, departure +0.42 / 0.12 -> +0.48 / 0.12, mean ATE 23.9 -> 25.1 mm (the scale reads 0.2-0.6 % short, which the unscaled first metre had
-//! partly cancelled); the slip-free passes' figures were unchanged to the printed digit
-//! (docs/pipeline-history.md, "The evidence tables before the slip replay").
+//! scale from the first frame; then the run goes on. On a slipping pass this removes the bias
+//! the unscaled first metre leaves in the approach end; slip-free passes are unchanged
+//! (decision record 009).
 
 // `!(x > 0.0)` is deliberate throughout: it rejects NaN along with the out-of-range values.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
@@ -40,11 +37,12 @@
 #![allow(clippy::needless_range_loop)]
 
 pub mod config;
+// The pipeline's geometry, re-exported so that `pipeline::geom::X` names it.
+pub use passangle_geom as geom;
 pub mod deskew;
 pub mod features;
 pub mod filter;
 pub mod fusion;
-pub mod geom;
 pub mod ground;
 pub mod laser_odometry;
 pub mod map;
@@ -69,8 +67,6 @@ use self::map::{CloudAccumulator, FeatureMap, FloorAccumulator};
 use self::registration::{Scan, keep_components, register_joint, register_two_step, unaided};
 use self::slip::SlipMeter;
 use self::visual_odometry::{VisualOdometry, VisualStep};
-use crate::cloud::Cloud;
-use crate::vlp16::Frame;
 
 /// One lidar return as the pipeline needs it.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -92,25 +88,6 @@ pub struct LidarFrame {
     pub stamp_s: f64,
     /// Points in firing order.
     pub points: Vec<LidarPoint>,
-}
-
-impl LidarFrame {
-    /// From a decoded VLP-16 frame whose first firing is at `stamp_s` on the common clock.
-    pub fn from_vlp16(frame: &Frame, stamp_s: f64) -> Self {
-        Self {
-            stamp_s,
-            points: frame
-                .points
-                .iter()
-                .map(|p| LidarPoint {
-                    xyz_in_lidar_m: [p.x_m, p.y_m, p.z_m],
-                    time_offset_s: p.time_us * 1e-6,
-                    azimuth_rad: p.azimuth_rad,
-                    ring: p.ring,
-                })
-                .collect(),
-        }
-    }
 }
 
 /// Wheel odometry from the firmware (`protocol::mcu::Odometry`), stamped on the common clock.
@@ -224,15 +201,6 @@ pub struct BuiltCloud {
     pub trajectory: Vec<TrajectoryPoint>,
     /// Counters.
     pub stats: PipelineStats,
-}
-
-impl BuiltCloud {
-    /// The points as a [`Cloud`] for the writers and the angle calculator.
-    pub fn to_cloud(&self) -> Cloud {
-        Cloud {
-            points_m: self.points_in_world.clone(),
-        }
-    }
 }
 
 /// Bad input to the pipeline.

@@ -275,10 +275,9 @@ pub fn residuals_at(
 /// Why: under a car the wrong correspondences are silhouettes. The map's corner line runs round
 /// the far side of a cylinder lying across the path (a differential), seen from elsewhere, 5-15
 /// cm from where this scan grazes it, and such residuals point along the travel; with Huber alone
-/// each still pulled by the kernel's width, all the same way (docs/pipeline-history.md, "The
-/// map's pull cut off"). The lever-arm term keeps the residuals a drifted yaw moves (the far
-/// tyres' sides), which hold the map's yaw against the wheels' (a plain cutoff lost them: ATE up
-/// to twice as high with the assumed wheel errors), while residuals along the travel near the
+/// each still pulls by the kernel's width, all the same way (decision record 003). The lever-arm
+/// term keeps the residuals a drifted yaw moves (the far tyres' sides), which hold the map's yaw
+/// against the wheels' (a plain cutoff loses them), while residuals along the travel near the
 /// centre line get the tight cutoff.
 #[derive(Debug, Clone, Copy, PartialEq)]
 struct Kernel {
@@ -412,10 +411,8 @@ pub(crate) fn increment_about(centre: V3, m: &Pose) -> Twist6 {
 /// feature rather than for the whole set: a small rotation moves the features 10 m away by
 /// millimetres and the near ones (most of them under a car) by far less.
 ///
-/// Measured on the simulated passes (seed 1, laser + wheel), with one threshold for the whole set
-/// (re-search everything once any feature moved this far): 0.025 kept ATE and drift where a search
-/// in every iteration had them (offroader 25 / 26 mm ATE); 0.05 lost accuracy on the offroader
-/// (ATE 26 -> 36 mm, mean of five seeds 22 -> 29 mm).
+/// 2.5 % of the search radius keeps the trajectory of a search in every iteration on the
+/// simulated passes; twice that loses accuracy (decision record 006).
 pub(crate) const RESEARCH_FRACTION: f64 = 0.025;
 
 /// An LM step whose rotation (rad) and translation (m) are both shorter than this has converged.

@@ -19,9 +19,8 @@
 //!    simulated 1.5 cm lidar noise (clipped at 3 cm) it lies 2.5-3 cm outside the outline, the
 //!    tread radius comes out 1.5-3 cm large and the centre height up to 2.4 cm low, by a different
 //!    amount per tyre and seed. Fitting the centres of the tread's noisy band instead recovers the
-//!    tyres to about 2 mm, but moved the approach and departure by 0.1-0.8 degree, fewer of them
-//!    under the 0.15 spread target: the body's ends carry biases of their own that these tyres
-//!    offset (docs/pipeline-history.md, "The tyre silhouette's band"; not kept).
+//!    tyres to about 2 mm but moves the approach and departure by 0.1-0.8 degree: the body's ends
+//!    carry biases of their own that these tyres offset (decision record 014, not adopted).
 //! 3. The static loaded radius is the centre's height above the ground; the fitted radius is the
 //!    free tread radius. The lateral faces are the 1 % / 99 % quantiles of y of the points in the disc.
 
@@ -541,7 +540,7 @@ pub(super) mod tests {
     use super::*;
 
     /// Gaussian sample by Box-Muller (no extra dependency); the angle tests' one.
-    pub(in crate::angles) fn gauss(rng: &mut ChaCha8Rng) -> f64 {
+    pub(crate) fn gauss(rng: &mut ChaCha8Rng) -> f64 {
         let u1: f64 = rng.random_range(f64::EPSILON..1.0);
         let u2: f64 = rng.random_range(0.0..1.0);
         (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
