@@ -7,8 +7,8 @@
 #
 # Tiers: (1) formatting and lints; (2) host tests: `cargo test --workspace` (protocol, firmware
 # control logic, onboard pipeline, simulator, end-to-end scenarios on the in-process CAN bus);
-# (3) no_std checks for the thumbv7em-none-eabihf target and the STM32 release build with its size
-# report; (4) the end-to-end demo per example vehicle (release, real time); (5) the
+# (3) the book in docs/ (mdbook); (4) no_std checks for the thumbv7em-none-eabihf target and the
+# STM32 release build with its size report; (5) the end-to-end demo per example vehicle (release, real time); (6) the
 # firmware-in-the-loop tests over real SocketCAN vcan0 inside a qemu guest.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -54,6 +54,14 @@ fi
 cargo test --workspace
 
 [[ $quick == 1 ]] && exit 0
+
+step "the book: mdbook build docs"
+# The manual in docs/ must build (SUMMARY entries point at existing chapters; create-missing is off).
+if ! command -v mdbook >/dev/null; then
+    echo "installing mdbook (cargo install, about 4 minutes of CPU)"
+    cargo install mdbook --version '^0.5' --locked --no-default-features --features search
+fi
+mdbook build docs
 
 step "no_std: protocol and control for thumbv7em-none-eabihf"
 cargo build -p protocol --target thumbv7em-none-eabihf --no-default-features

@@ -1,0 +1,52 @@
+#!/usr/bin/env bash
+# Writes the README's accuracy table: runs the end-to-end demo of each built-in simulated vehicle
+# (laser + wheel odometry, clean radio) and compares the angles the handheld received with the ones
+# computed from the vehicle model. The table goes between the README's accuracy-table markers, with
+# the date and commit in its caption; a copy goes to docs/reports/.
+#
+#   scripts/accuracy-table.sh [VEHICLE ...]      default: sedan suv pickup van offroader
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+vehicles=("$@")
+[[ ${#vehicles[@]} -gt 0 ]] || vehicles=(sedan suv pickup van offroader)
+
+cargo build --release --bin passangle-sim
+out=$(mktemp -d)
+trap 'rm -rf "$out"' EXIT
+for v in "${vehicles[@]}"; do
+    echo "demo: $v" >&2
+    target/release/passangle-sim demo --vehicle "$v" --json --out "$out/runs" > "$out/$v.json"
+done
+
+commit=$(git rev-parse --short HEAD)
+dirty=$(git diff --quiet HEAD -- . ':!README.md' ':!docs/reports' || echo " (with uncommitted changes)")
+date=$(date -u +%Y-%m-%d)
+python3 - "$out" "$commit$dirty" "$date" "${vehicles[@]}" <<'PY'
+import json, pathlib, re, sys
+out, commit, date, vehicles = pathlib.Path(sys.argv[1]), sys.argv[2], sys.argv[3], sys.argv[4:]
+rows = []
+for v in vehicles:
+    r = json.loads((out / f"{v}.json").read_text())
+    m, t = r["measured"], r["truth"]
+    cells = []
+    for k in ("approach_deg", "departure_deg", "breakover_deg"):
+        if m.get(k) is None:
+            cells.append(f"not measured ({t[k]:.2f})")
+        else:
+            cells.append(f"{m[k]:.2f} ({t[k]:.2f}) {m[k] - t[k]:+.2f}")
+    rows.append(f"| {v} | " + " | ".join(cells) + f" | {r['cloud_points']:,} |")
+table = (f"Demo runs at {commit}, {date}: measured (true) error, degrees.\n\n"
+         "| vehicle | approach | departure | breakover | cloud points |\n|---|---|---|---|---|\n"
+         + "\n".join(rows) + "\n")
+readme = pathlib.Path("README.md")
+text = readme.read_text()
+start, end = "<!-- accuracy-table:start -->", "<!-- accuracy-table:end -->"
+if start not in text or end not in text:
+    sys.exit("README.md lacks the accuracy-table markers")
+text = re.sub(re.escape(start) + ".*?" + re.escape(end), start + "\n" + table + end, text, flags=re.S)
+readme.write_text(text)
+report = pathlib.Path("docs/reports") / f"{date}-{commit.split()[0]}-accuracy.md"
+report.write_text(f"# Accuracy, demo runs at {commit}\n\nWritten by `scripts/accuracy-table.sh` on {date}.\n\n" + table)
+print(table)
+PY
