@@ -57,7 +57,7 @@ use onboard::pipeline::laser_odometry::{
     FeatureTarget, GROUND_TAG_BIT, Scan, register_two_step, residuals_at,
 };
 use onboard::pipeline::map::FeatureMap;
-use onboard::pipeline::registration::register_joint;
+use onboard::pipeline::registration::{JointProblem, register_joint};
 use onboard::pipeline::{Candidates, LidarFrame, step1_planes, tagged_index};
 
 fn pose_of(iso: &Isometry) -> Pose {
@@ -346,14 +346,17 @@ fn main() -> anyhow::Result<()> {
                     step2_planes: current.planes.len() - first,
                     corners,
                 };
-                let (features, active) = scan.for_refinement(config.map.level_with_ground);
-                register_joint(
+                let ((planes, corners), active) = scan.for_refinement(config.map.level_with_ground);
+                register_joint(&JointProblem {
                     target,
-                    features,
-                    (prior, None),
+                    planes,
+                    corners,
+                    prior,
+                    prior_information: None,
                     active,
-                    (config.map.iterations, &map_laser),
-                )
+                    iterations: config.map.iterations,
+                    config: &map_laser,
+                })
             } else {
                 let scan = Scan {
                     step1_planes: &current.step1_planes,

@@ -177,43 +177,59 @@ pub(crate) struct Match {
     found: Option<Correspondence>,
 }
 
-/// Search again the source features (`planes`, then `corners`, as in `matches`) that `pose`
-/// moves more than `limit_m` from where they were last searched; returns how many.
-fn refresh(
-    target: &FeatureTarget,
-    (planes, corners): (&[V3], &[V3]),
-    (pose, centre): (&Pose, V3),
-    (radius_m, limit_m, kernel): (f64, f64, Kernel),
-    matches: &mut [Match],
-) -> usize {
-    let mut searched = 0;
-    for (i, (&p, m)) in planes.iter().chain(corners).zip(matches).enumerate() {
-        let q = pose.apply(p);
-        if is_fresh(m, q, limit_m) {
-            continue;
-        }
-        m.searched_at = Some(q);
-        m.found = if i < planes.len() {
-            match_plane(target, p, q, radius_m)
-        } else {
-            match_corner(target, p, q, radius_m)
-        }
-        .map(|c| Correspondence {
-            cutoff_m: kernel.cutoff(q, centre, c.direction),
-            ..c
-        });
-        searched += 1;
-    }
-    searched
+/// The correspondence search of one solve: the scan's features (`planes`, then `corners`, in the
+/// order of its `matches`) against `target`, within `radius_m`, with the kernel's cutoffs taken
+/// about the solve's `centre`.
+struct Search<'a> {
+    target: &'a FeatureTarget,
+    planes: &'a [V3],
+    corners: &'a [V3],
+    centre: V3,
+    radius_m: f64,
+    /// A feature is searched again once it moved this far from where it was last searched.
+    research_m: f64,
+    kernel: Kernel,
 }
 
-/// True when some source feature is more than `limit_m` from where it was last searched.
-fn any_stale(planes: &[V3], corners: &[V3], pose: &Pose, matches: &[Match], limit_m: f64) -> bool {
-    planes
-        .iter()
-        .chain(corners)
-        .zip(matches)
-        .any(|(&p, m)| !is_fresh(m, pose.apply(p), limit_m))
+impl Search<'_> {
+    /// Search again the features that `pose` moves more than `research_m` from where they were
+    /// last searched; returns how many.
+    fn refresh(&self, pose: &Pose, matches: &mut [Match]) -> usize {
+        let mut searched = 0;
+        for (i, (&p, m)) in self
+            .planes
+            .iter()
+            .chain(self.corners)
+            .zip(matches)
+            .enumerate()
+        {
+            let q = pose.apply(p);
+            if is_fresh(m, q, self.research_m) {
+                continue;
+            }
+            m.searched_at = Some(q);
+            m.found = if i < self.planes.len() {
+                match_plane(self.target, p, q, self.radius_m)
+            } else {
+                match_corner(self.target, p, q, self.radius_m)
+            }
+            .map(|c| Correspondence {
+                cutoff_m: self.kernel.cutoff(q, self.centre, c.direction),
+                ..c
+            });
+            searched += 1;
+        }
+        searched
+    }
+
+    /// True when some feature is more than `research_m` from where it was last searched.
+    fn any_stale(&self, pose: &Pose, matches: &[Match]) -> bool {
+        self.planes
+            .iter()
+            .chain(self.corners)
+            .zip(matches)
+            .any(|(&p, m)| !is_fresh(m, pose.apply(p), self.research_m))
+    }
 }
 
 /// True when `m` was searched within `limit_m` of `q`.
@@ -418,9 +434,26 @@ pub(crate) const RESEARCH_FRACTION: f64 = 0.025;
 /// An LM step whose rotation (rad) and translation (m) are both shorter than this has converged.
 pub(crate) const CONVERGED_STEP: f64 = 1e-6;
 
-/// What [`solve_with`] returns: the pose, the per-residual normal matrix (zero outside
-/// `active`), the residual count and the RMS of the last iteration.
-pub(crate) type Solution = (Pose, [[f64; 6]; 6], usize, f64);
+/// What [`solve`] returns.
+#[derive(Clone)]
+pub(crate) struct Solution {
+    /// The solved pose.
+    pub pose: Pose,
+    /// The last iteration's normal matrix per residual, zero outside the problem's `active`.
+    pub information: [[f64; 6]; 6],
+    /// Residuals the kernel weighted in the last iteration.
+    pub residuals: usize,
+    /// RMS of the last iteration's residuals, metres.
+    pub rms_m: f64,
+    /// What the solve did.
+    #[cfg_attr(
+        not(test),
+        expect(dead_code, reason = "read by the tests and diagnostics")
+    )]
+    pub stats: SolveStats,
+    /// The final correspondences, for a later solve's `warm` start.
+    pub matches: Vec<Match>,
+}
 
 /// What one solve did, for tests and diagnostics.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
@@ -433,43 +466,28 @@ pub(crate) struct SolveStats {
     pub iterations: u32,
 }
 
-/// [`solve_with`] without guides (tests).
-#[cfg(test)]
-pub(crate) fn solve(
-    target: &FeatureTarget,
-    planes: &[V3],
-    corners: &[V3],
-    init: Pose,
-    active: &[usize],
-    iterations: u32,
-    config: &LaserOdometryConfig,
-) -> Solution {
-    solve_counted(target, planes, corners, init, active, iterations, config).0
+/// One registration problem for [`solve`]: a scan's features against a target, from `init`.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Problem<'a> {
+    /// What the scan is registered against.
+    pub target: &'a FeatureTarget,
+    /// The scan's plane features (robot frame).
+    pub planes: &'a [V3],
+    /// The scan's corner features (robot frame).
+    pub corners: &'a [V3],
+    /// The starting pose.
+    pub init: Pose,
+    /// The solved parameters: indices into `[rx, ry, rz, tx, ty, tz]`.
+    pub active: &'a [usize],
+    /// LM iterations at most.
+    pub iterations: u32,
+    /// Correspondence radius, kernel and damping.
+    pub config: &'a LaserOdometryConfig,
+    /// What the solve is held to besides the scan.
+    pub guides: SolveGuides,
 }
 
-/// [`solve`], also returning how many searches and iterations it took (tests).
-#[cfg(test)]
-pub(crate) fn solve_counted(
-    target: &FeatureTarget,
-    planes: &[V3],
-    corners: &[V3],
-    init: Pose,
-    active: &[usize],
-    iterations: u32,
-    config: &LaserOdometryConfig,
-) -> (Solution, SolveStats) {
-    solve_with(
-        target,
-        (planes, corners),
-        init,
-        active,
-        iterations,
-        config,
-        &SolveGuides::default(),
-    )
-}
-
-/// What a solve is held to besides the scan ([`solve_with`]).
+/// What a solve is held to besides the scan ([`Problem::guides`]).
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub(crate) struct SolveGuides {
     /// Project every step onto the eigen-directions that the first iteration's normal matrix
@@ -495,10 +513,8 @@ fn prior_terms(information: &[[f64; 6]; 6], init: &Pose, pose: &Pose) -> (f64, T
 /// A prior's information matrix and the pose it is centred on.
 type PriorRef<'a> = (&'a [[f64; 6]; 6], &'a Pose);
 
-/// One LM solve over the parameters in `active` (indices into `[rx, ry, rz, tx, ty, tz]`), held
-/// by `guides` (to the directions the first iteration determines, by a prior). Returns the pose,
-/// the per-residual normal matrix restricted to `active`, the residual count and the RMS, and
-/// what the solve did.
+/// One LM solve of `problem` over its `active` parameters, held by its guides (to the
+/// directions the first iteration determines, by a prior).
 ///
 /// At most `iterations` LM iterations. Each feature's correspondence is searched at the start and
 /// again only once the feature has moved more than [`RESEARCH_FRACTION`] of the correspondence
@@ -507,75 +523,44 @@ type PriorRef<'a> = (&'a [[f64; 6]; 6], &'a Pose);
 /// final pose puts it. The normal matrix, residual count and RMS are those of the last iteration:
 /// at the final pose up to the converged step, with correspondences searched within that small
 /// move of it.
-pub(crate) fn solve_with(
-    target: &FeatureTarget,
-    features: (&[V3], &[V3]),
-    init: Pose,
-    active: &[usize],
-    iterations: u32,
-    config: &LaserOdometryConfig,
-    guides: &SolveGuides,
-) -> (Solution, SolveStats) {
-    let (solution, stats, _) = solve_warm(
+///
+/// `warm`: the correspondences of an earlier solve against the same target (the first
+/// `warm.len()` features, in the same order; empty for a cold start). A feature whose
+/// correspondence was searched within [`RESEARCH_FRACTION`] of the radius of where `init` puts it
+/// keeps it, as it would between two iterations of one solve.
+pub(crate) fn solve(problem: &Problem<'_>, warm: Vec<Match>) -> Solution {
+    let Problem {
         target,
-        features,
+        planes,
+        corners,
         init,
         active,
-        (iterations, config),
+        iterations,
+        config,
         guides,
-        Vec::new(),
-    );
-    (solution, stats)
-}
-
-/// [`solve_with`] starting from the correspondences `warm` of an earlier solve against the same
-/// `target` (the first `warm.len()` source features, in the same order): a feature whose
-/// correspondence was searched within [`RESEARCH_FRACTION`] of the radius of where `init` puts it
-/// keeps it, as it would between two iterations of one solve. Returns the final correspondences
-/// too (for a later solve's `warm`).
-pub(crate) fn solve_warm(
-    target: &FeatureTarget,
-    (planes, corners): (&[V3], &[V3]),
-    init: Pose,
-    active: &[usize],
-    (iterations, config): (u32, &LaserOdometryConfig),
-    guides: &SolveGuides,
-    warm: Vec<Match>,
-) -> (Solution, SolveStats, Vec<Match>) {
+    } = *problem;
     let k = Kernel::of(config);
     let mut projection: Option<[[f64; 6]; 6]> = None;
-    let radius_m = config.max_correspondence_m;
-    let research_m = RESEARCH_FRACTION * radius_m;
     let centre = init.translation;
+    let search = Search {
+        target,
+        planes,
+        corners,
+        centre,
+        radius_m: config.max_correspondence_m,
+        research_m: RESEARCH_FRACTION * config.max_correspondence_m,
+        kernel: k,
+    };
     let mut pose = init;
     let mut lambda = config.lm_lambda;
     let mut last_h = [[0.0; 6]; 6];
     let mut last_n = 0;
     let mut rms = f64::NAN;
     let mut stats = SolveStats::default();
-    let unsearched = Match {
-        searched_at: None,
-        found: None,
-    };
-    let mut matches = warm;
-    matches.truncate(planes.len() + corners.len());
-    // The cutoffs depend on the solve's centre: those of kept correspondences are this solve's.
-    for m in &mut matches {
-        if let (Some(q), Some(c)) = (m.searched_at, m.found.as_mut()) {
-            c.cutoff_m = k.cutoff(q, centre, c.direction);
-        }
-    }
-    matches.resize(planes.len() + corners.len(), unsearched);
+    let mut matches = warm_start(warm, planes.len() + corners.len(), k, centre);
     let mut corr: Vec<Correspondence> = matches.iter().filter_map(|m| m.found).collect();
-    let features = (planes, corners);
     for _ in 0..iterations {
-        let searched = refresh(
-            target,
-            features,
-            (&pose, centre),
-            (radius_m, research_m, k),
-            &mut matches,
-        );
+        let searched = search.refresh(&pose, &mut matches);
         if searched > 0 {
             corr = matches.iter().filter_map(|m| m.found).collect();
             stats.searches += 1;
@@ -606,16 +591,17 @@ pub(crate) fn solve_warm(
         }
         rms = (2.0 * data_cost / corr.len() as f64).sqrt();
         stats.iterations += 1;
-        let step = lm_step(
-            &corr,
-            (&pose, guides.prior_information.as_ref().map(|l| (l, &init))),
-            (&h, &g),
-            (active, projection.as_ref()),
-            &mut lambda,
-            before,
+        let system = LmSystem {
+            corr: &corr,
+            h: &h,
+            g: &g,
+            active,
+            projection: projection.as_ref(),
+            prior: guides.prior_information.as_ref().map(|l| (l, &init)),
             centre,
-            k,
-        );
+            kernel: k,
+        };
+        let step = lm_step(&system, &pose, &mut lambda, before);
         let converged = match step {
             Some((candidate, d)) => {
                 pose = candidate;
@@ -625,7 +611,7 @@ pub(crate) fn solve_warm(
         };
         // Done when converged with every feature searched close enough to the final pose; a
         // converged step with stale features goes on with their new search.
-        if converged && !any_stale(planes, corners, &pose, &matches, research_m) {
+        if converged && !search.any_stale(&pose, &matches) {
             break;
         }
     }
@@ -637,24 +623,69 @@ pub(crate) fn solve_warm(
             }
         }
     }
-    ((pose, h, last_n, rms), stats, matches)
+    Solution {
+        pose,
+        information: h,
+        residuals: last_n,
+        rms_m: rms,
+        stats,
+        matches,
+    }
 }
 
-/// One Levenberg-Marquardt step over `active` on a fixed correspondence set (and the prior's
-/// cost, with its information matrix and `init`, when there is one): up to four dampings, the
-/// first whose pose lowers the cost wins (the damping then shrinks). Returns the new pose and
-/// its increment, or `None` when no damping improved the cost.
-#[allow(clippy::too_many_arguments)] // One step's state; a struct would only rename it.
+/// `features` correspondences for a solve centred on `centre`: those of `warm` (an earlier
+/// solve's, its first features in the same order) with their cutoffs made this solve's, the rest
+/// unsearched.
+fn warm_start(mut warm: Vec<Match>, features: usize, k: Kernel, centre: V3) -> Vec<Match> {
+    let unsearched = Match {
+        searched_at: None,
+        found: None,
+    };
+    warm.truncate(features);
+    // The cutoffs depend on the solve's centre: those of kept correspondences are this solve's.
+    for m in &mut warm {
+        if let (Some(q), Some(c)) = (m.searched_at, m.found.as_mut()) {
+            c.cutoff_m = k.cutoff(q, centre, c.direction);
+        }
+    }
+    warm.resize(features, unsearched);
+    warm
+}
+
+/// One iteration's linear system: the normal equations `h`, `g` of the correspondences `corr`
+/// at the current pose (with the prior's terms), over the `active` parameters, optionally
+/// projected onto the determined directions.
+struct LmSystem<'a> {
+    corr: &'a [Correspondence],
+    h: &'a [[f64; 6]; 6],
+    g: &'a [f64; 6],
+    active: &'a [usize],
+    projection: Option<&'a [[f64; 6]; 6]>,
+    /// The prior's information matrix and `init`, when there is a prior.
+    prior: Option<PriorRef<'a>>,
+    centre: V3,
+    kernel: Kernel,
+}
+
+/// One Levenberg-Marquardt step of `system` from `pose`, whose cost (the prior's included) is
+/// `before`: up to four dampings, the first whose pose lowers the cost wins (the damping then
+/// shrinks). Returns the new pose and its increment, or `None` when no damping improved the cost.
 fn lm_step(
-    corr: &[Correspondence],
-    (pose, prior): (&Pose, Option<PriorRef<'_>>),
-    (h, g): (&[[f64; 6]; 6], &[f64; 6]),
-    (active, projection): (&[usize], Option<&[[f64; 6]; 6]>),
+    system: &LmSystem<'_>,
+    pose: &Pose,
     lambda: &mut f64,
     before: f64,
-    centre: V3,
-    k: Kernel,
 ) -> Option<(Pose, Twist6)> {
+    let &LmSystem {
+        corr,
+        h,
+        g,
+        active,
+        projection,
+        prior,
+        centre,
+        kernel: k,
+    } = system;
     for _ in 0..4 {
         let mut a = [[0.0; 6]; 6];
         let mut b = [0.0; 6];
@@ -749,6 +780,30 @@ pub(crate) mod tests {
 
     const ALL: [usize; 6] = [0, 1, 2, 3, 4, 5];
 
+    /// A cold, unguided solve of every parameter.
+    fn solve_plain(
+        target: &FeatureTarget,
+        planes: &[V3],
+        corners: &[V3],
+        init: Pose,
+        iterations: u32,
+        config: &LaserOdometryConfig,
+    ) -> Solution {
+        solve(
+            &Problem {
+                target,
+                planes,
+                corners,
+                init,
+                active: &ALL,
+                iterations,
+                config,
+                guides: SolveGuides::default(),
+            },
+            Vec::new(),
+        )
+    }
+
     /// A joint solve of the tyre scene moved by `truth`, and the scene it solved.
     struct SceneSolve {
         pose: Pose,
@@ -764,12 +819,11 @@ pub(crate) mod tests {
         let target = target_of(&planes, &corners);
         let (planes, corners) = (moved(&planes, truth), moved(&corners, truth));
         let config = LaserOdometryConfig::default();
-        let ((pose, h, _, _), stats) =
-            solve_counted(&target, &planes, &corners, init, &ALL, iterations, &config);
+        let solution = solve_plain(&target, &planes, &corners, init, iterations, &config);
         SceneSolve {
-            pose,
-            h,
-            stats,
+            pose: solution.pose,
+            h: solution.information,
+            stats: solution.stats,
             target,
             planes,
             corners,
@@ -789,21 +843,25 @@ pub(crate) mod tests {
         let target = target_of(&planes, &corners);
         let (sp, sc) = (moved(&planes, &truth), moved(&corners, &truth));
         let config = LaserOdometryConfig::default();
-        let guides = SolveGuides::default();
         let run = |init: Pose, warm: Vec<Match>| {
-            solve_warm(
-                &target,
-                (&sp, &sc),
-                init,
-                &ALL,
-                (30, &config),
-                &guides,
+            let s = solve(
+                &Problem {
+                    target: &target,
+                    planes: &sp,
+                    corners: &sc,
+                    init,
+                    active: &ALL,
+                    iterations: 30,
+                    config: &config,
+                    guides: SolveGuides::default(),
+                },
                 warm,
-            )
+            );
+            (s.pose, s.stats, s.matches)
         };
-        let ((cold, ..), cold_stats, matches) = run(Pose::IDENTITY, Vec::new());
+        let (cold, cold_stats, matches) = run(Pose::IDENTITY, Vec::new());
         assert!(cold_stats.queries > sp.len() + sc.len(), "{cold_stats:?}");
-        let ((warm, ..), warm_stats, _) = run(cold, matches.clone());
+        let (warm, warm_stats, _) = run(cold, matches.clone());
         assert_eq!(warm_stats.queries, 0, "{warm_stats:?}");
         let moved_by = error_of(&warm, &cold);
         assert!(moved_by.iter().all(|e| e.abs() < 1e-4), "{moved_by:?}");
@@ -882,16 +940,15 @@ pub(crate) mod tests {
                 max_residual_rad: 0.0,
                 ..LaserOdometryConfig::default()
             };
-            let (pose, _, residuals, _) = solve(
+            let s = solve_plain(
                 &target,
                 &planes,
                 &source_corners,
                 Pose::from_xyz_rpy([0.015, 0.0, 0.0], [0.0; 3]),
-                &ALL,
                 30,
                 &config,
             );
-            (error_of(&pose, &truth)[3], residuals)
+            (error_of(&s.pose, &truth)[3], s.residuals)
         };
         let ((huber, n_huber), (cut, n_cut)) = (x_error(f64::INFINITY), x_error(0.05));
         assert!(huber.abs() > 5e-3, "Huber alone: x error {huber}");

@@ -64,7 +64,9 @@ use self::fusion::{Fusion, Source, SourceRate};
 use self::geom::{Pose, Twist6, V3, VoxelIndex, norm, voxel_of};
 use self::laser_odometry::{FeatureTarget, GROUND_TAG_BIT};
 use self::map::{CloudAccumulator, FeatureMap, FloorAccumulator};
-use self::registration::{Scan, keep_components, register_joint, register_two_step, unaided};
+use self::registration::{
+    JointProblem, Scan, keep_components, register_joint, register_two_step, unaided,
+};
 use self::slip::SlipMeter;
 use self::visual_odometry::{VisualOdometry, VisualStep};
 
@@ -366,6 +368,44 @@ impl PipelineConfig {
         }
         Ok(())
     }
+}
+
+/// A lidar frame's points in the robot frame, motion-compensated, with the lidar's firing
+/// times and ranges (steps 1-2).
+struct RobotFrame {
+    points: Vec<V3>,
+    times_s: Vec<f64>,
+    ranges_m: Vec<f64>,
+}
+
+/// Steps 5-6's result for one frame: the fused pose and what it was made of.
+struct FusedOdometry {
+    /// The interval since the previous frame, seconds.
+    dt_s: f64,
+    /// The previous frame's pose.
+    prev_world: Pose,
+    /// The previous pose moved by the fused rate over the interval.
+    predicted_world: Pose,
+    /// The source of each fused component.
+    chosen: [Source; 6],
+    /// The laser's degenerate components.
+    laser_degenerate: [bool; 6],
+    /// Wheel odometry over the interval, if it covers it.
+    wheel: Option<SourceRate>,
+    /// The laser settings the interval was registered with (see [`unaided`]).
+    laser_config: config::LaserOdometryConfig,
+}
+
+/// Steps 5-7a's result for one frame.
+struct PoseEstimate {
+    /// The frame's pose.
+    world_from_robot: Pose,
+    /// The source of each fused component.
+    chosen: [Source; 6],
+    /// The laser's degenerate components.
+    laser_degenerate: [bool; 6],
+    /// The components the refinement left at the fused prediction.
+    refine_rejected: [bool; 6],
 }
 
 /// The previous frame, kept as the scan-to-scan target.
@@ -670,52 +710,15 @@ impl Pipeline {
     }
 
     fn process(&mut self, frame: &LidarFrame) {
-        let cfg = self.config.clone();
-        let n = frame.points.len();
-        let mut points: Vec<V3> = Vec::with_capacity(n);
-        let mut times = Vec::with_capacity(n);
-        let mut ranges = Vec::with_capacity(n);
-        for p in &frame.points {
-            let l = p.xyz_in_lidar_m.map(f64::from);
-            points.push(self.robot_from_lidar.apply(l));
-            times.push(f64::from(p.time_offset_s));
-            ranges.push(norm(l));
-        }
-        let velocity = self.deskew_velocity(frame.stamp_s);
-        if deskew::deskew(&mut points, &times, velocity, &cfg.deskew) == DeskewModel::Twist {
-            self.stats.twist_deskews += 1;
-        }
         let frame_index = self.stats.frames as u64;
-        let split = ground::segment_ground(
-            &points,
-            self.robot_from_lidar.translation[2],
-            &cfg.ground,
-            frame_index,
-        );
-        let is_ground: Vec<bool> = if let Some(s) = &split {
-            s.is_ground.clone()
-        } else {
-            self.stats.frames_without_ground += 1;
-            vec![false; n]
-        };
-        let ring_points: Vec<RingPoint> = (0..n)
-            .map(|i| RingPoint {
-                p: points[i],
-                range_m: ranges[i],
-                azimuth_rad: f64::from(frame.points[i].azimuth_rad),
-                ring: frame.points[i].ring,
-                is_ground: cfg.ground.enabled && is_ground[i],
-            })
-            .collect();
-        let feats = features::extract(&ring_points, &cfg.features);
-        self.stats.frames += 1;
-        self.stats.points_in += n;
-        self.stats.ground_points += is_ground.iter().filter(|&&g| g).count();
-        self.stats.outlier_points += feats.is_outlier.iter().filter(|&&o| o).count();
-        self.stats.corners += feats.corners.len();
-        self.stats.planes += feats.planes.len();
+        let robot = self.deskewed_robot_frame(frame);
+        let split = self.segment_ground(&robot.points, frame_index);
+        let is_ground = split
+            .as_ref()
+            .map_or_else(|| vec![false; robot.points.len()], |s| s.is_ground.clone());
+        let feats = self.extract_features(frame, &robot, &is_ground);
 
-        let step1_planes = step1_planes(&feats, cfg.laser.ground_sample_voxel_m);
+        let step1_planes = step1_planes(&feats, self.config.laser.ground_sample_voxel_m);
         let scan = Scan {
             step1_planes: &step1_planes,
             step2_planes: feats.planes.len(),
@@ -724,44 +727,143 @@ impl Pipeline {
         // The frame's floor, which sets its roll, pitch and height (`map.level-with-ground`).
         let floor = split
             .as_ref()
-            .filter(|_| cfg.map.level_with_ground)
+            .filter(|_| self.config.map.level_with_ground)
             .map(|s| (s.plane.normal, s.plane.offset_m));
-        let (mut world_from_robot, chosen, laser_degenerate, refine_rejected) =
-            self.estimate_pose(frame.stamp_s, scan, floor);
+        let mut pose = self.estimate_pose(frame.stamp_s, scan, floor);
         if let Some(plane) = floor {
-            world_from_robot = self.level(&world_from_robot, plane);
+            pose.world_from_robot = self.level(&pose.world_from_robot, plane);
         }
         let candidates = Candidates::of(&feats, frame_index);
-        if cfg.map.refine {
-            self.map.add(
-                &world_from_robot,
-                candidates.map_planes(cfg.map.level_with_ground),
-                &candidates.corners,
-            );
-        }
-        let keep_ground = self.config.map.keep_ground;
-        for i in 0..n {
-            if feats.is_outlier[i]
-                || (is_ground[i] && !keep_ground)
-                || ranges[i] > self.config.map.output_max_range_m
-            {
-                continue;
-            }
-            self.add_output(world_from_robot.apply(points[i]), is_ground[i]);
-        }
+        self.extend_map(&pose.world_from_robot, &candidates);
+        self.add_frame_to_cloud(
+            &robot,
+            &is_ground,
+            &feats.is_outlier,
+            &pose.world_from_robot,
+        );
         self.trajectory.push(TrajectoryPoint {
             stamp_s: frame.stamp_s,
-            world_from_robot,
-            chosen,
-            laser_degenerate,
-            refine_rejected,
+            world_from_robot: pose.world_from_robot,
+            chosen: pose.chosen,
+            laser_degenerate: pose.laser_degenerate,
+            refine_rejected: pose.refine_rejected,
         });
         self.flush_depth_points(frame.stamp_s);
         let target = Arc::new(FeatureTarget {
             corners: tagged_index(candidates.corners, self.config.laser.max_correspondence_m),
             planes: tagged_index(candidates.planes, self.config.laser.max_correspondence_m),
         });
-        self.track_slip(frame_index, frame.stamp_s, scan, world_from_robot, target);
+        self.track_slip(
+            frame_index,
+            frame.stamp_s,
+            scan,
+            pose.world_from_robot,
+            target,
+        );
+    }
+
+    /// Steps 1-2: the frame's points in the robot frame (`mounts`), motion-compensated to the
+    /// frame's start ([`deskew`]), with their firing times and ranges from the lidar.
+    fn deskewed_robot_frame(&mut self, frame: &LidarFrame) -> RobotFrame {
+        let n = frame.points.len();
+        let mut robot = RobotFrame {
+            points: Vec::with_capacity(n),
+            times_s: Vec::with_capacity(n),
+            ranges_m: Vec::with_capacity(n),
+        };
+        for p in &frame.points {
+            let l = p.xyz_in_lidar_m.map(f64::from);
+            robot.points.push(self.robot_from_lidar.apply(l));
+            robot.times_s.push(f64::from(p.time_offset_s));
+            robot.ranges_m.push(norm(l));
+        }
+        let velocity = self.deskew_velocity(frame.stamp_s);
+        if deskew::deskew(
+            &mut robot.points,
+            &robot.times_s,
+            velocity,
+            &self.config.deskew,
+        ) == DeskewModel::Twist
+        {
+            self.stats.twist_deskews += 1;
+        }
+        robot
+    }
+
+    /// Step 3: the frame's RANSAC ground plane and its inliers ([`ground`]); `None` (counted)
+    /// when the frame has no plane.
+    fn segment_ground(&mut self, points: &[V3], frame_index: u64) -> Option<ground::GroundSplit> {
+        let split = ground::segment_ground(
+            points,
+            self.robot_from_lidar.translation[2],
+            &self.config.ground,
+            frame_index,
+        );
+        if split.is_none() {
+            self.stats.frames_without_ground += 1;
+        }
+        split
+    }
+
+    /// Step 4: per-ring feature extraction and outlier rejection ([`features`]); counts the
+    /// frame's points by class.
+    fn extract_features(
+        &mut self,
+        frame: &LidarFrame,
+        robot: &RobotFrame,
+        is_ground: &[bool],
+    ) -> features::Features {
+        let ground_enabled = self.config.ground.enabled;
+        let ring_points: Vec<RingPoint> = frame
+            .points
+            .iter()
+            .enumerate()
+            .map(|(i, p)| RingPoint {
+                p: robot.points[i],
+                range_m: robot.ranges_m[i],
+                azimuth_rad: f64::from(p.azimuth_rad),
+                ring: p.ring,
+                is_ground: ground_enabled && is_ground[i],
+            })
+            .collect();
+        let feats = features::extract(&ring_points, &self.config.features);
+        self.stats.frames += 1;
+        self.stats.points_in += robot.points.len();
+        self.stats.ground_points += is_ground.iter().filter(|&&g| g).count();
+        self.stats.outlier_points += feats.is_outlier.iter().filter(|&&o| o).count();
+        self.stats.corners += feats.corners.len();
+        self.stats.planes += feats.planes.len();
+        feats
+    }
+
+    /// Step 7a: the frame's feature candidates join the scan-to-map refinement's map.
+    fn extend_map(&mut self, world_from_robot: &Pose, candidates: &Candidates) {
+        if self.config.map.refine {
+            self.map.add(
+                world_from_robot,
+                candidates.map_planes(self.config.map.level_with_ground),
+                &candidates.corners,
+            );
+        }
+    }
+
+    /// Step 7b: the frame's points, placed at its pose, join the output cloud; outliers, ground
+    /// (unless kept) and points beyond `map.output-max-range-m` are left out.
+    fn add_frame_to_cloud(
+        &mut self,
+        robot: &RobotFrame,
+        is_ground: &[bool],
+        is_outlier: &[bool],
+        world_from_robot: &Pose,
+    ) {
+        let keep_ground = self.config.map.keep_ground;
+        let max_range_m = self.config.map.output_max_range_m;
+        for (i, &p) in robot.points.iter().enumerate() {
+            if is_outlier[i] || (is_ground[i] && !keep_ground) || robot.ranges_m[i] > max_range_m {
+                continue;
+            }
+            self.add_output(world_from_robot.apply(p), is_ground[i]);
+        }
     }
 
     /// Step 6b's slip evidence ([`slip`]): register the frame against a keyframe a baseline
@@ -829,24 +931,46 @@ impl Pipeline {
         }
     }
 
-    /// Steps 5-7: laser odometry, fusion, scan-to-map. Returns `world_from_robot`, the fused
-    /// components' sources, the laser's degenerate components and the components the refinement
-    /// left at the fused prediction.
+    /// Steps 5-7a: laser odometry, fusion, scan-to-map refinement.
     fn estimate_pose(
         &mut self,
         stamp_s: f64,
         scan: Scan<'_>,
         floor: Option<(V3, f64)>,
-    ) -> (Pose, [Source; 6], [bool; 6], [bool; 6]) {
-        let Some(prev) = &self.previous else {
-            return (Pose::IDENTITY, [Source::Zero; 6], [false; 6], [false; 6]);
+    ) -> PoseEstimate {
+        let Some(odometry) = self.fuse_odometry(stamp_s, scan) else {
+            return PoseEstimate {
+                world_from_robot: Pose::IDENTITY,
+                chosen: [Source::Zero; 6],
+                laser_degenerate: [false; 6],
+                refine_rejected: [false; 6],
+            };
         };
-        let dt = stamp_s - prev.stamp_s;
+        let (world_from_robot, refine_rejected) = if self.config.map.refine && !self.map.is_empty()
+        {
+            self.refine_against_map(&odometry, scan, floor)
+        } else {
+            (odometry.predicted_world, [false; 6])
+        };
+        PoseEstimate {
+            world_from_robot,
+            chosen: odometry.chosen,
+            laser_degenerate: odometry.laser_degenerate,
+            refine_rejected,
+        }
+    }
+
+    /// Steps 5-6: scan-to-scan laser odometry against the previous frame from the other sources'
+    /// prediction, then fusion (Algorithm 1) of laser, visual and wheel odometry over the
+    /// interval. `None` for the first frame.
+    fn fuse_odometry(&mut self, stamp_s: f64, scan: Scan<'_>) -> Option<FusedOdometry> {
+        let prev = self.previous.as_ref()?;
+        let dt_s = stamp_s - prev.stamp_s;
         let prev_world = prev.world_from_robot;
         let wheel = self.wheel_rate(prev.stamp_s, stamp_s);
         let visual = self.visual_rate(prev.stamp_s, stamp_s);
         let predicted = self.fusion.predict(visual.as_ref(), wheel.as_ref());
-        let prior = Pose::from_increment(scale_twist(&predicted, dt));
+        let prior = Pose::from_increment(scale_twist(&predicted, dt_s));
         // Without a measured prior (no wheel or visual odometry over the interval) the degeneracy
         // thresholds trade the laser against the constant-velocity guess instead.
         let laser_config = if wheel.is_none() && visual.is_none() {
@@ -866,7 +990,7 @@ impl Pipeline {
         }
         count(&mut self.stats.laser_degenerate, laser_degenerate);
         let laser_rate = laser.map(|l| SourceRate {
-            rate: scale_twist(&l.pose.to_increment(), 1.0 / dt),
+            rate: scale_twist(&l.pose.to_increment(), 1.0 / dt_s),
             available: laser_degenerate.map(|d| !d),
         });
         let fused = self
@@ -876,36 +1000,63 @@ impl Pipeline {
             self.stats.chosen[s as usize] += 1;
         }
         self.last_rate = fused.rate;
-        let increment = Pose::from_increment(scale_twist(&fused.rate, dt));
-        let mut predicted_world = prev_world.compose(&increment);
-        if !self.config.map.refine || self.map.is_empty() {
-            return (predicted_world, fused.chosen, laser_degenerate, [false; 6]);
-        }
-        let prior_information = (self.config.map.wheel_prior && wheel.is_some())
-            .then(|| self.wheel_prior_information(dt));
+        let increment = Pose::from_increment(scale_twist(&fused.rate, dt_s));
+        Some(FusedOdometry {
+            dt_s,
+            prev_world,
+            predicted_world: prev_world.compose(&increment),
+            chosen: fused.chosen,
+            laser_degenerate,
+            wheel,
+            laser_config,
+        })
+    }
+
+    /// Step 7a: the fused pose refined against the local feature map, with the wheels as a prior
+    /// (`map.wheel-prior`) and the refined increment gated by them as Algorithm 1 gates the laser.
+    /// Returns the pose and the components left at the fused prediction.
+    fn refine_against_map(
+        &mut self,
+        odometry: &FusedOdometry,
+        scan: Scan<'_>,
+        floor: Option<(V3, f64)>,
+    ) -> (Pose, [bool; 6]) {
+        let dt_s = odometry.dt_s;
+        let prior_information = (self.config.map.wheel_prior && odometry.wheel.is_some())
+            .then(|| self.wheel_prior_information(dt_s));
         // With the frame's floor, roll, pitch and height are the floor's whatever the map says
         // (`process` levels the pose): the prediction is levelled first and the refinement solves
         // the other three ([`Scan::for_refinement`]).
+        let mut predicted_world = odometry.predicted_world;
         if let Some(plane) = floor {
             predicted_world = self.level(&predicted_world, plane);
         }
-        let (features, active) = scan.for_refinement(floor.is_some());
-        let refined = register_joint(
-            self.map.target(),
-            features,
-            (predicted_world, prior_information),
+        let ((planes, corners), active) = scan.for_refinement(floor.is_some());
+        let refined = register_joint(&JointProblem {
+            target: self.map.target(),
+            planes,
+            corners,
+            prior: predicted_world,
+            prior_information,
             active,
-            (self.config.map.iterations, &laser_config),
-        );
+            iterations: self.config.map.iterations,
+            config: &odometry.laser_config,
+        });
         count(&mut self.stats.refine_degenerate, refined.degenerate);
         // The refinement's yaw (by default; x, y too with `gate-refinement-by-wheel`) is gated
         // by the wheels like the scan-to-scan laser in Algorithm 1: the refined increment over
         // the interval must agree with the wheels' rate.
         let refined_rate = scale_twist(
-            &prev_world.inverse().compose(&refined.pose).to_increment(),
-            1.0 / dt,
+            &odometry
+                .prev_world
+                .inverse()
+                .compose(&refined.pose)
+                .to_increment(),
+            1.0 / dt_s,
         );
-        let agrees = self.fusion.refinement_gate(&refined_rate, wheel.as_ref());
+        let agrees = self
+            .fusion
+            .refinement_gate(&refined_rate, odometry.wheel.as_ref());
         for (gated, ok) in self.stats.refine_gated.iter_mut().zip(agrees) {
             *gated += usize::from(!ok);
         }
@@ -916,7 +1067,7 @@ impl Pipeline {
             keep_components(&refined.pose, &predicted_world, keep)
         };
         let rejected = std::array::from_fn(|k| refined.degenerate[k] || !keep[k]);
-        (world, fused.chosen, laser_degenerate, rejected)
+        (world, rejected)
     }
 
     /// `world_from_robot` levelled by the frame's floor `plane` (robot frame) against the first

@@ -1,4 +1,4 @@
-//! Registration: the laser's LM solves ([`super::laser_odometry::solve_with`]) put together as the
+//! Registration: the laser's LM solves ([`super::laser_odometry::solve`]) put together as the
 //! scan-to-scan two-step and the scan-to-map joint registration, and the degeneracy test with
 //! solution remapping that decides which directions the scan determines.
 //!
@@ -44,9 +44,7 @@
 
 use super::config::LaserOdometryConfig;
 use super::geom::{Pose, V3, symmetric_eigen};
-use super::laser_odometry::{
-    FeatureTarget, SolveGuides, about, increment_about, solve_warm, solve_with,
-};
+use super::laser_odometry::{FeatureTarget, Problem, SolveGuides, about, increment_about, solve};
 
 /// How a registration went.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -172,7 +170,28 @@ pub const ALL_SIX: [usize; 6] = [0, 1, 2, 3, 4, 5];
 /// levelled refinement).
 pub const YAW_X_Y: [usize; 3] = [2, 3, 4];
 
-/// Register source features to `target` with the `active` parameters (increment order: roll,
+/// A scan-to-map registration problem for [`register_joint`].
+#[derive(Debug, Clone, Copy)]
+pub struct JointProblem<'a> {
+    /// What the scan is registered against (the feature map).
+    pub target: &'a FeatureTarget,
+    /// The scan's plane features (robot frame).
+    pub planes: &'a [V3],
+    /// The scan's corner features (robot frame).
+    pub corners: &'a [V3],
+    /// `target_from_source` to start from and fall back to.
+    pub prior: Pose,
+    /// The prior as a Gaussian too, when there is one (see [`register_joint`]).
+    pub prior_information: Option<[[f64; 6]; 6]>,
+    /// The solved parameters: indices into `[rx, ry, rz, tx, ty, tz]`.
+    pub active: &'a [usize],
+    /// LM iterations at most.
+    pub iterations: u32,
+    /// Correspondence radius, kernel, damping and degeneracy thresholds.
+    pub config: &'a LaserOdometryConfig,
+}
+
+/// Register a scan's features to the problem's `target` with the `active` parameters (increment order: roll,
 /// pitch, yaw, x, y, z; the others stay at `prior`'s) in one LM problem (the scan-to-map
 /// refinement: all six, or x, y and yaw once the floor has levelled `prior`), starting from and
 /// falling back to `prior` = `target_from_source`.
@@ -181,36 +200,50 @@ pub const YAW_X_Y: [usize; 3] = [2, 3, 4];
 /// in the residuals' units): the solve weighs the scan against it, and a direction counts as
 /// determined when the scan and the prior together determine it, so the hard split below (scan
 /// or prior) applies only to the directions the prior leaves free.
-pub fn register_joint(
-    target: &FeatureTarget,
-    (planes, corners): (&[V3], &[V3]),
-    (prior, prior_information): (Pose, Option<[[f64; 6]; 6]>),
-    active: &[usize],
-    (iterations, config): (u32, &LaserOdometryConfig),
-) -> Registration {
+pub fn register_joint(problem: &JointProblem<'_>) -> Registration {
+    let JointProblem {
+        target,
+        planes,
+        corners,
+        prior,
+        prior_information,
+        active,
+        iterations,
+        config,
+    } = *problem;
     let thresholds = DegeneracyThresholds::of(config);
     // The steps are held to the directions the first linearisation determines (LOAM's in-solve
     // remapping): the joint solve against the map otherwise wanders along the undetermined ones,
     // which the remapping below would throw away anyway, and its far features then go stale and
     // are searched again (it ran all its iterations; the scan-to-map solve was 37 % of the CPU).
-    let ((pose, h, residuals, rms_m), _) = solve_with(
-        target,
-        (planes, corners),
-        prior,
-        active,
-        iterations,
-        config,
-        &SolveGuides {
-            hold: Some(thresholds),
-            prior_information,
+    let solution = solve(
+        &Problem {
+            target,
+            planes,
+            corners,
+            init: prior,
+            active,
+            iterations,
+            config,
+            guides: SolveGuides {
+                hold: Some(thresholds),
+                prior_information,
+            },
         },
+        Vec::new(),
     );
-    let (pose, degenerate) = remap(&pose, &prior, &h, active, thresholds);
+    let (pose, degenerate) = remap(
+        &solution.pose,
+        &prior,
+        &solution.information,
+        active,
+        thresholds,
+    );
     Registration {
         pose,
         degenerate,
-        residuals,
-        rms_m,
+        residuals: solution.residuals,
+        rms_m: solution.rms_m,
     }
 }
 
@@ -261,42 +294,57 @@ pub fn register_two_step(
     let thresholds = DegeneracyThresholds::of(config);
     let guides = SolveGuides::default();
     let step1 = [0, 1, 5];
-    let ((pose1, h1, n1, _), _, mut matches) = solve_warm(
-        target,
-        (scan.step1_planes, &[]),
-        prior,
-        &step1,
-        (config.iterations, config),
-        &guides,
+    let first = solve(
+        &Problem {
+            target,
+            planes: scan.step1_planes,
+            corners: &[],
+            init: prior,
+            active: &step1,
+            iterations: config.iterations,
+            config,
+            guides,
+        },
         Vec::new(),
     );
-    let (pose1, deg1) = remap(&pose1, &prior, &h1, &step1, thresholds);
+    let (pose1, deg1) = remap(&first.pose, &prior, &first.information, &step1, thresholds);
+    let mut matches = first.matches;
     // Step 2 starts from step 1's plane correspondences (its planes lead step 1's, same target):
     // only those step 1 moved by more than the re-search distance are searched again.
     matches.truncate(planes.len());
     let step2 = YAW_X_Y;
-    let ((pose2, h2, n2, rms_m), _, _) = solve_warm(
-        target,
-        (planes, corners),
-        pose1,
-        &step2,
-        (config.iterations, config),
-        &guides,
+    let second = solve(
+        &Problem {
+            target,
+            planes,
+            corners,
+            init: pose1,
+            active: &step2,
+            iterations: config.iterations,
+            config,
+            guides,
+        },
         matches,
     );
-    let (pose, deg2) = remap(&pose2, &pose1, &h2, &step2, thresholds);
+    let (pose, deg2) = remap(
+        &second.pose,
+        &pose1,
+        &second.information,
+        &step2,
+        thresholds,
+    );
     Registration {
         pose,
         degenerate: std::array::from_fn(|k| deg1[k] || deg2[k]),
-        residuals: n1.max(n2),
-        rms_m,
+        residuals: first.residuals.max(second.residuals),
+        rms_m: second.rms_m,
     }
 }
 
 #[cfg(test)]
 pub(crate) mod tests {
     use super::*;
-    use crate::laser_odometry::solve_with;
+    use crate::laser_odometry::Solution;
     use crate::laser_odometry::tests::{moved, scene, target_of};
 
     /// A scan without a ground sample: step 1 and step 2 register the same planes.
@@ -313,13 +361,16 @@ pub(crate) mod tests {
         let (target, truth, (sp, sc), config) = known_motion();
         for reg in [
             register_two_step(&target, scan_of(&sp, &sc), Pose::IDENTITY, &config),
-            register_joint(
-                &target,
-                (&sp, &sc),
-                (Pose::IDENTITY, None),
-                &ALL_SIX,
-                (10, &config),
-            ),
+            register_joint(&JointProblem {
+                target: &target,
+                planes: &sp,
+                corners: &sc,
+                prior: Pose::IDENTITY,
+                prior_information: None,
+                active: &ALL_SIX,
+                iterations: 10,
+                config: &config,
+            }),
         ] {
             let err = reg.pose.compose(&truth.inverse()).to_increment();
             assert!(err.iter().all(|e| e.abs() < 3e-3), "{err:?} {reg:?}");
@@ -350,14 +401,17 @@ pub(crate) mod tests {
         // move them (here the prior's are off the truth's by 3, 4 mrad and 5 mm).
         let (target, _, (sp, sc), config) = known_motion();
         let prior = Pose::IDENTITY;
-        let levelled = scan_of(&sp, &sc).for_refinement(true);
-        let reg = register_joint(
-            &target,
-            levelled.0,
-            (prior, None),
-            levelled.1,
-            (10, &config),
-        );
+        let ((planes, corners), active) = scan_of(&sp, &sc).for_refinement(true);
+        let reg = register_joint(&JointProblem {
+            target: &target,
+            planes,
+            corners,
+            prior,
+            prior_information: None,
+            active,
+            iterations: 10,
+            config: &config,
+        });
         let moved_by = increment_about(prior.translation, &reg.pose.compose(&prior.inverse()));
         for k in [0, 1, 5] {
             assert!(moved_by[k].abs() < 1e-12, "{moved_by:?}");
@@ -381,13 +435,16 @@ pub(crate) mod tests {
             let shifted =
                 |v: &[V3]| -> Vec<V3> { v.iter().map(|&p| world_from_target.apply(p)).collect() };
             let target = target_of(&shifted(&planes), &shifted(&corners));
-            let reg = register_joint(
-                &target,
-                (&sp, &sc),
-                (world_from_target, None),
-                &ALL_SIX,
-                (10, &config),
-            );
+            let reg = register_joint(&JointProblem {
+                target: &target,
+                planes: &sp,
+                corners: &sc,
+                prior: world_from_target,
+                prior_information: None,
+                active: &ALL_SIX,
+                iterations: 10,
+                config: &config,
+            });
             let in_target = world_from_target.inverse().compose(&reg.pose);
             (
                 reg.degenerate,
@@ -510,17 +567,21 @@ pub(crate) mod tests {
         let active = [0, 1, 2, 3, 4, 5];
         let thresholds = DegeneracyThresholds::of(&config);
         let run = |hold| {
-            let ((pose, ..), stats) = solve_with(
-                &target,
-                (&sp, &[]),
-                prior,
-                &active,
-                6,
-                &config,
-                &SolveGuides {
-                    hold,
-                    prior_information: None,
+            let Solution { pose, stats, .. } = solve(
+                &Problem {
+                    target: &target,
+                    planes: &sp,
+                    corners: &[],
+                    init: prior,
+                    active: &active,
+                    iterations: 6,
+                    config: &config,
+                    guides: SolveGuides {
+                        hold,
+                        prior_information: None,
+                    },
                 },
+                Vec::new(),
             );
             let d = increment_about(prior.translation, &pose.compose(&prior.inverse()));
             (d, stats)
@@ -561,24 +622,37 @@ pub(crate) mod tests {
                 l[3][3] = v;
                 l
             });
-            register_joint(&target, (&sp, &sc), (prior, l), &ALL_SIX, (20, &config))
-                .pose
-                .translation[0]
+            register_joint(&JointProblem {
+                target: &target,
+                planes: &sp,
+                corners: &sc,
+                prior,
+                prior_information: l,
+                active: &ALL_SIX,
+                iterations: 20,
+                config: &config,
+            })
+            .pose
+            .translation[0]
         };
         let free = x_with(None);
         assert!((free - 0.05).abs() < 1e-3, "{free}");
         // The scan's information on x: its normal matrix per residual times the residuals, at
         // the truth.
-        let ((_, h, n_h, _), _) = solve_with(
-            &target,
-            (&sp, &sc),
-            truth,
-            &[0, 1, 2, 3, 4, 5],
-            1,
-            &config,
-            &SolveGuides::default(),
+        let at_truth = solve(
+            &Problem {
+                target: &target,
+                planes: &sp,
+                corners: &sc,
+                init: truth,
+                active: &[0, 1, 2, 3, 4, 5],
+                iterations: 1,
+                config: &config,
+                guides: SolveGuides::default(),
+            },
+            Vec::new(),
         );
-        let scan_information = h[3][3] * n_h as f64;
+        let scan_information = at_truth.information[3][3] * at_truth.residuals as f64;
         let equal = x_with(Some(scan_information));
         assert!((equal - 0.04).abs() < 1.5e-3, "{equal}");
         let strong = x_with(Some(scan_information * 1e6));

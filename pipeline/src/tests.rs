@@ -410,3 +410,57 @@ fn a_config_text_is_parsed_and_checked_and_errors_name_the_key() {
         .to_string();
     assert!(e.contains("wheel-priors"), "{e}");
 }
+
+/// The synthetic runs' outputs, bit for bit, against a committed golden file: a refactor must
+/// leave them as they are, and a change that moves them shows up as a diff to review.
+/// `UPDATE_GOLDEN=1 cargo test -p pipeline --lib outputs_match` rewrites the file.
+#[test]
+fn outputs_match_the_golden_digests() {
+    use std::fmt::Write as _;
+    use std::hash::{Hash, Hasher};
+    let mut out = String::new();
+    let mut slipping = PipelineConfig::default();
+    slipping.map.residual_sigma_m = 0.02;
+    let mut laser_only = PipelineConfig::default();
+    laser_only.fusion.use_wheel = false;
+    for (name, cfg, slip) in [
+        ("default", PipelineConfig::default(), Some(0.0)),
+        ("slip", slipping, Some(0.05)),
+        ("laser", laser_only, None),
+    ] {
+        let (_, built) = run(cfg, 30, slip);
+        let mut h = std::collections::hash_map::DefaultHasher::new();
+        for p in &built.points_in_world {
+            p.map(f64::to_bits).hash(&mut h);
+        }
+        for t in &built.trajectory {
+            format!("{t:?}").hash(&mut h);
+        }
+        format!("{:?}", built.stats).hash(&mut h);
+        let _ = writeln!(
+            out,
+            "{name} {} {:x}",
+            built.points_in_world.len(),
+            h.finish()
+        );
+    }
+    let d = run_with_depth(PipelineConfig::default(), 20);
+    let _ = writeln!(
+        out,
+        "depth {} {:?}",
+        d.points_in_world.len(),
+        d.trajectory.last()
+    );
+    let path =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/golden/synthetic-runs.txt");
+    if std::env::var_os("UPDATE_GOLDEN").is_some() {
+        std::fs::write(&path, &out).unwrap();
+        return;
+    }
+    let golden = std::fs::read_to_string(&path).unwrap_or_default();
+    assert!(
+        golden == out,
+        "pipeline outputs differ from {}:\n{out}\nRegenerate with UPDATE_GOLDEN=1 if the change is intended.",
+        path.display()
+    );
+}
