@@ -11,6 +11,8 @@
 
 use serde::{Deserialize, Serialize};
 
+use crate::PipelineError;
+
 /// Every stage's settings. `PipelineConfig::default()` is the tuned configuration (every stage's
 /// own default, except that the bilateral filter is off: see its `Default` impl).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -56,6 +58,150 @@ impl Default for PipelineConfig {
                 ..FilterConfig::default()
             },
         }
+    }
+}
+
+/// How many keys [`PipelineConfig::positive_values`] checks.
+const POSITIVE_KEYS: usize = 18;
+
+impl PipelineConfig {
+    /// The values that must be positive numbers, by key.
+    fn positive_values(&self) -> [(&'static str, f64); POSITIVE_KEYS] {
+        [
+            (
+                "ground.distance-threshold-m",
+                self.ground.distance_threshold_m,
+            ),
+            (
+                "features.max-window-angle-rad",
+                self.features.max_window_angle_rad,
+            ),
+            ("features.max-range-m", self.features.max_range_m),
+            (
+                "laser.max-correspondence-m",
+                self.laser.max_correspondence_m,
+            ),
+            (
+                "laser.ground-sample-voxel-m",
+                self.laser.ground_sample_voxel_m,
+            ),
+            ("laser.huber-m", self.laser.huber_m),
+            ("laser.max-residual-m", self.laser.max_residual_m),
+            ("visual.max-depth-m", self.visual.max_depth_m),
+            ("visual.max-residual-m", self.visual.max_residual_m),
+            ("map.feature-voxel-m", self.map.feature_voxel_m),
+            ("map.output-voxel-m", self.map.output_voxel_m),
+            ("map.output-max-range-m", self.map.output_max_range_m),
+            ("map.residual-sigma-m", self.map.residual_sigma_m),
+            (
+                "fusion.wheel-speed-sigma-mps",
+                self.fusion.wheel_speed_sigma_mps,
+            ),
+            (
+                "fusion.wheel-yaw-rate-sigma-radps",
+                self.fusion.wheel_yaw_rate_sigma_radps,
+            ),
+            ("filter.radius-m", self.filter.radius_m),
+            ("filter.sigma-spatial-m", self.filter.sigma_spatial_m),
+            ("filter.sigma-normal-m", self.filter.sigma_normal_m),
+        ]
+    }
+
+    /// A config from the text of a `[pipeline]`-like TOML table (kebab-case keys, unknown keys
+    /// rejected, missing keys at their defaults), checked by [`Self::validate`].
+    pub fn from_toml(text: &str) -> Result<Self, PipelineError> {
+        let config: Self =
+            toml::from_str(text).map_err(|e| PipelineError::InvalidConfig(e.to_string()))?;
+        config.validate()?;
+        Ok(config)
+    }
+
+    /// Check every value the stages divide by or loop on; the error names the key.
+    pub fn validate(&self) -> Result<(), PipelineError> {
+        let positive = self.positive_values();
+        for (key, v) in positive {
+            if !(v > 0.0 && v.is_finite()) {
+                return Err(PipelineError::InvalidConfig(format!(
+                    "{key} = {v}: must be a positive number"
+                )));
+            }
+        }
+        if !(self.map.ground_voxel_m >= 0.0 && self.map.ground_voxel_m.is_finite()) {
+            return Err(PipelineError::InvalidConfig(format!(
+                "map.ground-voxel-m = {}: must be 0 (the output voxel) or a positive number",
+                self.map.ground_voxel_m
+            )));
+        }
+        for (key, v) in [
+            ("laser.max-residual-rad", self.laser.max_residual_rad),
+            ("fusion.slip-replay-s", self.fusion.slip_replay_s),
+            (
+                "laser.degeneracy-eigen-min",
+                self.laser.degeneracy_eigen_min,
+            ),
+            (
+                "laser.degeneracy-rotation-eigen-min-m2",
+                self.laser.degeneracy_rotation_eigen_min_m2,
+            ),
+            (
+                "laser.unaided-degeneracy-eigen-min",
+                self.laser.unaided_degeneracy_eigen_min,
+            ),
+            (
+                "laser.unaided-degeneracy-rotation-eigen-min-m2",
+                self.laser.unaided_degeneracy_rotation_eigen_min_m2,
+            ),
+        ] {
+            if !(v >= 0.0 && v.is_finite()) {
+                return Err(PipelineError::InvalidConfig(format!(
+                    "{key} = {v}: must be 0 or a positive number"
+                )));
+            }
+        }
+        if !(self.fusion.wheel_scale_baseline_m >= 0.0
+            && self.fusion.wheel_scale_baseline_m.is_finite())
+        {
+            return Err(PipelineError::InvalidConfig(format!(
+                "fusion.wheel-scale-baseline-m = {}: must be 0 (off) or a positive number",
+                self.fusion.wheel_scale_baseline_m
+            )));
+        }
+        if !(0.0..0.2).contains(&self.fusion.wheel_scale_min_slip) {
+            return Err(PipelineError::InvalidConfig(format!(
+                "fusion.wheel-scale-min-slip = {}: must lie in 0..0.2 (a fraction of the distance)",
+                self.fusion.wheel_scale_min_slip
+            )));
+        }
+        if !(0.0..=1.0).contains(&self.fusion.rotation_gap_decay) {
+            return Err(PipelineError::InvalidConfig(format!(
+                "fusion.rotation-gap-decay = {}: must lie in 0..=1",
+                self.fusion.rotation_gap_decay
+            )));
+        }
+        if !(0.0..=1.0).contains(&self.ground.early_stop_fraction) {
+            return Err(PipelineError::InvalidConfig(
+                "ground.early-stop-fraction must lie in 0..=1".into(),
+            ));
+        }
+        if self.features.window_half_width == 0 || self.visual.pixel_stride == 0 {
+            return Err(PipelineError::InvalidConfig(
+                "features.window-half-width and visual.pixel-stride must be >= 1".into(),
+            ));
+        }
+        let spacing = self.map.min_point_spacing_m;
+        if !(spacing >= 0.0 && spacing < self.map.feature_voxel_m) {
+            return Err(PipelineError::InvalidConfig(format!(
+                "map.min-point-spacing-m = {spacing}: must be 0 (off) or positive and under \
+                 map.feature-voxel-m ({})",
+                self.map.feature_voxel_m
+            )));
+        }
+        if self.laser.max_correspondence_m > self.map.feature_voxel_m {
+            return Err(PipelineError::InvalidConfig(
+                "laser.max-correspondence-m must not exceed map.feature-voxel-m".into(),
+            ));
+        }
+        Ok(())
     }
 }
 
