@@ -13,7 +13,7 @@
 #![allow(clippy::needless_range_loop)]
 
 use std::collections::HashMap;
-use std::hash::{BuildHasherDefault, Hasher};
+use std::hash::BuildHasherDefault;
 
 /// A 3-vector in metres (or a direction), `[x, y, z]`.
 pub type V3 = [f64; 3];
@@ -499,47 +499,9 @@ pub fn centroid_covariance(points: impl Iterator<Item = V3> + Clone) -> Option<(
     ))
 }
 
-/// A fast, non-cryptographic hasher for voxel keys (FxHash's multiply-rotate).
-///
-/// Byte strings are consumed eight bytes at a time, so a `[i32; 3]` key (which `Hash` feeds as
-/// its length and then one 12-byte write) costs three multiply rounds instead of thirteen.
-#[derive(Default, Clone, Copy)]
-pub struct FxHasher(u64);
-
-impl Hasher for FxHasher {
-    #[inline]
-    fn finish(&self) -> u64 {
-        self.0
-    }
-    #[inline]
-    fn write(&mut self, bytes: &[u8]) {
-        let mut chunks = bytes.chunks_exact(8);
-        for chunk in &mut chunks {
-            let mut word = [0u8; 8];
-            word.copy_from_slice(chunk);
-            self.write_u64(u64::from_le_bytes(word));
-        }
-        let rest = chunks.remainder();
-        if !rest.is_empty() {
-            let mut word = [0u8; 8];
-            word[..rest.len()].copy_from_slice(rest);
-            // The length keeps "ab" and "ab\0" apart.
-            self.write_u64(u64::from_le_bytes(word) ^ ((rest.len() as u64) << 59));
-        }
-    }
-    #[inline]
-    fn write_i32(&mut self, i: i32) {
-        self.write_u64(u64::from(i.cast_unsigned()));
-    }
-    #[inline]
-    fn write_u64(&mut self, i: u64) {
-        self.0 = (self.0.rotate_left(5) ^ i).wrapping_mul(0x51_7c_c1_b7_27_22_0a_95);
-    }
-    #[inline]
-    fn write_usize(&mut self, i: usize) {
-        self.write_u64(i as u64);
-    }
-}
+/// The hasher of the voxel maps: rustc's FxHash (`rustc-hash`), fast on small integer keys and
+/// not DoS-resistant, which voxel keys from a sensor need not be.
+pub use rustc_hash::FxHasher;
 
 /// A hash map keyed by voxel, with [`FxHasher`].
 pub type VoxelMap<T> = HashMap<[i32; 3], T, BuildHasherDefault<FxHasher>>;
@@ -1216,20 +1178,5 @@ mod tests {
         }
         let p = [0.31, -0.01, -0.2];
         assert_eq!(voxel_of(p, 0.1), [3, -1, -2]);
-    }
-
-    #[test]
-    fn fx_hasher_reads_words_and_tells_lengths_apart() {
-        let hash = |bytes: &[u8]| {
-            let mut h = FxHasher::default();
-            h.write(bytes);
-            h.finish()
-        };
-        assert_ne!(hash(b"ab"), hash(b"ab\0"));
-        assert_ne!(hash(b"abcdefgh"), hash(b"abcdefgi"));
-        assert_ne!(
-            hash(&[1, 0, 0, 0, 2, 0, 0, 0, 3, 0, 0, 0]),
-            hash(&[1, 0, 0, 0, 3, 0, 0, 0, 2, 0, 0, 0])
-        );
     }
 }
