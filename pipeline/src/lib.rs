@@ -1192,4 +1192,6 @@ fn pose_on_trajectory(trajectory: &[TrajectoryPoint], t_s: f64) -> Option<Pose> 
 }
 
 #[cfg(test)]
+mod test_support;
+#[cfg(test)]
 mod tests;

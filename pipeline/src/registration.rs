@@ -342,19 +342,10 @@ pub fn register_two_step(
 }
 
 #[cfg(test)]
-pub(crate) mod tests {
+mod tests {
     use super::*;
     use crate::laser_odometry::Solution;
-    use crate::laser_odometry::tests::{moved, scene, target_of};
-
-    /// A scan without a ground sample: step 1 and step 2 register the same planes.
-    pub(crate) fn scan_of<'a>(planes: &'a [V3], corners: &'a [V3]) -> Scan<'a> {
-        Scan {
-            step1_planes: planes,
-            step2_planes: planes.len(),
-            corners,
-        }
-    }
+    use crate::test_support::{moved, scan_of, scene, target_of};
 
     #[test]
     fn recovers_a_known_motion_in_both_modes() {

@@ -192,8 +192,7 @@ fn travelled(a: &Pose, b: &Pose) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::laser_odometry::tests::{moved, scene, target_of};
-    use crate::registration::tests::scan_of;
+    use crate::test_support::{moved, scan_of, scene, target_of};
 
     fn at(x_m: f64) -> Pose {
         Pose::from_xyz_rpy([x_m, 0.0, 0.0], [0.0; 3])
