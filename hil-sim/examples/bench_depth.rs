@@ -11,12 +11,14 @@ use hil_sim::scenario::Scenario;
 use hil_sim::world::Scene;
 
 fn main() -> anyhow::Result<()> {
-    let frames: u64 = match std::env::args().nth(1) {
-        Some(s) => s
-            .parse()
-            .map_err(|e| anyhow::anyhow!("FRAMES must be an integer: {e}"))?,
-        None => 30,
-    };
+    /// Simulated D435 frames per second on one core.
+    #[derive(clap::Parser)]
+    struct Args {
+        /// Frames to render.
+        #[arg(default_value_t = 30)]
+        frames: u64,
+    }
+    let frames = <Args as clap::Parser>::parse().frames;
     let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("scenarios/suv-offset.toml");
     let scenario = Scenario::load(&path)?;
     let scene = Scene::from_vehicle(&scenario.vehicle);

@@ -43,12 +43,14 @@ fn run<T: hil_sim::trajectory::Trajectory>(
 }
 
 fn main() -> anyhow::Result<()> {
-    let seconds: f64 = match std::env::args().nth(1) {
-        Some(s) => s
-            .parse()
-            .map_err(|e| anyhow::anyhow!("SECONDS must be a number: {e}"))?,
-        None => 10.0,
-    };
+    /// Simulated VLP-16 seconds per CPU second, per scenario.
+    #[derive(clap::Parser)]
+    struct Args {
+        /// Simulated seconds per scenario.
+        #[arg(default_value_t = 10.0)]
+        seconds: f64,
+    }
+    let seconds = <Args as clap::Parser>::parse().seconds;
     let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("scenarios");
     let mut paths: Vec<PathBuf> = std::fs::read_dir(&dir)?
         .filter_map(|e| e.ok().map(|e| e.path()))

@@ -586,62 +586,76 @@ fn save_cloud(
     Ok(())
 }
 
-// The argument parsing and the two tables are one straight script.
+/// The pipeline's evidence on simulated passes (see the module docs).
+// Command-line switches, not a state machine.
+#[allow(clippy::struct_excessive_bools)]
+#[derive(clap::Parser)]
+struct Args {
+    /// Seeds per scenario.
+    #[arg(default_value_t = 10)]
+    seeds: u64,
+    /// Add the ablation's variants on the first seed of every scenario.
+    #[arg(long, conflicts_with = "peer")]
+    ablation: bool,
+    /// Run exactly the KISS-ICP comparison's two configurations.
+    #[arg(long)]
+    peer: bool,
+    /// Write each run's frames, true poses and trajectories for the peer here.
+    #[arg(long = "export")]
+    export_dir: Option<PathBuf>,
+    /// Write each run's cloud with its true angles and path here.
+    #[arg(long = "save-clouds")]
+    save_dir: Option<PathBuf>,
+    /// Only scenarios whose path contains this.
+    #[arg(long)]
+    only: Option<String>,
+    /// Simulated seconds per run instead of the scenario's.
+    #[arg(long)]
+    duration_s: Option<f64>,
+    /// Leave the D435 out.
+    #[arg(long)]
+    no_depth: bool,
+    /// Apply the assumed mecanum wheel errors where a scenario sets none.
+    #[arg(long)]
+    wheel_noise: bool,
+    /// Turn the scan-to-map refinement off.
+    #[arg(long)]
+    no_refine: bool,
+    /// Override `laser.degeneracy-eigen-min`.
+    #[arg(long)]
+    eigen_min: Option<f64>,
+    /// A `[pipeline]`-style TOML table (kebab-case keys, the service's) that replaces the
+    /// defaults every variant starts from.
+    #[arg(long)]
+    config: Option<PathBuf>,
+}
+
+// The two tables are one straight script.
 #[allow(clippy::too_many_lines)]
 fn main() -> anyhow::Result<()> {
-    let args: Vec<String> = std::env::args().skip(1).collect();
-    let seeds: u64 = args
-        .first()
-        .filter(|a| !a.starts_with("--"))
-        .map_or(Ok(10), |s| s.parse())?;
-    let mode = match (
-        args.iter().any(|a| a == "--ablation"),
-        args.iter().any(|a| a == "--peer"),
-    ) {
-        (false, false) => Mode::Default,
-        (true, false) => Mode::Ablation,
+    let Args {
+        seeds,
+        ablation,
+        peer,
+        export_dir,
+        save_dir,
+        only,
+        duration_s,
+        no_depth,
+        wheel_noise,
+        no_refine,
+        eigen_min,
+        config,
+    } = <Args as clap::Parser>::parse();
+    let mode = match (ablation, peer) {
+        (true, _) => Mode::Ablation,
         (false, true) => Mode::Peer,
-        (true, true) => anyhow::bail!("--ablation and --peer exclude each other"),
+        (false, false) => Mode::Default,
     };
-    let export_dir = args
-        .iter()
-        .position(|a| a == "--export")
-        .and_then(|i| args.get(i + 1))
-        .map(PathBuf::from);
-    let save_dir = args
-        .iter()
-        .position(|a| a == "--save-clouds")
-        .and_then(|i| args.get(i + 1))
-        .map(PathBuf::from);
-    let only = args
-        .iter()
-        .position(|a| a == "--only")
-        .and_then(|i| args.get(i + 1))
-        .cloned();
-    let duration_s: Option<f64> = args
-        .iter()
-        .position(|a| a == "--duration-s")
-        .and_then(|i| args.get(i + 1))
-        .map(|s| s.parse())
-        .transpose()?;
-    let no_depth = args.iter().any(|a| a == "--no-depth");
-    let wheel_noise = args.iter().any(|a| a == "--wheel-noise");
-    let no_refine = args.iter().any(|a| a == "--no-refine");
-    let eigen_min: Option<f64> = args
-        .iter()
-        .position(|a| a == "--eigen-min")
-        .and_then(|i| args.get(i + 1))
-        .map(|s| s.parse())
-        .transpose()?;
-    // `--config FILE`: a `[pipeline]`-style TOML table (kebab-case keys, the service's) that
-    // replaces the defaults every variant starts from.
-    let base_config = match args.iter().position(|a| a == "--config") {
-        Some(i) => {
-            let path = args
-                .get(i + 1)
-                .ok_or_else(|| anyhow::anyhow!("--config needs a file"))?;
-            let text = std::fs::read_to_string(path).with_context(|| path.clone())?;
-            PipelineConfig::from_toml(&text).with_context(|| path.clone())?
+    let base_config = match &config {
+        Some(path) => {
+            let text = std::fs::read_to_string(path).with_context(|| path.display().to_string())?;
+            PipelineConfig::from_toml(&text).with_context(|| path.display().to_string())?
         }
         None => PipelineConfig::default(),
     };

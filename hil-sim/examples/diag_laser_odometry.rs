@@ -131,32 +131,72 @@ fn prepare(
     }
 }
 
-// The argument parsing, the per-frame loop and the summary are one straight script.
+/// Laser odometry against the truth on a simulated pass (see the module docs).
+// Command-line switches, not a state machine.
+#[allow(clippy::struct_excessive_bools)]
+#[derive(clap::Parser)]
+struct Args {
+    /// Scenario name under hil-sim/scenarios.
+    #[arg(default_value = "sedan-pass")]
+    name: String,
+    /// Simulated seconds instead of the scenario's.
+    #[arg(long)]
+    duration_s: Option<f64>,
+    /// Evaluate (and explain) only the frames from this time on; earlier ones are still prepared.
+    #[arg(long, default_value_t = 0.0)]
+    from_s: f64,
+    /// The registration's prior: truth, zero or wheel.
+    #[arg(long, default_value = "truth")]
+    prior: String,
+    /// Print every frame.
+    #[arg(long)]
+    frames: bool,
+    /// Leave corner features out of step 2.
+    #[arg(long)]
+    no_corners: bool,
+    /// Leave plane features out of step 2.
+    #[arg(long)]
+    no_planes: bool,
+    /// The pipeline settings, a TOML table like the service's `[pipeline]`.
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// Explain the pull on x per residual group.
+    #[arg(long)]
+    explain: bool,
+    /// Print residuals of the groups starting with this.
+    #[arg(long)]
+    dump: Option<String>,
+    /// With `--dump`: every K-th frame.
+    #[arg(long, default_value_t = 20)]
+    dump_every: usize,
+    /// Deskew with the true linear velocity only.
+    #[arg(long)]
+    straight_deskew: bool,
+    /// Register each frame against the one K frames back.
+    #[arg(long, default_value_t = 1)]
+    stride: usize,
+    /// Register against the feature map built at the true poses.
+    #[arg(long)]
+    map: bool,
+    /// With `--map`: no degeneracy test.
+    #[arg(long)]
+    free: bool,
+    /// Tag the ground like any other plane point.
+    #[arg(long)]
+    mixed_planes: bool,
+}
+
+// The per-frame loop and the summary are one straight script.
 #[allow(clippy::too_many_lines)]
 fn main() -> anyhow::Result<()> {
-    let args: Vec<String> = std::env::args().skip(1).collect();
-    let name = args
-        .first()
-        .filter(|a| !a.starts_with("--"))
-        .cloned()
-        .unwrap_or_else(|| "sedan-pass".into());
-    let flag = |f: &str| {
-        args.iter()
-            .position(|a| a == f)
-            .and_then(|i| args.get(i + 1))
-            .cloned()
-    };
-    let duration_s: Option<f64> = flag("--duration-s").map(|s| s.parse()).transpose()?;
-    // `--from-s S`: evaluate (and explain) only the frames from S seconds on; the earlier ones
-    // are still prepared, as targets and for the map.
-    let from_s: f64 = flag("--from-s")
-        .map(|s| s.parse())
-        .transpose()?
-        .unwrap_or(0.0);
-    let prior_mode = flag("--prior").unwrap_or_else(|| "truth".into());
-    let per_frame = args.iter().any(|a| a == "--frames");
-    let no_corners = args.iter().any(|a| a == "--no-corners");
-    let no_planes = args.iter().any(|a| a == "--no-planes");
+    let args = <Args as clap::Parser>::parse();
+    let name = args.name.clone();
+    let duration_s = args.duration_s;
+    let from_s = args.from_s;
+    let prior_mode = args.prior.clone();
+    let per_frame = args.frames;
+    let no_corners = args.no_corners;
+    let no_planes = args.no_planes;
     let path = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
         .join("scenarios")
         .join(format!("{name}.toml"));
@@ -169,10 +209,10 @@ fn main() -> anyhow::Result<()> {
     let scene = Scene::from_vehicle(&scenario.vehicle);
     let frames = scenario.decoded_lidar_frames(&scene);
     // `--config FILE`: the pipeline settings, a TOML table like the service's `[pipeline]`.
-    let mut config = match flag("--config") {
+    let mut config = match &args.config {
         Some(path) => {
-            let text = std::fs::read_to_string(&path).with_context(|| path.clone())?;
-            PipelineConfig::from_toml(&text).with_context(|| path.clone())?
+            let text = std::fs::read_to_string(path).with_context(|| path.display().to_string())?;
+            PipelineConfig::from_toml(&text).with_context(|| path.display().to_string())?
         }
         None => PipelineConfig::default(),
     };
@@ -194,8 +234,8 @@ fn main() -> anyhow::Result<()> {
     // Sum of estimated and true x, and the count, over the frames where x was determined.
     let mut x_determined = (0.0, 0.0, 0usize);
     let mut travelled_m = 0.0;
-    let explain = args.iter().any(|a| a == "--explain");
-    let dump = flag("--dump");
+    let explain = args.explain;
+    let dump = args.dump.clone();
     // Pull on x at the true pose, per group: sum of e_x * r (positive pushes the estimate back).
     let mut pull: std::collections::BTreeMap<String, (f64, usize)> =
         std::collections::BTreeMap::default();
@@ -205,27 +245,20 @@ fn main() -> anyhow::Result<()> {
     let mut by_tilt = [(0.0, 0usize); 2];
     let mut by_size = [(0.0, 0usize); 5];
     // `--dump-every K`: with `--dump`, every K-th frame (default 20).
-    let dump_every: usize = flag("--dump-every")
-        .map(|s| s.parse())
-        .transpose()?
-        .unwrap_or(20)
-        .max(1);
+    let dump_every: usize = args.dump_every.max(1);
     // `--stride K`: register each frame against the one K frames back (the slip meter's long
     // baseline is 10-17 frames).
     // `--straight-deskew`: deskew with the true linear velocity only, no rotation (what the
     // pipeline's wheel-velocity deskew can do: the vibration's rotation stays in the scan).
-    let straight_deskew = args.iter().any(|a| a == "--straight-deskew");
-    let stride: usize = flag("--stride")
-        .map(|s| s.parse())
-        .transpose()?
-        .unwrap_or(1);
+    let straight_deskew = args.straight_deskew;
+    let stride: usize = args.stride;
     let mut history: std::collections::VecDeque<Prepared> = std::collections::VecDeque::new();
     // `--map`: register each frame against the pipeline's feature map built from every earlier
     // frame at its TRUE pose (the scan-to-map refinement, `register_joint`, no wheel prior),
     // starting from the TRUE pose (or the `--prior`); the error is the refined pose's against the
     // truth, in the robot frame, per frame (it does not accumulate here; in the pipeline the next
     // frame starts from it).
-    let mut map = args.iter().any(|a| a == "--map").then(|| {
+    let mut map = args.map.then(|| {
         FeatureMap::new(
             config.map.feature_voxel_m,
             config.map.points_per_voxel,
@@ -235,7 +268,7 @@ fn main() -> anyhow::Result<()> {
     // `--free`: the map solve without the degeneracy test (no direction held at the prior), to
     // see where the map alone pulls.
     let mut map_laser = config.laser.clone();
-    if args.iter().any(|a| a == "--free") {
+    if args.free {
         map_laser.degeneracy_eigen_min = 0.0;
         map_laser.degeneracy_rotation_eigen_min_m2 = 0.0;
     }
@@ -243,11 +276,7 @@ fn main() -> anyhow::Result<()> {
     let world_truth = |t: f64| truth(t0).inverse().compose(&truth(t));
     for (i, frame) in frames.iter().enumerate() {
         let current = prepare(
-            if args.iter().any(|a| a == "--mixed-planes") {
-                0
-            } else {
-                GROUND_TAG_BIT
-            },
+            if args.mixed_planes { 0 } else { GROUND_TAG_BIT },
             frame,
             i as u64,
             &robot_from_lidar,

@@ -162,39 +162,52 @@ fn save(
     Ok(())
 }
 
-/// The value after `--name`, parsed.
-fn flag<T: std::str::FromStr>(args: &[String], name: &str) -> anyhow::Result<Option<T>>
-where
-    T::Err: std::error::Error + Send + Sync + 'static,
-{
-    match args.iter().position(|a| a == name) {
-        None => Ok(None),
-        Some(i) => {
-            let v = args
-                .get(i + 1)
-                .ok_or_else(|| anyhow::anyhow!("{name} needs a value"))?;
-            Ok(Some(
-                v.parse()
-                    .map_err(|e| anyhow::anyhow!("{name} '{v}': {e}"))?,
-            ))
-        }
-    }
+/// The calculator on oracle clouds (see the module docs).
+#[derive(clap::Parser)]
+struct Args {
+    /// Use every N-th lidar packet.
+    #[arg(default_value_t = 4)]
+    every: u64,
+    /// Add the D435's points of every N-th depth frame (0: none).
+    #[arg(default_value_t = 0)]
+    depth_every: u64,
+    /// `noiseless`: no range noise.
+    noise: Option<String>,
+    /// Run seeds 1..=N instead of the scenario's own.
+    #[arg(long)]
+    seeds: Option<u64>,
+    /// Only scenarios whose path contains this.
+    #[arg(long)]
+    only: Option<String>,
+    /// Simulated seconds per run instead of the scenario's.
+    #[arg(long)]
+    duration_s: Option<f64>,
+    /// Keep one centroid per voxel of this size, metres.
+    #[arg(long)]
+    voxel_m: Option<f64>,
+    /// Write each cloud with its true angles to this directory.
+    #[arg(long = "save-clouds")]
+    save_dir: Option<PathBuf>,
 }
 
-// The argument parsing and the per-run report are one straight script.
+// The per-run report is one straight script.
 #[allow(clippy::too_many_lines)]
 fn main() -> anyhow::Result<()> {
-    let all: Vec<String> = std::env::args().skip(1).collect();
-    let seeds: Option<u64> = flag(&all, "--seeds")?;
-    let only: Option<String> = flag(&all, "--only")?;
-    let duration_s: Option<f64> = flag(&all, "--duration-s")?;
-    let voxel_m: Option<f64> = flag(&all, "--voxel-m")?;
-    let save_dir: Option<PathBuf> = flag(&all, "--save-clouds")?;
-    // Positional arguments are the ones before the first flag.
-    let mut args = all.iter().take_while(|a| !a.starts_with("--"));
-    let every: u64 = args.next().map_or(Ok(4), |s| s.parse())?;
-    let depth_every: u64 = args.next().map_or(Ok(0), |s| s.parse())?;
-    let noiseless = args.next().is_some_and(|s| s == "noiseless");
+    let Args {
+        every,
+        depth_every,
+        noise,
+        seeds,
+        only,
+        duration_s,
+        voxel_m,
+        save_dir,
+    } = <Args as clap::Parser>::parse();
+    let noiseless = match noise.as_deref() {
+        None => false,
+        Some("noiseless") => true,
+        Some(other) => anyhow::bail!("unknown argument `{other}` (expected `noiseless`)"),
+    };
     let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("scenarios");
     let mut paths: Vec<PathBuf> = std::fs::read_dir(&dir)?
         .filter_map(|e| e.ok().map(|e| e.path()))

@@ -22,22 +22,52 @@ mod synth;
 
 use onboard::angles::{AnglesConfig, compute_angles};
 
+/// The calculator's accuracy on synthetic vehicles or on saved clouds (see the module docs).
+#[derive(clap::Parser)]
+#[command(args_conflicts_with_subcommands = true)]
+struct Args {
+    #[command(subcommand)]
+    saved: Option<Saved>,
+    /// Isotropic range noise (sigma), metres.
+    #[arg(default_value_t = 0.005)]
+    noise_m: f64,
+    /// Noise seeds per vehicle.
+    #[arg(default_value_t = 5)]
+    seeds: u64,
+    /// Point spacing, metres.
+    #[arg(default_value_t = 0.005)]
+    spacing_m: f64,
+    /// `jitter`: sample the body from a seed-dependent offset along the profile.
+    jitter: Option<String>,
+}
+
+#[derive(clap::Subcommand)]
+enum Saved {
+    /// Run the calculator on the clouds a bench saved (`--save-clouds DIR`).
+    Saved {
+        /// The directory of `.ply` clouds with their `.truth` files.
+        dir: std::path::PathBuf,
+        /// Only clouds whose name contains this.
+        #[arg(default_value = "")]
+        filter: String,
+    },
+}
+
 fn main() {
-    let args: Vec<String> = std::env::args().collect();
-    if args.get(1).is_some_and(|a| a == "saved") {
-        let dir = args
-            .get(2)
-            .expect("usage: accuracy_angles saved DIR [FILTER]");
-        saved::run(
-            std::path::Path::new(dir),
-            args.get(3).map_or("", String::as_str),
-        );
+    let args = <Args as clap::Parser>::parse();
+    if let Some(Saved::Saved { dir, filter }) = &args.saved {
+        saved::run(dir, filter);
         return;
     }
-    let noise_m: f64 = args.get(1).map_or(0.005, |s| s.parse().unwrap());
-    let seeds: u64 = args.get(2).map_or(5, |s| s.parse().unwrap());
-    let spacing_m: f64 = args.get(3).map_or(0.005, |s| s.parse().unwrap());
-    let jitter = args.get(4).is_some_and(|s| s == "jitter");
+    let (noise_m, seeds, spacing_m) = (args.noise_m, args.seeds, args.spacing_m);
+    let jitter = match args.jitter.as_deref() {
+        None => false,
+        Some("jitter") => true,
+        Some(other) => {
+            eprintln!("unknown argument `{other}` (expected `jitter`)");
+            std::process::exit(2);
+        }
+    };
     let pose = synth::Pose {
         yaw_rad: 8f64.to_radians(),
         tilt_rad: 4f64.to_radians(),

@@ -93,13 +93,21 @@ fn report(name: &str, (points, best, median): (u64, f64, f64)) {
     );
 }
 
+/// Decoder throughput on a VLP-16 capture.
+#[derive(clap::Parser)]
+struct Args {
+    /// The capture (pcap or pcapng).
+    pcap: PathBuf,
+    /// Measuring time, seconds (split between the two measurements).
+    #[arg(default_value_t = 3.0)]
+    seconds: f64,
+}
+
 fn main() -> Result<(), Box<dyn Error>> {
-    let mut args = std::env::args().skip(1);
-    let path = PathBuf::from(
-        args.next()
-            .ok_or("usage: bench_vlp16 FILE.pcap [SECONDS]")?,
-    );
-    let seconds: f64 = args.next().map(|s| s.parse()).transpose()?.unwrap_or(3.0);
+    let Args {
+        pcap: path,
+        seconds,
+    } = <Args as clap::Parser>::parse();
     let budget = Duration::from_secs_f64(seconds / 2.0);
 
     report("end_to_end", measure(budget, || end_to_end(&path))?);

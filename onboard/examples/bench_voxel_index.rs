@@ -234,8 +234,15 @@ fn within_case(name: &str, points: &[V3], voxel_m: f64, radius_m: f64) {
     );
 }
 
-fn main() -> Result<(), Box<dyn std::error::Error>> {
-    let n_queries: usize = std::env::args().nth(1).map_or(Ok(50_000), |s| s.parse())?;
+fn main() {
+    /// Voxel-index query speed against two peers.
+    #[derive(clap::Parser)]
+    struct Args {
+        /// Queries per measurement.
+        #[arg(default_value_t = 50_000)]
+        queries: usize,
+    }
+    let n_queries = <Args as clap::Parser>::parse().queries;
     let mut rng = ChaCha8Rng::seed_from_u64(1);
     let target: Vec<V3> = (0..8000).map(|_| surface_point(&mut rng)).collect();
     let queries: Vec<V3> = (0..n_queries)
@@ -253,5 +260,4 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     // The fused cloud is dense: 2 cm centroids.
     let dense: Vec<V3> = (0..60_000).map(|_| surface_point(&mut rng)).collect();
     within_case("filter_within_r0.05_voxel0.05", &dense, 0.05, 0.05);
-    Ok(())
 }

@@ -9,20 +9,34 @@
 mod synth;
 
 use std::io::BufWriter;
+use std::path::PathBuf;
+
+use clap::Parser;
 
 use onboard::cloud::{Cloud, PlyEncoding, write_ply};
 
+/// Write a synthetic vehicle's cloud as PLY and print its true angles.
+#[derive(Parser)]
+struct Args {
+    /// Vehicle: sedan, suv, off-roader, pickup+hitch, van or rounded.
+    vehicle: String,
+    /// Output PLY file.
+    out: PathBuf,
+    /// Isotropic range noise (sigma), metres.
+    #[arg(default_value_t = 0.0)]
+    noise_m: f64,
+    /// Point spacing, metres.
+    #[arg(default_value_t = 0.005)]
+    spacing_m: f64,
+}
+
 fn main() -> Result<(), Box<dyn std::error::Error>> {
-    let args: Vec<String> = std::env::args().collect();
-    if args.len() < 3 {
-        return Err("usage: synth_cloud VEHICLE OUT.ply [NOISE_M] [SPACING_M]".into());
-    }
+    let args = Args::parse();
     let v = synth::all()
         .into_iter()
-        .find(|v| v.name == args[1])
-        .ok_or_else(|| format!("unknown vehicle `{}`", args[1]))?;
-    let noise_m: f64 = args.get(3).map_or(Ok(0.0), |s| s.parse())?;
-    let spacing_m: f64 = args.get(4).map_or(Ok(0.005), |s| s.parse())?;
+        .find(|v| v.name == args.vehicle)
+        .ok_or_else(|| format!("unknown vehicle `{}`", args.vehicle))?;
+    let (noise_m, spacing_m) = (args.noise_m, args.spacing_m);
     let pose = synth::Pose {
         yaw_rad: 8f64.to_radians(),
         tilt_rad: 4f64.to_radians(),
@@ -39,7 +53,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             .map(|p| pose.apply(p))
             .collect(),
     };
-    let file = std::fs::File::create(&args[2])?;
+    let file = std::fs::File::create(&args.out)?;
     write_ply(
         BufWriter::new(file),
         &cloud,
@@ -50,7 +64,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         "{}: {} points -> {}; true approach {:.3} deg, departure {:.3} deg, breakover {:.3} deg",
         v.name,
         cloud.points_m.len(),
-        args[2],
+        args.out.display(),
         t.approach_rad.to_degrees(),
         t.departure_rad.to_degrees(),
         t.breakover_rad.to_degrees()
