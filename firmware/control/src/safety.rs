@@ -143,6 +143,12 @@ impl EscMonitor {
         }
     }
 
+    /// Whether this ESC reported within the feedback timeout before `now_us`.
+    pub fn fresh(&self, config: &Config, now_us: u64) -> bool {
+        self.last_seen_us
+            .is_some_and(|t| now_us.saturating_sub(t) < config.feedback_timeout_us)
+    }
+
     /// Checks the feedback timeout at `now_us`.
     pub fn check_timeout(&mut self, config: &Config, now_us: u64) {
         if self
@@ -155,9 +161,7 @@ impl EscMonitor {
 
     /// Clears the faults whose condition is gone; returns what stays latched.
     pub fn clear(&mut self, config: &Config, now_us: u64) -> EscFaults {
-        let fresh = self
-            .last_seen_us
-            .is_some_and(|t| now_us.saturating_sub(t) < config.feedback_timeout_us);
+        let fresh = self.fresh(config, now_us);
         let mut keep = EscFaults::EMPTY;
         if self.faults.contains(EscFaults::MISSING) && !fresh {
             keep.insert(EscFaults::MISSING);
