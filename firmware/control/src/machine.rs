@@ -456,11 +456,12 @@ impl Machine {
     fn clear_faults(&mut self, now_us: u64) -> Result<(), Reject> {
         // With the contactor open the ESCs may be unpowered, so a silent ESC says nothing about
         // its health: it restarts as never seen. A drive stays refused (`ESC_FEEDBACK_MISSING`)
-        // until it reports again, and its first reports are checked like any other.
+        // until it reports again, and its first reports are checked like any other (a motor
+        // that was too hot must report below the clearing temperature).
         let contactor_open = !self.contactor_closed();
         for (esc, encoder) in self.escs.iter_mut().zip(&mut self.encoders) {
             if contactor_open && !esc.fresh(&self.config, now_us) {
-                *esc = EscMonitor::new();
+                *esc = esc.restarted();
                 *encoder = EncoderUnwrap::new();
             } else {
                 esc.clear(&self.config, now_us);
