@@ -572,7 +572,6 @@ class Usart6(Peripheral):
         while self.tx_next is not None and self.tx_next <= now:
             t = self.tx_next
             self.tx_out.append(self.tx_pending)
-            self.board.world.link_tx_time(t)
             self.tx_next = None
             dma = self.board.dma2
             if dma.enabled(6) and self.cr3 & (1 << 7) and dma.ndtr[6]:
@@ -917,9 +916,6 @@ class Nvic:
             return best
         return None
 
-    def any_pending_enabled(self):
-        return any(e < 16 or e in self.enabled for e in self.pending)
-
 
 class Scs:
     """System control space: NVIC registers, SCB, SysTick (registers only), DWT, DCB, DBGMCU."""
@@ -1057,7 +1053,6 @@ class Board:
         self.usart6 = Usart6(self)
         self.can1 = BxCan(self)
         self.gpio = {p: Gpio(self, p) for p in "ABCDEFGHI"}
-        generic = lambda name: type(name, (Peripheral,), {"name": name})(self)  # noqa: E731
         self.periph = {
             0x4000_0000: self.tim2,
             0x4000_3000: self.iwdg,
@@ -1070,7 +1065,6 @@ class Board:
         }
         for i, p in enumerate("ABCDEFGHI"):
             self.periph[0x4002_0000 + 0x400 * i] = self.gpio[p]
-        self.generic = generic
         self.unknown = {}
         self.timed = [self.tim2, self.iwdg, self.adc3, self.usart6, self.can1]
         # Hooks: WFE/WFI/SEV (found by scanning the code) and the exception-return page.
@@ -1112,7 +1106,8 @@ class Board:
         if p is None:
             p = self.unknown.get(base)
             if p is None:
-                p = self.generic("@%08x" % base)
+                p = Peripheral(self)  # unmodelled: plain storage
+                p.name = "@%08x" % base
                 self.unknown[base] = p
         return p, addr - base
 
@@ -1136,7 +1131,7 @@ class Board:
         if size < 4:
             shift = 8 * (off & 3)
             mask = ((1 << (8 * size)) - 1) << shift
-            old = p.regs.get(aligned) if not hasattr(p, "read_raw") else p.read_raw(aligned)
+            old = p.regs.get(aligned)  # byte/halfword writes only hit plain registers here
             value = (old & ~mask) | ((value << shift) & mask)
         try:
             p.write(aligned, value)
@@ -1264,9 +1259,8 @@ class Board:
         if exc is not None:
             self.enter_exception(exc)
         if self.sleeping:
-            if self.nvic.any_pending_enabled() and self.nvic.deliverable() is None \
-                    and not self.uc.reg_read(A.UC_ARM_REG_PRIMASK) & 1:
-                pass  # pending below the current priority: stays asleep
+            # Nothing deliverable (a pending interrupt below the current priority does not
+            # wake the core): time jumps to the next event.
             nxt = self.next_event()
             target = limit if nxt is None else min(max(nxt, self.cycles + 1), limit)
             self.cycles = target

@@ -151,9 +151,6 @@ class World:
             if not self.contactor_log or self.contactor_log[-1][1] != closed:
                 self.contactor_log.append((t, closed))
 
-    def link_tx_time(self, t):
-        pass
-
     def on_reset(self, t, reason):
         self.resets.append((t, reason))
         if self.contactor_log and self.contactor_log[-1][1]:
