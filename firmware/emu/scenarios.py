@@ -125,6 +125,20 @@ def scenario_boot(r):
     r.figures["control_step_max_us (Status)"] = step_max
     check(0 < step_max < 1000, "control_step_max_us %d is not within (0, 1000)" % step_max)
     check(r.defmt.lines, "no defmt log decoded")
+    # The wiring as the binary sets it up.
+    can = r.board.can1
+    check(can.mcr & (1 << 4), "NART not set (automatic retransmission is on)")
+    btr = can.regs.get(0x1C)
+    timing = (btr & 0x3FF) + 1, ((btr >> 16) & 0xF) + 1, ((btr >> 20) & 0x7) + 1, ((btr >> 24) & 3) + 1
+    r.figures["CAN prescaler, BS1, BS2, SJW"] = list(timing)
+    check(timing == (3, 10, 3, 1), "CAN bit timing %s, expected prescaler 3, BS1 10, BS2 3, SJW 1" % (timing,))
+    nv = r.board.nvic
+    uart4, tim2 = mcu.IRQ["UART4"], mcu.IRQ["TIM2"]
+    steps = nv.taken.get(uart4, 0)
+    r.figures["control executor interrupts (UART4) in %.0f ms" % ms_of(r.now)] = steps
+    check(steps >= 0.9 * ms_of(r.now - 60 * MS), "the control step does not run on the UART4 executor")
+    check(nv.priority(uart4) > nv.priority(tim2) and nv.priority(uart4) > 0,
+          "UART4 executor priority %d (TIM2 %d)" % (nv.priority(uart4), nv.priority(tim2)))
 
 
 def scenario_drive(r, burst=40):
