@@ -1,9 +1,11 @@
 """A small defmt log decoder for the emulated board: rzCOBS frames from the RTT buffer, the
-format string and level from the ELF's `.defmt` symbols, the uptime timestamp. Arguments are
-shown raw (hex) after the format string: enough to read the log, without a full defmt decoder.
+format string and level from the ELF's `.defmt` symbols, the uptime timestamp, and the argument
+types this firmware logs (`{}` of strings and integers, `{=u8}`..`{=u64}`, `{=i16}`, `{=i32}`,
+`{=bool}`, `{=str}`). Anything else ends the decoding of that line: the rest is shown as hex.
 """
 
 import json
+import re
 import struct
 
 from elftools.elf.elffile import ELFFile
@@ -88,5 +90,48 @@ class DefmtDecoder:
         if meta is None:
             return "%s<unknown index %d> %s" % (ts, index, rest.hex())
         level = meta.get("tag", "").replace("defmt_", "").upper()
-        args = (" [%s]" % rest.hex()) if rest else ""
-        return "%s%-5s %s%s" % (ts, level, meta.get("data", ""), args)
+        text, rest = self.format(meta.get("data", ""), rest, depth=0)
+        # rzCOBS pads the last group with zeros: a tail of zeros is not an argument.
+        tail = (" [%s]" % rest.hex()) if rest.strip(b"\0") else ""
+        return "%s%-5s %s%s" % (ts, level, text, tail)
+
+    PRIMS = {"u8": "<B", "u16": "<H", "u32": "<I", "u64": "<Q", "usize": "<I", "i8": "<b",
+             "i16": "<h", "i32": "<i", "i64": "<q", "isize": "<i", "f32": "<f", "bool": "<?"}
+
+    def format(self, fmt, data, depth):
+        """Renders `fmt` with arguments from `data`; returns (text, bytes not consumed)."""
+        out = []
+        pos = 0
+        for m in re.finditer(r"\{(=?[^}]*)\}", fmt):
+            out.append(fmt[pos:m.start()])
+            pos = m.end()
+            spec = m.group(1).split(":")[0]
+            value, data = self.argument(spec, data, depth)
+            if value is None:
+                out.append(m.group(0))
+                out.append(fmt[pos:])
+                return "".join(out), data
+            out.append(value)
+        out.append(fmt[pos:])
+        return "".join(out), data
+
+    def argument(self, spec, data, depth):
+        try:
+            if spec in ("", "?"):  # a Format value: its own format index, then its arguments
+                if depth > 4 or len(data) < 2:
+                    return None, data
+                nested = self.table.get(struct.unpack_from("<H", data)[0])
+                if nested is None:
+                    return None, data
+                return self.format(nested.get("data", ""), data[2:], depth + 1)
+            t = spec.lstrip("=")
+            if t == "str":
+                (n,) = struct.unpack_from("<I", data)
+                return data[4:4 + n].decode("utf-8", "replace"), data[4 + n:]
+            if t in self.PRIMS:
+                fmt = self.PRIMS[t]
+                (v,) = struct.unpack_from(fmt, data)
+                return str(v), data[struct.calcsize(fmt):]
+        except struct.error:
+            pass
+        return None, data

@@ -318,6 +318,7 @@ async fn control_task(
     let mut esc = heapless::Vec::<EscSample, 32>::new();
     let mut link_rx = [0u8; 1024];
     let mut last_led = None;
+    let mut bus_off = false;
     loop {
         ticker.next().await;
         let start = cortex_m::peripheral::DWT::cycle_count();
@@ -353,9 +354,10 @@ async fn control_task(
             info!("state: {}", out.led.name());
             last_led = Some(out.led);
         }
-        if out.recover_bus {
+        if out.recover_bus && !bus_off {
             warn!("CAN bus-off: currents zeroed, hardware recovery running");
         }
+        bus_off = out.recover_bus;
         board::pet_watchdog();
         let cycles = cortex_m::peripheral::DWT::cycle_count().wrapping_sub(start);
         controller.record_step_time(cycles / CYCLES_PER_US);
