@@ -81,7 +81,9 @@ fn panic(_info: &core::panic::PanicInfo<'_>) -> ! {
     board::safe_stop()
 }
 
-/// A HardFault (bad access, stack overflow into flip-link's guard) does the same as a panic.
+/// A HardFault (a bad access, an undefined instruction) does the same as a panic. A stack
+/// overflow's HardFault cannot: its trampoline pushes onto the overflowed stack, the core locks up
+/// and the IWDG resets it.
 #[allow(unsafe_code)]
 #[cortex_m_rt::exception]
 unsafe fn HardFault(_frame: &cortex_m_rt::ExceptionFrame) -> ! {
