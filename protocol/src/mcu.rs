@@ -191,6 +191,9 @@ pub struct Status {
     /// Battery voltage at the board's supply input, low-pass filtered, millivolts (0: not
     /// measured).
     pub battery_mv: u16,
+    /// Longest control step since boot, microseconds (the firmware's DWT cycle counter; 0: not
+    /// measured). The step runs every 1000 us: this is the real board's timing margin.
+    pub control_step_max_us: u16,
 }
 
 wire_enum! {

@@ -103,7 +103,7 @@ fn from_firmware() -> impl Strategy<Value = FromFirmware> {
             proptest::sample::select(mcu::DriveMode::ALL),
             any::<u32>(),
             proptest::array::uniform4(esc),
-            any::<[u16; 4]>()
+            any::<[u16; 5]>()
         )
             .prop_map(|(t, mode, il, esc, counts)| {
                 mcu::Status {
@@ -115,6 +115,7 @@ fn from_firmware() -> impl Strategy<Value = FromFirmware> {
                     link_errors: counts[1],
                     rejected_count: counts[2],
                     battery_mv: counts[3],
+                    control_step_max_us: counts[4],
                 }
                 .into()
             }),

@@ -57,6 +57,7 @@ fn status() -> mcu::Status {
         link_errors: 2,
         rejected_count: 1,
         battery_mv: 23_870,
+        control_step_max_us: 87,
     }
 }
 
@@ -362,6 +363,7 @@ fn worst_cases_fit_their_bounds_and_the_link_buffer() {
     s.link_errors = u16::MAX;
     s.rejected_count = u16::MAX;
     s.battery_mv = u16::MAX;
+    s.control_step_max_us = u16::MAX;
     check(&s);
     check(&mcu::Rejected {
         msg_id: u16::MAX,

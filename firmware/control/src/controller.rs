@@ -47,6 +47,10 @@ pub struct Outputs {
     pub led: LedPattern,
     /// Restart the CAN controller (it went bus-off).
     pub recover_bus: bool,
+    /// Drive the motor contactor closed (motor power on): no fault is latched
+    /// ([`crate::Machine::contactor_closed`]). The shell keeps it open from reset until the first
+    /// step and opens it on a panic.
+    pub contactor_closed: bool,
 }
 
 impl Outputs {
@@ -143,6 +147,7 @@ pub struct Controller {
     next_status_us: u64,
     last_status_us: Option<u64>,
     last_status_key: Option<StatusKey>,
+    step_max_us: u16,
 }
 
 impl Controller {
@@ -155,6 +160,7 @@ impl Controller {
             next_status_us: 0,
             last_status_us: None,
             last_status_key: None,
+            step_max_us: 0,
         })
     }
 
@@ -166,6 +172,18 @@ impl Controller {
     /// The MCU-link state (counters).
     pub fn link(&self) -> &Link {
         &self.link
+    }
+
+    /// Records how long a control step took, microseconds, as the shell measured it (the STM32
+    /// shell reads the DWT cycle counter); status reports carry the longest since boot.
+    pub fn record_step_time(&mut self, step_us: u32) {
+        let step_us = u16::try_from(step_us).unwrap_or(u16::MAX);
+        self.step_max_us = self.step_max_us.max(step_us);
+    }
+
+    /// The longest control step recorded since boot, microseconds.
+    pub fn step_max_us(&self) -> u16 {
+        self.step_max_us
     }
 
     /// One control period at `now_us` (MCU clock).
@@ -195,6 +213,7 @@ impl Controller {
         if now_us >= self.next_status_us || (changed && gap_ok) {
             status.link_errors = self.link.link_errors();
             status.rejected_count = self.link.rejected_count();
+            status.control_step_max_us = self.step_max_us;
             self.link.send(&status, &mut link_tx);
             self.last_status_key = Some(key);
             self.last_status_us = Some(now_us);
@@ -205,6 +224,7 @@ impl Controller {
             link_tx,
             led: LedPattern::from_state(status.mode, status.interlocks),
             recover_bus: step.recover_bus,
+            contactor_closed: self.machine.contactor_closed(),
         }
     }
 }

@@ -337,6 +337,7 @@ impl Machine {
             link_errors: 0,
             rejected_count: 0,
             battery_mv: self.battery.filtered_mv(),
+            control_step_max_us: 0,
         }
     }
 
@@ -445,9 +446,26 @@ impl Machine {
         Ok(())
     }
 
+    /// Whether the motor contactor (motor power) may be closed: no fault is latched. It opens in
+    /// the step a fault latches and stays open until an accepted `ClearFaults`; the shell keeps it
+    /// open from reset until the first step and on a panic.
+    pub fn contactor_closed(&self) -> bool {
+        self.mode != Mode::Faulted && self.hard_faults().is_empty()
+    }
+
     fn clear_faults(&mut self, now_us: u64) -> Result<(), Reject> {
-        for esc in &mut self.escs {
-            esc.clear(&self.config, now_us);
+        // With the contactor open the ESCs may be unpowered, so a silent ESC says nothing about
+        // its health: it restarts as never seen. A drive stays refused (`ESC_FEEDBACK_MISSING`)
+        // until it reports again, and its first reports are checked like any other (a motor
+        // that was too hot must report below the clearing temperature).
+        let contactor_open = !self.contactor_closed();
+        for (esc, encoder) in self.escs.iter_mut().zip(&mut self.encoders) {
+            if contactor_open && !esc.fresh(&self.config, now_us) {
+                *esc = esc.restarted();
+                *encoder = EncoderUnwrap::new();
+            } else {
+                esc.clear(&self.config, now_us);
+            }
         }
         if self.bus != BusState::BusOff {
             self.latched.remove(Interlocks::CAN_BUS_OFF);

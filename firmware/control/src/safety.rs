@@ -76,6 +76,9 @@ pub struct EscMonitor {
     faults: EscFaults,
     over_current_since_us: Option<u64>,
     stall_since_us: Option<u64>,
+    /// Restarted with an over-temperature latched: its first report must be below the clearing
+    /// temperature (limit minus the hysteresis), or the fault latches again.
+    recheck_cool: bool,
 }
 
 impl EscMonitor {
@@ -92,6 +95,18 @@ impl EscMonitor {
             faults: EscFaults::EMPTY,
             over_current_since_us: None,
             stall_since_us: None,
+            recheck_cool: false,
+        }
+    }
+
+    /// A monitor that has seen nothing, for an ESC that may have been unpowered (see
+    /// `Machine::clear_faults`): an over-temperature latched before keeps its hysteresis, so the
+    /// first report must be cool enough to clear it.
+    #[must_use]
+    pub fn restarted(&self) -> Self {
+        Self {
+            recheck_cool: self.recheck_cool || self.faults.contains(EscFaults::OVER_TEMPERATURE),
+            ..Self::new()
         }
     }
 
@@ -121,7 +136,15 @@ impl EscMonitor {
     ) {
         self.last_seen_us = Some(now_us);
         self.last = *fb;
-        if fb.temperature_c >= config.over_temperature_c {
+        let limit = if self.recheck_cool {
+            config
+                .over_temperature_c
+                .saturating_sub(TEMPERATURE_HYSTERESIS_C)
+        } else {
+            config.over_temperature_c
+        };
+        self.recheck_cool = false;
+        if fb.temperature_c >= limit {
             self.faults.insert(EscFaults::OVER_TEMPERATURE);
         }
         let current_a = libm::fabsf(protocol::esc::raw_to_amps(fb.current_raw));
@@ -143,6 +166,12 @@ impl EscMonitor {
         }
     }
 
+    /// Whether this ESC reported within the feedback timeout before `now_us`.
+    pub fn fresh(&self, config: &Config, now_us: u64) -> bool {
+        self.last_seen_us
+            .is_some_and(|t| now_us.saturating_sub(t) < config.feedback_timeout_us)
+    }
+
     /// Checks the feedback timeout at `now_us`.
     pub fn check_timeout(&mut self, config: &Config, now_us: u64) {
         if self
@@ -155,9 +184,7 @@ impl EscMonitor {
 
     /// Clears the faults whose condition is gone; returns what stays latched.
     pub fn clear(&mut self, config: &Config, now_us: u64) -> EscFaults {
-        let fresh = self
-            .last_seen_us
-            .is_some_and(|t| now_us.saturating_sub(t) < config.feedback_timeout_us);
+        let fresh = self.fresh(config, now_us);
         let mut keep = EscFaults::EMPTY;
         if self.faults.contains(EscFaults::MISSING) && !fresh {
             keep.insert(EscFaults::MISSING);
@@ -221,6 +248,34 @@ mod tests {
         );
         assert!(HARD_INTERLOCKS.contains(i));
         assert!(!HARD_INTERLOCKS.contains(Interlocks::HEARTBEAT_LOST));
+    }
+
+    #[test]
+    fn a_restarted_hot_esc_must_report_cool_before_it_counts_as_healthy() {
+        let c = Config::default();
+        let hot = c.over_temperature_c;
+        let mut m = EscMonitor::new();
+        m.on_feedback(&c, &fb(0, 0, hot), 0.0, 0);
+        assert_eq!(m.faults(), EscFaults::OVER_TEMPERATURE);
+        // Restarted (its supply was cut): seen by nobody, but the hysteresis is kept.
+        let mut r = m.restarted();
+        assert!(!r.seen() && r.faults().is_empty());
+        r.on_feedback(&c, &fb(0, 0, hot - 5), 0.0, 1_000);
+        assert_eq!(
+            r.faults(),
+            EscFaults::OVER_TEMPERATURE,
+            "5 C below is not cool"
+        );
+        let mut r = m.restarted();
+        r.on_feedback(&c, &fb(0, 0, hot - 11), 0.0, 1_000);
+        assert!(r.faults().is_empty());
+        // Only the first report is held to the clearing temperature.
+        r.on_feedback(&c, &fb(0, 0, hot - 5), 0.0, 2_000);
+        assert!(r.faults().is_empty());
+        // A cool ESC restarts without the recheck.
+        let mut cool = EscMonitor::new().restarted();
+        cool.on_feedback(&c, &fb(0, 0, hot - 5), 0.0, 0);
+        assert!(cool.faults().is_empty());
     }
 
     #[test]

@@ -354,3 +354,27 @@ fn led_patterns_blink_as_documented() {
     assert_eq!(LedPattern::Idle.rgb(500_000), [false, false, false]);
     assert_eq!(LedPattern::Driving.rgb(123_456), [false, true, false]);
 }
+
+#[test]
+fn status_reports_the_longest_step_the_shell_recorded() {
+    let mut b = Bench::new();
+    for _ in 0..200 {
+        b.tick();
+    }
+    assert_eq!(
+        last_status(&b).control_step_max_us,
+        0,
+        "nothing recorded yet"
+    );
+    b.ctl.record_step_time(87);
+    b.ctl.record_step_time(41);
+    for _ in 0..200 {
+        b.tick();
+    }
+    assert_eq!(last_status(&b).control_step_max_us, 87);
+    b.ctl.record_step_time(1_000_000);
+    for _ in 0..200 {
+        b.tick();
+    }
+    assert_eq!(last_status(&b).control_step_max_us, u16::MAX, "saturates");
+}

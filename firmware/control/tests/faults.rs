@@ -69,18 +69,76 @@ fn esc_feedback_missing_zeroes_on_the_tenth_step() {
     assert!(status.interlocks.contains(Interlocks::ESC_FEEDBACK_MISSING));
     assert_eq!(status.mode, DriveMode::Faulted);
     assert_eq!(sim.machine.mode(), Mode::Faulted);
+    assert!(
+        !sim.machine.contactor_closed(),
+        "the fault opens the contactor"
+    );
     assert_zero_for(&mut sim, 500);
-    // Clearing while ESC 3 is still silent fails and names what persists.
-    assert_eq!(
-        sim.command(Command::ClearFaults),
-        Err(Reject::FaultsPersist(Interlocks::ESC_FEEDBACK_MISSING))
+    // With the contactor open a silent ESC may just be unpowered: clearing restarts it as never
+    // seen, closes the contactor, and drives stay refused until ESC 3 reports again.
+    assert_eq!(sim.command(Command::ClearFaults), Ok(()));
+    assert_eq!(sim.machine.mode(), Mode::Idle);
+    assert!(sim.machine.contactor_closed());
+    assert_zero_for(&mut sim, 20);
+    let drive = Command::Drive(DriveCommand {
+        twist: Twist::new(0.3, 0.0, 0.0),
+        accel_mps2: 0.5,
+        jerk_mps3: 0.0,
+    });
+    match sim.command(drive) {
+        Err(Reject::Interlocked(i)) => assert!(i.contains(Interlocks::ESC_FEEDBACK_MISSING)),
+        other => panic!("drive with ESC 3 silent: {other:?}"),
+    }
+    assert!(
+        sim.machine
+            .status(sim.now_us)
+            .interlocks
+            .contains(Interlocks::ESC_FEEDBACK_MISSING)
     );
     sim.silent[2] = false;
     sim.tick();
-    assert_eq!(sim.command(Command::ClearFaults), Ok(()));
-    assert_eq!(sim.machine.mode(), Mode::Idle);
+    assert!(sim.machine.status(sim.now_us).esc[2].faults.is_empty());
     // Idle: still zero until a new drive command.
     assert_zero_for(&mut sim, 20);
+}
+
+#[test]
+fn contactor_is_closed_without_faults_and_opens_in_the_step_a_fault_latches() {
+    let mut sim = cruising();
+    assert!(sim.machine.contactor_closed());
+    sim.patch[0] = Patch {
+        current_raw: Some(amps_to_raw(18.0)),
+        ..Patch::default()
+    };
+    let mut steps = 0;
+    while sim.machine.contactor_closed() {
+        let out = sim.tick();
+        steps += 1;
+        assert!(steps <= 10, "contactor still closed after {steps} steps");
+        if !sim.machine.contactor_closed() {
+            assert_eq!(encode_command(out.currents_raw), ZERO_FRAME);
+        }
+    }
+    assert_eq!(sim.machine.mode(), Mode::Faulted);
+    // It stays open while nothing clears the fault.
+    for _ in 0..100 {
+        sim.tick();
+        assert!(!sim.machine.contactor_closed());
+    }
+    // ClearFaults clears an over-current; if the current is still stuck it latches again within
+    // the over-current time and the contactor opens again.
+    assert_eq!(sim.command(Command::ClearFaults), Ok(()));
+    assert!(sim.machine.contactor_closed());
+    let mut reopened = false;
+    for _ in 0..10 {
+        sim.tick();
+        reopened |= !sim.machine.contactor_closed();
+    }
+    assert!(reopened, "a still-stuck ESC must open the contactor again");
+    sim.patch[0] = Patch::default();
+    sim.tick();
+    assert_eq!(sim.command(Command::ClearFaults), Ok(()));
+    assert!(sim.machine.contactor_closed());
 }
 
 #[test]

@@ -225,6 +225,7 @@ fn status(mode: DriveMode, interlocks: Interlocks) -> Status {
         link_errors: 0,
         rejected_count: 0,
         battery_mv: 23_500,
+        control_step_max_us: 0,
     }
 }
 
