@@ -8,8 +8,9 @@
 # Tiers: (1) formatting and lints; (2) host tests: `cargo test --workspace` (protocol, firmware
 # control logic, onboard pipeline, simulator, end-to-end scenarios on the in-process CAN bus);
 # (3) the book in docs/ (mdbook); (4) no_std checks for the thumbv7em-none-eabihf target and the
-# STM32 release build with its size report; (5) the end-to-end demo per example vehicle (release, real time); (6) the
-# firmware-in-the-loop tests over real SocketCAN vcan0 inside a qemu guest.
+# STM32 release build with its size report and the release ELF on an emulated STM32F407; (5) the
+# end-to-end demo per example vehicle (release, real time); (6) the firmware-in-the-loop tests
+# over real SocketCAN vcan0 inside a qemu guest.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -92,6 +93,9 @@ if [[ -f firmware/ci.sh ]]; then
     step "STM32 firmware release build and size report"
     bash firmware/ci.sh
 fi
+
+step "the release firmware on an emulated STM32F407 (Unicorn; firmware/README.md)"
+bash firmware/emu/run.sh
 
 if [[ -f hil-sim/vcan-vm/ci.sh ]]; then
     step "firmware in the loop over SocketCAN vcan0 (qemu guest)"

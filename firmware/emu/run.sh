@@ -18,6 +18,15 @@ TARGET=thumbv7em-none-eabihf
 venv="${EMU_VENV:-$root/target/emu-venv}"
 if ! "$venv/bin/python" -c 'import unicorn, elftools' 2>/dev/null; then
     echo "== python venv $venv (unicorn, pyelftools)"
+    if ! python3 -c 'import venv, ensurepip' 2>/dev/null; then
+        # Debian ships venv's pip bootstrap separately.
+        if [[ $(id -u) == 0 ]] && command -v apt-get >/dev/null; then
+            (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq python3-venv) >/dev/null
+        else
+            echo "error: python3 venv is missing: apt-get install python3-venv" >&2
+            exit 1
+        fi
+    fi
     python3 -m venv "$venv"
     "$venv/bin/pip" install --quiet 'unicorn==2.1.4' 'pyelftools==0.33'
 fi

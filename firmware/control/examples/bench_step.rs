@@ -1,4 +1,4 @@
-//! Host proxy for the firmware's worst-case `Controller::step` time (DESIGN.md section 5 figure).
+//! Host proxy for the firmware's worst-case `Controller::step` time (docs/architecture.md section 5 figure).
 //!
 //! Runs the controller closed around the plant model through a scripted run (handshake, ramp,
 //! cruise with 4 feedback frames and MCU-link traffic every step, a fault, recovery) and prints the

@@ -1,4 +1,4 @@
-//! passangle firmware logic (DESIGN.md section 5): everything the STM32 does except touching
+//! passangle firmware logic (docs/architecture.md section 5): everything the STM32 does except touching
 //! hardware. `no_std`, no alloc, no clocks: time and received data come in, wheel currents and
 //! MCU-link bytes go out, so the same code runs on the board, in `hil-sim` and in host tests.
 //!

@@ -1,4 +1,4 @@
-//! passangle robot firmware: embassy wiring around `control::Controller` (DESIGN.md section 5).
+//! passangle robot firmware: embassy wiring around `control::Controller` (docs/architecture.md section 5).
 //!
 //! Tasks, where they run, and what connects them (all logic lives in the host-tested `control`
 //! crate):
