@@ -165,7 +165,8 @@ pub struct ReadCounts {
     pub odometry: usize,
     /// `odometry.csv` ended in a cut-short line (a crash while writing it), skipped.
     pub odometry_cut_short: bool,
-    /// `lidar.pcap` ended in a truncated or corrupt record; the packets before it were used.
+    /// `lidar.pcap` ended inside its last record (a crash while recording); the packets before
+    /// it were used. A corrupt record is an error of [`build_run`] instead.
     pub lidar_cut_short: bool,
     /// Depth frames read.
     pub depth_frames: usize,
@@ -476,8 +477,8 @@ pub fn build_run(dir: &Path, config: &ProcessConfig) -> Result<(BuiltCloud, Read
     let mut source = PcapSource::open(&pcap).map_err(|e| e.to_string())?;
     let mut buf = [0u8; PACKET_BUF_LEN];
     // Ends at the end of the file, or at a cut-short last record after a crash (keeping what
-    // came before it).
-    while let Ok(Some(meta)) = source.next_packet(&mut buf) {
+    // came before it); a corrupt record anywhere fails the run with its byte offset.
+    while let Some(meta) = source.next_packet(&mut buf).map_err(|e| e.to_string())? {
         builder.push_lidar_packet(
             meta.recv_host_ns,
             &buf[..meta.len],
