@@ -127,6 +127,16 @@ fn run_inner(args: &LidarArgs, out: &mut impl Write) -> anyhow::Result<()> {
     } else {
         out.write_all(summary_text(args, &summary).as_bytes())?;
     }
+    // A summary of nothing is a failure: the capture holds no VLP-16 frame (wrong ports, not a
+    // lidar capture, or every packet malformed).
+    if summary.frames.is_empty() {
+        bail!(
+            "{}: no VLP-16 frame ({} data packets, {} records skipped)",
+            args.file.display(),
+            summary.stats.data_packets,
+            summary.skips.not_udp + summary.skips.other_port + summary.skips.oversized
+        );
+    }
     Ok(())
 }
 
