@@ -619,24 +619,26 @@ impl Recording {
     pub fn odometry(&self) -> Result<(Vec<(u64, Odometry)>, usize), RecorderError> {
         let path = self.dir.join("odometry.csv");
         let text = fs::read_to_string(&path).map_err(|e| RecorderError::io(&path, e))?;
-        let mut out = Vec::new();
-        let mut bad = 0;
-        let lines = text.lines().count();
-        for (i, line) in text.lines().enumerate().skip(1) {
-            match parse_odometry_line(line) {
-                Ok(v) => out.push(v),
-                // A crash while appending cuts the last line short: skipped and counted.
-                Err(OdometryLineError::Malformed) if i + 1 == lines => bad += 1,
-                Err(e) => {
-                    return Err(RecorderError::Parse {
-                        path,
-                        detail: format!("line {}: {e}: {line:?}", i + 1),
-                    });
-                }
-            }
-        }
-        Ok((out, bad))
+        parse_odometry_csv(&text).map_err(|detail| RecorderError::Parse { path, detail })
     }
+}
+
+/// Parses the text of an `odometry.csv` (a header line, then one report per line). Pure; never
+/// panics; allocates one entry per line present. A cut-short last line (a crash while
+/// appending) is skipped and counted in the second value; any other malformed or non-finite
+/// line is an error naming the line (1-based, the header is line 1) and the column.
+pub fn parse_odometry_csv(text: &str) -> Result<(Vec<(u64, Odometry)>, usize), String> {
+    let mut out = Vec::new();
+    let mut bad = 0;
+    let lines = text.lines().count();
+    for (i, line) in text.lines().enumerate().skip(1) {
+        match parse_odometry_line(line) {
+            Ok(v) => out.push(v),
+            Err(OdometryLineError::Malformed) if i + 1 == lines => bad += 1,
+            Err(e) => return Err(format!("line {}: {e}: {line:?}", i + 1)),
+        }
+    }
+    Ok((out, bad))
 }
 
 /// Why an `odometry.csv` line was refused.
