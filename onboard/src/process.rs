@@ -613,7 +613,7 @@ fn read_depth(dir: &Path, builder: &mut RunBuilder) -> Result<(), String> {
     let Ok(text) = fs::read_to_string(&index) else {
         return Ok(());
     };
-    for line in text.lines().skip(1) {
+    for (i, line) in text.lines().enumerate().skip(1) {
         let f: Vec<&str> = line.split(',').collect();
         if f.len() != 9 {
             break;
@@ -632,10 +632,35 @@ fn read_depth(dir: &Path, builder: &mut RunBuilder) -> Result<(), String> {
         else {
             break;
         };
-        let Ok(bytes) = fs::read(dir.join(format!("depth/{n:06}.z16"))) else {
+        // Intrinsics that parse but are NaN, infinite or not positive would project every
+        // depth pixel to garbage: refused, naming the line.
+        let positive = [fx, fy, depth_scale_m]
+            .iter()
+            .all(|v| v.is_finite() && *v > 0.0);
+        if !(positive && cx.is_finite() && cy.is_finite()) {
+            return Err(format!(
+                "{}: line {}: intrinsics fx {fx}, fy {fy}, cx {cx}, cy {cy}, depth scale \
+                 {depth_scale_m}: each must be finite, fx, fy and the scale above 0",
+                index.display(),
+                i + 1
+            ));
+        }
+        let path = dir.join(format!("depth/{n:06}.z16"));
+        let expected = 2 * usize::from(width) * usize::from(height);
+        // The size is checked before reading, so a huge file is never read into memory.
+        let Ok(meta) = fs::metadata(&path) else {
             break;
         };
-        let expected = 2 * usize::from(width) * usize::from(height);
+        if meta.len() != expected as u64 {
+            return Err(format!(
+                "{}: frame {n} has {} bytes, expected {expected}",
+                index.display(),
+                meta.len(),
+            ));
+        }
+        let Ok(bytes) = fs::read(&path) else {
+            break;
+        };
         if bytes.len() != expected {
             return Err(format!(
                 "{}: frame {n} has {} bytes, expected {expected}",
@@ -657,4 +682,37 @@ fn read_depth(dir: &Path, builder: &mut RunBuilder) -> Result<(), String> {
         builder.push_depth(wall_us, width, height, depth, &k);
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn non_finite_depth_intrinsics_are_refused_naming_the_line() {
+        let dir = std::env::temp_dir().join(format!("passangle-depth-{}", std::process::id()));
+        let _ = fs::remove_dir_all(&dir);
+        fs::create_dir_all(dir.join("depth")).unwrap();
+        fs::write(dir.join("depth/000000.z16"), [0u8; 16]).unwrap();
+        fs::write(dir.join("depth/000001.z16"), [0u8; 16]).unwrap();
+        let head = "frame,wall_us,width,height,fx,fy,cx,cy,depth_scale_m\n";
+        let good = "0,5,4,2,420,420,2,1,0.001\n";
+        fs::write(
+            dir.join("depth/index.csv"),
+            format!("{head}{good}1,6,4,2,NaN,420,2,1,0.001\n"),
+        )
+        .unwrap();
+        let mut builder = RunBuilder::new(&ProcessConfig::default()).unwrap();
+        let err = read_depth(&dir, &mut builder).unwrap_err();
+        assert!(
+            err.contains("depth/index.csv: line 3: intrinsics fx NaN"),
+            "{err}"
+        );
+        // A frame file whose size disagrees with the index is refused before it is read.
+        fs::write(dir.join("depth/index.csv"), format!("{head}{good}")).unwrap();
+        fs::write(dir.join("depth/000000.z16"), [0u8; 18]).unwrap();
+        let err = read_depth(&dir, &mut builder).unwrap_err();
+        assert!(err.contains("frame 0 has 18 bytes, expected 16"), "{err}");
+        fs::remove_dir_all(&dir).unwrap();
+    }
 }
