@@ -689,6 +689,47 @@ mod tests {
     use super::*;
 
     #[test]
+    fn a_corrupt_lidar_record_fails_the_replay_naming_its_offset() {
+        use crate::recorder::{RecordedOutcome, RunRecorder};
+        use protocol::bounded::Text;
+        use protocol::radio::{StartMeasurement, Zone};
+        let root = std::env::temp_dir().join(format!("passangle-replay-{}", std::process::id()));
+        let _ = fs::remove_dir_all(&root);
+        let params = StartMeasurement {
+            vehicle_id: Text::truncated("V"),
+            speed_mps: 0.2,
+            distance_m: 1.0,
+            zone: Zone::Tyre,
+        };
+        let mut r = RunRecorder::begin(&root, 1, &params, 0, "").unwrap();
+        let src = std::net::SocketAddrV4::new([192, 168, 1, 201].into(), 2368);
+        let dst = std::net::SocketAddrV4::new([255, 255, 255, 255].into(), 2368);
+        for i in 0..10u64 {
+            r.lidar_packet(
+                1_700_000_000_000_000_000 + i * 1_327_000,
+                src,
+                dst,
+                &[0; 1206],
+            );
+        }
+        let dir = r.dir().to_owned();
+        assert!(r.finish(RecordedOutcome::Completed).is_empty());
+        // Record 3's original length below its captured length.
+        let pcap = dir.join("lidar.pcap");
+        let mut bytes = fs::read(&pcap).unwrap();
+        let at = 24 + 3 * (16 + 1248);
+        bytes[at + 12..at + 16].copy_from_slice(&7u32.to_le_bytes());
+        fs::write(&pcap, &bytes).unwrap();
+        let err = build_run(&dir, &ProcessConfig::default()).unwrap_err();
+        assert!(
+            err.contains("lidar.pcap")
+                && err.contains(&format!("record 3 at byte {at} is corrupt")),
+            "{err}"
+        );
+        fs::remove_dir_all(&root).unwrap();
+    }
+
+    #[test]
     fn non_finite_depth_intrinsics_are_refused_naming_the_line() {
         let dir = std::env::temp_dir().join(format!("passangle-depth-{}", std::process::id()));
         let _ = fs::remove_dir_all(&dir);
