@@ -1,15 +1,22 @@
 //! Fuzz the point-cloud readers (PLY, PCD incl. LZF `binary_compressed`, XYZ/CSV): never panic,
-//! and every point returned is finite.
+//! every point returned is finite, and no header gets more points than the limits allow. Small
+//! limits keep each run fast and make libFuzzer's malloc limit catch any unbounded allocation.
+//! Seeds: `onboard/tests/hostile/` (pass it as a corpus directory).
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
-use onboard::cloud::{CloudFormat, parse_cloud};
+use onboard::cloud::{CloudFormat, ParseLimits, parse_cloud_with};
 
 fuzz_target!(|data: &[u8]| {
+    let limits = ParseLimits {
+        max_points: 100_000,
+        max_decoded_bytes: 4 << 20,
+    };
     for format in [CloudFormat::Ply, CloudFormat::Pcd, CloudFormat::Text] {
-        if let Ok((cloud, stats)) = parse_cloud(data, format) {
+        if let Ok((cloud, stats)) = parse_cloud_with(data, format, &limits) {
             assert!(cloud.points_m.iter().flatten().all(|v| v.is_finite()));
             assert_eq!(cloud.points_m.len() + stats.dropped_non_finite, stats.points_in_file);
+            assert!(stats.points_in_file <= limits.max_points);
         }
     }
 });

@@ -12,7 +12,7 @@ use onboard::angles::{
     AngleFinding, AnglesConfig, AnglesResult, Band, ExclusionBox, Zone, compute_angles,
     side_view_svg,
 };
-use onboard::cloud::{ReadStats, read_cloud};
+use onboard::cloud::{ParseLimits, ReadStats, read_cloud_with};
 use serde_json::{Value, json};
 
 /// Arguments of `passangle angles`.
@@ -42,15 +42,25 @@ pub struct AnglesArgs {
     /// Print one JSON object instead of the table.
     #[arg(long)]
     pub json: bool,
+    /// Refuse clouds declaring more points than this (bounds the reader's memory: 24 bytes a
+    /// point, plus the file).
+    #[arg(long, default_value_t = ParseLimits::DEFAULT_MAX_POINTS, value_name = "N")]
+    pub max_points: usize,
     /// Write the side-view report (SVG) to this file.
     #[arg(long)]
     pub report: Option<PathBuf>,
 }
 
-/// Run the command, writing the table or JSON to `out`.
+/// Run the command, writing the table or JSON to `out`. The table or JSON is written even when an
+/// angle is undetermined; the command then fails naming the missing angles, so scripts see a
+/// non-zero exit whenever the three angles were not all measured.
 pub fn run(args: &AnglesArgs, out: &mut impl Write) -> anyhow::Result<()> {
     let config = config_from(args)?;
-    let (cloud, stats) = read_cloud(&args.cloud)?;
+    let limits = ParseLimits {
+        max_points: args.max_points,
+        ..ParseLimits::default()
+    };
+    let (cloud, stats) = read_cloud_with(&args.cloud, &limits)?;
     let result = compute_angles(&cloud.points_m, &config)
         .with_context(|| format!("{}: computing the angles", args.cloud.display()))?;
     if let Some(path) = &args.report {
@@ -63,7 +73,26 @@ pub fn run(args: &AnglesArgs, out: &mut impl Write) -> anyhow::Result<()> {
     } else {
         write_table(out, args, &stats, &result)?;
     }
-    Ok(())
+    missing_angles(&result).map_or(Ok(()), |missing| {
+        bail!(
+            "{}: {missing} could not be determined",
+            args.cloud.display()
+        )
+    })
+}
+
+/// The names of the angles a result lacks (`None`: all three were found).
+pub fn missing_angles(r: &AnglesResult) -> Option<String> {
+    let missing: Vec<&str> = [
+        ("approach", r.approach.is_some()),
+        ("breakover", r.breakover.is_some()),
+        ("departure", r.departure.is_some()),
+    ]
+    .into_iter()
+    .filter(|(_, found)| !found)
+    .map(|(name, _)| name)
+    .collect();
+    (!missing.is_empty()).then(|| missing.join(", "))
 }
 
 fn config_from(args: &AnglesArgs) -> anyhow::Result<AnglesConfig> {

@@ -127,6 +127,16 @@ fn run_inner(args: &LidarArgs, out: &mut impl Write) -> anyhow::Result<()> {
     } else {
         out.write_all(summary_text(args, &summary).as_bytes())?;
     }
+    // A summary of nothing is a failure: the capture holds no VLP-16 frame (wrong ports, not a
+    // lidar capture, or every packet malformed).
+    if summary.frames.is_empty() {
+        bail!(
+            "{}: no VLP-16 frame ({} data packets, {} records skipped)",
+            args.file.display(),
+            summary.stats.data_packets,
+            summary.skips.not_udp + summary.skips.other_port + summary.skips.oversized
+        );
+    }
     Ok(())
 }
 
@@ -582,6 +592,31 @@ mod tests {
             .parse()
             .unwrap();
         assert!((z - 5.0 * w.sin()).abs() < 2e-4);
+    }
+
+    #[test]
+    fn no_frames_and_corrupt_captures_fail() {
+        // Only the packet to port 9999: nothing to summarise.
+        let capture = synthetic_capture(0, 0);
+        let err = run_to_string(&args(capture.0.clone()))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("no VLP-16 frame") && err.contains("1 records skipped"),
+            "{err}"
+        );
+        // A record mid-capture whose lengths are impossible: an error naming its byte offset,
+        // not a summary of the packets before it.
+        let capture = synthetic_capture(20, 0);
+        let mut bytes = std::fs::read(&capture.0).unwrap();
+        let at = 24 + 5 * (16 + 1248);
+        bytes[at + 12..at + 16].copy_from_slice(&100u32.to_le_bytes());
+        std::fs::write(&capture.0, &bytes).unwrap();
+        let err = format!("{:#}", run_to_string(&args(capture.0.clone())).unwrap_err());
+        assert!(
+            err.contains(&format!("record 5 at byte {at} is corrupt")),
+            "{err}"
+        );
     }
 
     #[test]

@@ -66,7 +66,8 @@ pub fn run(args: &ReplayArgs, out: &mut impl Write) -> anyhow::Result<()> {
     if counts.lidar_cut_short {
         writeln!(
             out,
-            "note: lidar.pcap ends in a truncated record (the packets before it were used)"
+            "note: lidar.pcap ends inside its last record (a crash while recording); the packets \
+             before it were used"
         )?;
     }
     if counts.odometry_cut_short {
@@ -139,20 +140,22 @@ fn report(
             .collect(),
         ..AnglesConfig::default()
     };
-    match compute_angles(&built.points_in_world, &config) {
-        Ok(r) => {
-            for (name, a) in [
-                ("approach", &r.approach),
-                ("breakover", &r.breakover),
-                ("departure", &r.departure),
-            ] {
-                match a {
-                    Some(a) => writeln!(out, "{name:<10} {:6.2} deg", a.angle_rad.to_degrees())?,
-                    None => writeln!(out, "{name:<10} not found")?,
-                }
-            }
+    // The cloud is written either way; the command fails when the angles were not all measured,
+    // so scripts see a non-zero exit.
+    let r = compute_angles(&built.points_in_world, &config)
+        .with_context(|| format!("{}: computing the angles", path.display()))?;
+    for (name, a) in [
+        ("approach", &r.approach),
+        ("breakover", &r.breakover),
+        ("departure", &r.departure),
+    ] {
+        match a {
+            Some(a) => writeln!(out, "{name:<10} {:6.2} deg", a.angle_rad.to_degrees())?,
+            None => writeln!(out, "{name:<10} not found")?,
         }
-        Err(e) => writeln!(out, "angles: {e}")?,
+    }
+    if let Some(missing) = crate::angles::missing_angles(&r) {
+        bail!("{}: {missing} could not be determined", path.display());
     }
     Ok(())
 }

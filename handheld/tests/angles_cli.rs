@@ -142,3 +142,39 @@ fn bad_input_is_a_clear_error() {
     assert!(String::from_utf8_lossy(&out.stderr).contains("six numbers"));
     std::fs::remove_dir_all(&dir).ok();
 }
+
+#[test]
+fn an_undetermined_angle_prints_the_table_and_fails() {
+    let dir = std::env::temp_dir().join(format!("passangle-angles-partial-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let ply = dir.join("box.ply");
+    let cloud = Cloud {
+        points_m: box_vehicle(),
+    };
+    write_ply(
+        BufWriter::new(std::fs::File::create(&ply).unwrap()),
+        &cloud,
+        PlyEncoding::BinaryLittleEndian,
+    )
+    .unwrap();
+    // Excluding the body ahead of the front tyres (bumper face and floor) leaves the approach
+    // zone empty; departure and breakover are still measured.
+    let out = Command::new(env!("CARGO_BIN_EXE_passangle"))
+        .args(["angles", "--exclude", "1.6,2.1,-0.7,0.7,0.1,0.6"])
+        .args(["--exclude", "0.9,1.7,-0.62,0.62,0.1,0.6"])
+        .arg(&ply)
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "{stdout}");
+    assert!(
+        stdout.contains("approach        n/a") && stdout.contains("departure     16.97"),
+        "{stdout}"
+    );
+    assert!(
+        stderr.contains("box.ply: approach could not be determined"),
+        "{stderr}"
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}

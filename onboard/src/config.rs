@@ -46,7 +46,7 @@ pub enum ConfigError {
         /// The file.
         path: PathBuf,
         /// Dotted key.
-        key: &'static str,
+        key: String,
         /// What is wrong.
         problem: String,
     },
@@ -343,23 +343,74 @@ impl Default for PreviewConfig {
 const STOP_MARGIN_S: f64 = 1.0;
 
 impl OnboardConfig {
-    /// Parses and checks a configuration text; `path` is only used in messages.
+    /// Parses and checks a configuration text; `path` is only used in messages. The first
+    /// problem is the error; [`OnboardConfig::parse_reporting_all`] gives every one.
     pub fn parse(text: &str, path: &Path) -> Result<Self, ConfigError> {
-        let config: Self = toml::from_str(text).map_err(|e| ConfigError::Parse {
-            path: path.to_owned(),
-            message: e.to_string(),
-        })?;
-        config.check(path)?;
-        Ok(config)
+        Self::parse_reporting_all(text, path).map_err(|mut all| all.swap_remove(0))
+    }
+
+    /// Parses and checks a configuration text, returning every problem found (`check-config`):
+    /// every number that is NaN or infinite anywhere in the file (TOML spells them `nan`, `inf`),
+    /// then the typed parse, then every range check. The error list is never empty.
+    pub fn parse_reporting_all(text: &str, path: &Path) -> Result<Self, Vec<ConfigError>> {
+        match Self::parse_with_problems(text, path) {
+            (Some(config), problems) if problems.is_empty() => Ok(config),
+            (_, problems) => Err(problems),
+        }
+    }
+
+    /// The typed configuration if the text parses (range problems or not), and every problem.
+    fn parse_with_problems(text: &str, path: &Path) -> (Option<Self>, Vec<ConfigError>) {
+        let mut problems = non_finite_values(text, path);
+        match toml::from_str::<Self>(text) {
+            Ok(config) => {
+                problems.extend(config.problems(path));
+                (Some(config), problems)
+            }
+            Err(e) => {
+                problems.push(ConfigError::Parse {
+                    path: path.to_owned(),
+                    message: e.to_string(),
+                });
+                (None, problems)
+            }
+        }
+    }
+
+    /// What `check-config` reports: the configuration if it parses, and every problem of the
+    /// file, of its values and of the key and counter files it names (empty: all good).
+    pub fn check_file(path: &Path) -> (Option<Self>, Vec<ConfigError>) {
+        let text = match fs::read_to_string(path) {
+            Ok(text) => text,
+            Err(source) => {
+                let e = ConfigError::Io {
+                    path: path.to_owned(),
+                    source,
+                };
+                return (None, vec![e]);
+            }
+        };
+        let (config, mut problems) = Self::parse_with_problems(&text, path);
+        if let Some(c) = &config {
+            problems.extend(c.file_problems());
+        }
+        (config, problems)
     }
 
     /// Reads, parses and checks a configuration file.
     pub fn load(path: &Path) -> Result<Self, ConfigError> {
-        let text = fs::read_to_string(path).map_err(|source| ConfigError::Io {
-            path: path.to_owned(),
-            source,
+        Self::load_reporting_all(path).map_err(|mut all| all.swap_remove(0))
+    }
+
+    /// Reads, parses and checks a configuration file, returning every problem found.
+    pub fn load_reporting_all(path: &Path) -> Result<Self, Vec<ConfigError>> {
+        let text = fs::read_to_string(path).map_err(|source| {
+            vec![ConfigError::Io {
+                path: path.to_owned(),
+                source,
+            }]
         })?;
-        Self::parse(&text, path)
+        Self::parse_reporting_all(&text, path)
     }
 
     /// How long the firmware takes from a stop at `run.max-speed-mps` to reporting rest: the
@@ -374,23 +425,34 @@ impl OnboardConfig {
         v / a + jerk_s + hold_s
     }
 
-    /// Range checks the types cannot express.
+    /// Range checks the types cannot express; the first problem is the error.
     pub fn check(&self, path: &Path) -> Result<(), ConfigError> {
-        let bad = |key: &'static str, problem: String| {
-            Err(ConfigError::Invalid {
+        self.problems(path).into_iter().next().map_or(Ok(()), Err)
+    }
+
+    /// Every value outside its range, each naming its key. Every comparison is written so that
+    /// NaN fails it.
+    #[allow(clippy::too_many_lines)]
+    pub fn problems(&self, path: &Path) -> Vec<ConfigError> {
+        let mut problems = Vec::new();
+        let mut bad = |key: &str, problem: String| {
+            problems.push(ConfigError::Invalid {
                 path: path.to_owned(),
-                key,
+                key: key.to_owned(),
                 problem,
-            })
+            });
         };
+        if self.recording.flush_period_ms == 0 {
+            bad("recording.flush-period-ms", "must be above 0".into());
+        }
         if self.radio.baud == 0 {
-            return bad("radio.baud", "must be above 0".into());
+            bad("radio.baud", "must be above 0".into());
         }
         if self.mcu.baud == 0 {
-            return bad("mcu.baud", "must be above 0".into());
+            bad("mcu.baud", "must be above 0".into());
         }
         if !(5..=50).contains(&self.mcu.heartbeat_period_ms) {
-            return bad(
+            bad(
                 "mcu.heartbeat-period-ms",
                 format!(
                     "{} is outside 5..=50 (the firmware stops after {} ms without one)",
@@ -399,67 +461,244 @@ impl OnboardConfig {
             );
         }
         if u64::from(self.mcu.firmware.heartbeat_timeout_ms) < 2 * self.mcu.heartbeat_period_ms {
-            return bad(
+            bad(
                 "mcu.firmware.heartbeat-timeout-ms",
                 "must be at least twice mcu.heartbeat-period-ms".into(),
             );
         }
-        if !(self.mcu.accel_mps2 > 0.0 && self.mcu.accel_mps2 <= self.mcu.firmware.max_accel_mps2) {
-            return bad(
+        // The firmware's own validation of what the service will send it.
+        if let Err(e) = control::Config::default()
+            .with_mcu(&self.mcu.firmware.to_wire())
+            .validate()
+        {
+            bad("mcu.firmware", format!("the firmware would refuse it: {e}"));
+        }
+        let accel_ok = self.mcu.accel_mps2 > 0.0
+            && self.mcu.accel_mps2 <= self.mcu.firmware.max_accel_mps2
+            && self.mcu.accel_mps2.is_finite();
+        if !accel_ok {
+            bad(
                 "mcu.accel-mps2",
                 format!(
-                    "must be in (0, mcu.firmware.max-accel-mps2 = {}]",
-                    self.mcu.firmware.max_accel_mps2
+                    "{} is not in (0, mcu.firmware.max-accel-mps2 = {}]",
+                    self.mcu.accel_mps2, self.mcu.firmware.max_accel_mps2
                 ),
             );
         }
         if !(self.mcu.jerk_mps3 >= 0.0 && self.mcu.jerk_mps3.is_finite()) {
-            return bad("mcu.jerk-mps3", "must be finite and >= 0".into());
+            bad(
+                "mcu.jerk-mps3",
+                format!("{} is not finite and >= 0", self.mcu.jerk_mps3),
+            );
         }
-        if self.run.max_speed_mps > self.mcu.firmware.max_speed_mps || self.run.max_speed_mps <= 0.0
-        {
-            return bad(
+        let run = &self.run;
+        let speed_ok = run.max_speed_mps > 0.0
+            && run.max_speed_mps <= self.mcu.firmware.max_speed_mps
+            && run.max_speed_mps.is_finite();
+        if !speed_ok {
+            bad(
                 "run.max-speed-mps",
                 format!(
-                    "must be in (0, mcu.firmware.max-speed-mps = {}]",
-                    self.mcu.firmware.max_speed_mps
+                    "{} is not in (0, mcu.firmware.max-speed-mps = {}]",
+                    run.max_speed_mps, self.mcu.firmware.max_speed_mps
                 ),
             );
         }
-        if self.run.progress_period_us == 0 {
-            return bad("run.progress-period-us", "must be above 0".into());
+        if !(run.max_distance_m > 0.0 && run.max_distance_m <= MAX_DISTANCE_M) {
+            bad(
+                "run.max-distance-m",
+                format!("{} is not in (0, {MAX_DISTANCE_M}] m", run.max_distance_m),
+            );
         }
-        let stop_s = self.stop_time_s();
-        #[allow(clippy::cast_precision_loss)]
-        let timeout_s = self.run.stop_timeout_us as f64 * 1e-6;
-        if timeout_s < stop_s + STOP_MARGIN_S {
-            return bad(
-                "run.stop-timeout-us",
+        for (key, us) in [
+            ("run.checks-timeout-us", run.checks_timeout_us),
+            ("run.stop-timeout-us", run.stop_timeout_us),
+            ("run.progress-period-us", run.progress_period_us),
+        ] {
+            if us == 0 {
+                bad(key, "must be above 0".into());
+            }
+        }
+        if accel_ok && speed_ok && self.mcu.jerk_mps3.is_finite() {
+            let stop_s = self.stop_time_s();
+            #[allow(clippy::cast_precision_loss)]
+            let timeout_s = run.stop_timeout_us as f64 * 1e-6;
+            if timeout_s < stop_s + STOP_MARGIN_S {
+                bad(
+                    "run.stop-timeout-us",
+                    format!(
+                        "{timeout_s} s is too short for a stop from run.max-speed-mps = {} at \
+                         mcu.accel-mps2 = {} (about {stop_s:.1} s with the jerk limit and the \
+                         firmware's hold, plus {STOP_MARGIN_S} s): raise it or the acceleration",
+                        run.max_speed_mps, self.mcu.accel_mps2
+                    ),
+                );
+            }
+        }
+        if self.lidar.alive_timeout_ms == 0 {
+            bad("lidar.alive-timeout-ms", "must be above 0".into());
+        }
+        let cam = &self.camera;
+        if cam.width == 0 || cam.height == 0 {
+            bad(
+                "camera.width/height",
                 format!(
-                    "{timeout_s} s is too short for a stop from run.max-speed-mps = {} at \
-                     mcu.accel-mps2 = {} (about {stop_s:.1} s with the jerk limit and the \
-                     firmware's hold, plus {STOP_MARGIN_S} s): raise it or the acceleration",
-                    self.run.max_speed_mps, self.mcu.accel_mps2
+                    "{} x {} pixels: both must be above 0",
+                    cam.width, cam.height
                 ),
             );
         }
-        let k = &self.camera.intrinsics;
-        if !(k.fx > 0.0 && k.fy > 0.0 && k.depth_scale_m > 0.0) {
-            return bad(
-                "camera.intrinsics",
-                "fx, fy and depth-scale-m must be above 0".into(),
+        if cam.fps == 0 || cam.fps > 300 {
+            bad("camera.fps", format!("{} is not in 1..=300", cam.fps));
+        }
+        if cam.record_every == 0 {
+            bad("camera.record-every", "must be at least 1".into());
+        }
+        if cam.alive_timeout_ms == 0 {
+            bad("camera.alive-timeout-ms", "must be above 0".into());
+        }
+        let k = &cam.intrinsics;
+        for (key, v) in [
+            ("camera.intrinsics.fx", k.fx),
+            ("camera.intrinsics.fy", k.fy),
+            ("camera.intrinsics.depth-scale-m", k.depth_scale_m),
+        ] {
+            if !(v > 0.0 && v.is_finite()) {
+                bad(key, format!("{v} is not finite and above 0"));
+            }
+        }
+        for (key, v, size) in [
+            ("camera.intrinsics.cx", k.cx, cam.width),
+            ("camera.intrinsics.cy", k.cy, cam.height),
+        ] {
+            if !(v >= 0.0 && v <= f32::from(size)) {
+                bad(
+                    key,
+                    format!("{v} is not inside the image (0..={size} pixels)"),
+                );
+            }
+        }
+        if self.preview.max_points == 0 {
+            bad("preview.max-points", "must be above 0".into());
+        }
+        if !(self.preview.voxel_m > 0.0 && self.preview.voxel_m.is_finite()) {
+            bad(
+                "preview.voxel-m",
+                format!("{} is not finite and above 0", self.preview.voxel_m),
             );
         }
-        if self.camera.record_every == 0 {
-            return bad("camera.record-every", "must be at least 1".into());
+        if self.processing.min_cloud_points == 0 {
+            bad("processing.min-cloud-points", "must be above 0".into());
         }
-        if self.preview.max_points == 0
-            || self.preview.voxel_m.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater)
-        {
-            return bad("preview", "max-points and voxel-m must be above 0".into());
-        }
-        Ok(())
+        problems
     }
+
+    /// Problems with the pairing key and start-counter files (`check-config`; the service reads
+    /// them at start). Each must exist, be a regular file owned by root or by the user running
+    /// the check (run it as the service user), grant nothing to others and at most read to the
+    /// group (modes 0600, 0640, 0400, 0440), and parse.
+    pub fn file_problems(&self) -> Vec<ConfigError> {
+        let mut problems = Vec::new();
+        if let Err(e) = check_secret_file(&self.radio.key_file, "radio.key-file")
+            .and_then(|()| read_key(&self.radio.key_file).map(drop))
+        {
+            problems.push(e);
+        }
+        if let Err(e) = check_secret_file(&self.radio.counter_file, "radio.counter-file")
+            .and_then(|()| read_counter(&self.radio.counter_file).map(drop))
+        {
+            problems.push(e);
+        }
+        problems
+    }
+}
+
+/// The longest drive `run.max-distance-m` may allow, m (a car park's length, far beyond any
+/// vehicle).
+const MAX_DISTANCE_M: f32 = 100.0;
+
+/// Every float in the TOML text that is NaN or infinite, named by its dotted key. A text that
+/// does not parse as TOML gives none (the typed parse reports it).
+fn non_finite_values(text: &str, path: &Path) -> Vec<ConfigError> {
+    fn walk(value: &toml::Value, key: &str, out: &mut Vec<String>) {
+        match value {
+            toml::Value::Float(f) if !f.is_finite() => out.push(format!("{key} = {f}")),
+            toml::Value::Table(t) => {
+                for (k, v) in t {
+                    let key = if key.is_empty() {
+                        k.clone()
+                    } else {
+                        format!("{key}.{k}")
+                    };
+                    walk(v, &key, out);
+                }
+            }
+            toml::Value::Array(a) => {
+                for (i, v) in a.iter().enumerate() {
+                    walk(v, &format!("{key}[{i}]"), out);
+                }
+            }
+            _ => {}
+        }
+    }
+    let Ok(table) = text.parse::<toml::Table>() else {
+        return Vec::new();
+    };
+    let mut found = Vec::new();
+    for (k, v) in &table {
+        walk(v, k, &mut found);
+    }
+    found
+        .into_iter()
+        .map(|entry| {
+            let (key, value) = entry.split_once(" = ").unwrap_or((&entry, ""));
+            ConfigError::Invalid {
+                path: path.to_owned(),
+                key: key.to_owned(),
+                problem: format!("is {value}: every number must be finite"),
+            }
+        })
+        .collect()
+}
+
+/// Checks that `path` (the value of `key`) is a regular file owned by root or the effective
+/// user, with no permission for others and at most read for the group.
+fn check_secret_file(path: &Path, key: &str) -> Result<(), ConfigError> {
+    use std::os::unix::fs::MetadataExt;
+    let invalid = |problem: String| ConfigError::Invalid {
+        path: path.to_owned(),
+        key: key.to_owned(),
+        problem,
+    };
+    let meta = fs::metadata(path).map_err(|e| {
+        if e.kind() == io::ErrorKind::NotFound {
+            invalid("the file does not exist".into())
+        } else {
+            ConfigError::Io {
+                path: path.to_owned(),
+                source: e,
+            }
+        }
+    })?;
+    if !meta.is_file() {
+        return Err(invalid("is not a regular file".into()));
+    }
+    let mode = meta.mode() & 0o7777;
+    if mode & 0o7137 != 0 {
+        return Err(invalid(format!(
+            "mode {mode:04o} is too open: use 0600 (or 0640 for the service's group), \
+             never readable by others"
+        )));
+    }
+    let me = nix::unistd::geteuid().as_raw();
+    if meta.uid() != 0 && meta.uid() != me {
+        return Err(invalid(format!(
+            "owned by uid {}: expected root or the user running this check (uid {me}); run \
+             check-config as the service user",
+            meta.uid()
+        )));
+    }
+    Ok(())
 }
 
 /// Reads a pairing key file (64 hex digits, surrounding whitespace ignored).
@@ -604,6 +843,97 @@ mod tests {
         );
         let c = OnboardConfig::parse(MINIMAL, Path::new("x.toml")).unwrap();
         assert!((c.stop_time_s() - (0.5 / 0.3 + 0.3 + 0.5)).abs() < 1e-6);
+    }
+
+    #[test]
+    fn every_problem_is_reported_non_finite_values_included() {
+        let text = format!(
+            "{MINIMAL}[run]\nmax-speed-mps = nan\nmax-distance-m = inf\n\
+             [camera]\nwidth = 0\nheight = 0\n[processing.pipeline]\n"
+        );
+        let problems = OnboardConfig::parse_reporting_all(&text, Path::new("f.toml")).unwrap_err();
+        let all: Vec<String> = problems.iter().map(ToString::to_string).collect();
+        for needle in [
+            "`run.max-speed-mps` is NaN: every number must be finite",
+            "`run.max-distance-m` is inf: every number must be finite",
+            "`run.max-speed-mps` NaN is not in (0,",
+            "`run.max-distance-m` inf is not in (0, 100] m",
+            "`camera.width/height` 0 x 0 pixels",
+            "`camera.intrinsics.cx` 424 is not inside the image",
+        ] {
+            assert!(
+                all.iter()
+                    .any(|e| e.starts_with("f.toml: ") && e.contains(needle)),
+                "{needle:?} missing from {all:#?}"
+            );
+        }
+        // The service's own load stops at the first.
+        assert!(OnboardConfig::parse(&text, Path::new("f.toml")).is_err());
+        // A negative infinity in an array and a NaN deep in the pipeline section are named too.
+        let text = format!("{MINIMAL}[processing.pipeline]\nvoxel-m = -inf\n");
+        let e = OnboardConfig::parse_reporting_all(&text, Path::new("g.toml"))
+            .unwrap_err()
+            .remove(0)
+            .to_string();
+        assert!(e.contains("`processing.pipeline.voxel-m` is -inf"), "{e}");
+    }
+
+    #[test]
+    fn key_and_counter_files_are_checked() {
+        use std::os::unix::fs::PermissionsExt;
+        let dir = std::env::temp_dir().join(format!("passangle-cfgchk-{}", std::process::id()));
+        let _ = fs::remove_dir_all(&dir);
+        fs::create_dir_all(&dir).unwrap();
+        let key = dir.join("pairing.key");
+        let counter = dir.join("start-counter");
+        let text = MINIMAL.replace(
+            "[mcu]",
+            &format!(
+                "key-file = \"{}\"\ncounter-file = \"{}\"\n[mcu]",
+                key.display(),
+                counter.display()
+            ),
+        );
+        let config_path = dir.join("onboard.toml");
+        fs::write(&config_path, &text).unwrap();
+        let problems = |path: &Path| -> Vec<String> {
+            OnboardConfig::check_file(path)
+                .1
+                .iter()
+                .map(ToString::to_string)
+                .collect()
+        };
+        // Neither file exists: both reported.
+        let p = problems(&config_path);
+        assert_eq!(p.len(), 2, "{p:#?}");
+        assert!(
+            p[0].contains("`radio.key-file` the file does not exist"),
+            "{p:#?}"
+        );
+        assert!(
+            p[1].contains("`radio.counter-file` the file does not exist"),
+            "{p:#?}"
+        );
+        write_key(&key, &Key([7; KEY_LEN])).unwrap();
+        write_counter(&counter, 5).unwrap();
+        fs::set_permissions(&counter, fs::Permissions::from_mode(0o640)).unwrap();
+        assert_eq!(problems(&config_path), Vec::<String>::new());
+        // World-readable key, group-writable counter.
+        fs::set_permissions(&key, fs::Permissions::from_mode(0o644)).unwrap();
+        fs::set_permissions(&counter, fs::Permissions::from_mode(0o660)).unwrap();
+        let p = problems(&config_path);
+        assert_eq!(p.len(), 2, "{p:#?}");
+        assert!(p[0].contains("mode 0644 is too open"), "{p:#?}");
+        assert!(p[1].contains("mode 0660 is too open"), "{p:#?}");
+        // A directory where the key should be, and a counter that does not parse.
+        fs::remove_file(&key).unwrap();
+        fs::create_dir(&key).unwrap();
+        fs::set_permissions(&counter, fs::Permissions::from_mode(0o600)).unwrap();
+        fs::write(&counter, "twelve\n").unwrap();
+        let p = problems(&config_path);
+        assert!(p[0].contains("is not a regular file"), "{p:#?}");
+        assert!(p[1].contains("expected one decimal counter"), "{p:#?}");
+        fs::remove_dir_all(&dir).unwrap();
     }
 
     #[test]

@@ -15,7 +15,19 @@
 //! No-panic contract: every length read from the file is checked against what is there; a
 //! truncated record or a block whose lengths disagree is an error naming the record number and
 //! byte offset, never a panic. Record bodies above [`MAX_RECORD_LEN`] are refused so a corrupt
-//! length cannot make the reader allocate gigabytes.
+//! length cannot make the reader allocate gigabytes: the reader holds one record, so its memory is
+//! bounded by [`MAX_RECORD_LEN`] whatever the file's size.
+//!
+//! Truncation and corruption are different errors ([`PcapError::is_truncated_end`]). A capture
+//! whose last record is cut short (the recorder crashed, the disk filled) ends in
+//! [`PcapError::TruncatedRecord`]: the end of file came inside a record whose header is
+//! plausible, so the records before it are intact. A record header that cannot be right (a length
+//! above the limit, a captured length above the original length, a sub-second field of a second or
+//! more, a pcapng block whose lengths disagree) is [`PcapError::Corrupt`] /
+//! [`PcapError::RecordTooLarge`] / [`PcapError::BadBlock`] at its byte offset. The reader does
+//! not resynchronise after corruption: classic pcap has no record marker, so scanning for the
+//! next plausible header is a guess that can invent or drop packets silently; the caller gets
+//! the error and decides (`passangle replay` and `passangle lidar` exit non-zero).
 
 use std::io::{self, Read, Write};
 use std::net::{Ipv4Addr, SocketAddrV4};
@@ -84,6 +96,16 @@ pub enum PcapError {
         /// Claimed length.
         len: u64,
     },
+    /// A classic record header that cannot be right: the file is corrupt from `offset` on.
+    #[error("record {record} at byte {offset} is corrupt: {reason}")]
+    Corrupt {
+        /// Record number, from 0.
+        record: u64,
+        /// Byte offset of the record header in the file.
+        offset: u64,
+        /// Which field is impossible.
+        reason: String,
+    },
     /// A pcapng block is inconsistent.
     #[error("pcapng block at byte {offset}: {reason}")]
     BadBlock {
@@ -92,6 +114,15 @@ pub enum PcapError {
         /// What was wrong.
         reason: &'static str,
     },
+}
+
+impl PcapError {
+    /// True when the file ends inside a record whose header is plausible (a capture cut short
+    /// by a crash or a full disk): the records before it are intact. False for corruption and IO
+    /// errors.
+    pub fn is_truncated_end(&self) -> bool {
+        matches!(self, Self::TruncatedRecord { .. })
+    }
 }
 
 /// One captured frame.
@@ -318,6 +349,29 @@ impl<R: Read> PcapReader<R> {
         let fraction = u64::from(endian.u32(&self.buf[4..8]));
         let captured = endian.u32(&self.buf[8..12]) as usize;
         let original_len = endian.u32(&self.buf[12..16]);
+        let corrupt = |reason: String| PcapError::Corrupt {
+            record: self.record,
+            offset: record_offset,
+            reason,
+        };
+        if captured > MAX_RECORD_LEN {
+            return Err(PcapError::RecordTooLarge {
+                record: self.record,
+                offset: record_offset,
+                len: captured as u64,
+            });
+        }
+        let per_second = if nanos { 1_000_000_000 } else { 1_000_000 };
+        if fraction >= per_second {
+            return Err(corrupt(format!(
+                "sub-second field {fraction} is not below {per_second}"
+            )));
+        }
+        if captured > original_len as usize {
+            return Err(corrupt(format!(
+                "captured length {captured} exceeds the original length {original_len}"
+            )));
+        }
         let stamp_ns = seconds * 1_000_000_000 + if nanos { fraction } else { fraction * 1000 };
         self.fill(captured, record_offset, false)?;
         Ok(Some((stamp_ns, link_type, 0, captured, original_len)))
@@ -609,6 +663,9 @@ pub fn udp_in_frame(link_type: u32, frame: &[u8]) -> Result<UdpDatagram<'_>, Net
     // frame (540 bytes of IP); like Wireshark, trust the bytes present and let the UDP length
     // decide. A capture cut by its snap length still fails the UDP length check below.
     let total_len = total_len.min(ip.len());
+    if header_len > total_len {
+        return Err(NetError::Truncated("IPv4 options"));
+    }
     let flags_fragment = u16::from_be_bytes([ip[6], ip[7]]);
     if flags_fragment & 0x3fff != 0 {
         return Err(NetError::Fragment);
@@ -874,6 +931,69 @@ mod tests {
             r.next_record(),
             Err(PcapError::RecordTooLarge { .. })
         ));
+    }
+
+    #[test]
+    fn corrupt_record_mid_file_is_corruption_at_its_offset() {
+        let bytes = written(&[b"one", b"two", b"three"]);
+        // Record 1 starts at 24 + 16 + 45 = 85; its original length below its captured length.
+        let mut bad = bytes.clone();
+        bad[85 + 12..85 + 16].copy_from_slice(&10u32.to_le_bytes());
+        let mut r = PcapReader::new(&bad[..]).unwrap();
+        assert!(r.next_record().unwrap().is_some());
+        let err = r.next_record().unwrap_err();
+        assert!(!err.is_truncated_end(), "{err:?}");
+        assert!(
+            err.to_string()
+                .starts_with("record 1 at byte 85 is corrupt"),
+            "{err}"
+        );
+        // A microsecond field of a second or more.
+        let mut bad = bytes.clone();
+        bad[85 + 4..85 + 8].copy_from_slice(&1_000_000u32.to_le_bytes());
+        let mut r = PcapReader::new(&bad[..]).unwrap();
+        r.next_record().unwrap();
+        assert!(matches!(
+            r.next_record(),
+            Err(PcapError::Corrupt {
+                record: 1,
+                offset: 85,
+                ..
+            })
+        ));
+        // A length above the limit mid-file is not a truncated end either.
+        let mut bad = bytes.clone();
+        bad[85 + 8..85 + 12].copy_from_slice(&u32::MAX.to_le_bytes());
+        let mut r = PcapReader::new(&bad[..]).unwrap();
+        r.next_record().unwrap();
+        assert!(!r.next_record().unwrap_err().is_truncated_end());
+        // A cut-short last record is.
+        let mut r = PcapReader::new(&bytes[..bytes.len() - 1]).unwrap();
+        r.next_record().unwrap();
+        r.next_record().unwrap();
+        assert!(r.next_record().unwrap_err().is_truncated_end());
+    }
+
+    #[test]
+    fn ipv4_header_longer_than_the_packet_is_an_error() {
+        // IHL 15 (60 bytes) with 30 bytes of IP present: the header runs past the packet.
+        let mut ip = vec![0u8; 30];
+        ip[0] = 0x4f;
+        ip[2..4].copy_from_slice(&60u16.to_be_bytes());
+        ip[9] = 17;
+        assert_eq!(
+            udp_in_frame(link_type::RAW, &ip),
+            Err(NetError::Truncated("IPv4 options"))
+        );
+        // The same inside an Ethernet frame, with a total length above the bytes present.
+        let mut eth = vec![0u8; 12];
+        eth.extend_from_slice(&ETHERTYPE_IPV4.to_be_bytes());
+        ip[2..4].copy_from_slice(&1500u16.to_be_bytes());
+        eth.extend_from_slice(&ip);
+        assert_eq!(
+            udp_in_frame(link_type::ETHERNET, &eth),
+            Err(NetError::Truncated("IPv4 options"))
+        );
     }
 
     fn ng_block(block_type: u32, body: &[u8]) -> Vec<u8> {

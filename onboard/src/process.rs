@@ -165,7 +165,8 @@ pub struct ReadCounts {
     pub odometry: usize,
     /// `odometry.csv` ended in a cut-short line (a crash while writing it), skipped.
     pub odometry_cut_short: bool,
-    /// `lidar.pcap` ended in a truncated or corrupt record; the packets before it were used.
+    /// `lidar.pcap` ended inside its last record (a crash while recording); the packets before
+    /// it were used. A corrupt record is an error of [`build_run`] instead.
     pub lidar_cut_short: bool,
     /// Depth frames read.
     pub depth_frames: usize,
@@ -476,8 +477,8 @@ pub fn build_run(dir: &Path, config: &ProcessConfig) -> Result<(BuiltCloud, Read
     let mut source = PcapSource::open(&pcap).map_err(|e| e.to_string())?;
     let mut buf = [0u8; PACKET_BUF_LEN];
     // Ends at the end of the file, or at a cut-short last record after a crash (keeping what
-    // came before it).
-    while let Ok(Some(meta)) = source.next_packet(&mut buf) {
+    // came before it); a corrupt record anywhere fails the run with its byte offset.
+    while let Some(meta) = source.next_packet(&mut buf).map_err(|e| e.to_string())? {
         builder.push_lidar_packet(
             meta.recv_host_ns,
             &buf[..meta.len],
@@ -612,7 +613,7 @@ fn read_depth(dir: &Path, builder: &mut RunBuilder) -> Result<(), String> {
     let Ok(text) = fs::read_to_string(&index) else {
         return Ok(());
     };
-    for line in text.lines().skip(1) {
+    for (i, line) in text.lines().enumerate().skip(1) {
         let f: Vec<&str> = line.split(',').collect();
         if f.len() != 9 {
             break;
@@ -631,10 +632,35 @@ fn read_depth(dir: &Path, builder: &mut RunBuilder) -> Result<(), String> {
         else {
             break;
         };
-        let Ok(bytes) = fs::read(dir.join(format!("depth/{n:06}.z16"))) else {
+        // Intrinsics that parse but are NaN, infinite or not positive would project every
+        // depth pixel to garbage: refused, naming the line.
+        let positive = [fx, fy, depth_scale_m]
+            .iter()
+            .all(|v| v.is_finite() && *v > 0.0);
+        if !(positive && cx.is_finite() && cy.is_finite()) {
+            return Err(format!(
+                "{}: line {}: intrinsics fx {fx}, fy {fy}, cx {cx}, cy {cy}, depth scale \
+                 {depth_scale_m}: each must be finite, fx, fy and the scale above 0",
+                index.display(),
+                i + 1
+            ));
+        }
+        let path = dir.join(format!("depth/{n:06}.z16"));
+        let expected = 2 * usize::from(width) * usize::from(height);
+        // The size is checked before reading, so a huge file is never read into memory.
+        let Ok(meta) = fs::metadata(&path) else {
             break;
         };
-        let expected = 2 * usize::from(width) * usize::from(height);
+        if meta.len() != expected as u64 {
+            return Err(format!(
+                "{}: frame {n} has {} bytes, expected {expected}",
+                index.display(),
+                meta.len(),
+            ));
+        }
+        let Ok(bytes) = fs::read(&path) else {
+            break;
+        };
         if bytes.len() != expected {
             return Err(format!(
                 "{}: frame {n} has {} bytes, expected {expected}",
@@ -656,4 +682,78 @@ fn read_depth(dir: &Path, builder: &mut RunBuilder) -> Result<(), String> {
         builder.push_depth(wall_us, width, height, depth, &k);
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_corrupt_lidar_record_fails_the_replay_naming_its_offset() {
+        use crate::recorder::{RecordedOutcome, RunRecorder};
+        use protocol::bounded::Text;
+        use protocol::radio::{StartMeasurement, Zone};
+        let root = std::env::temp_dir().join(format!("passangle-replay-{}", std::process::id()));
+        let _ = fs::remove_dir_all(&root);
+        let params = StartMeasurement {
+            vehicle_id: Text::truncated("V"),
+            speed_mps: 0.2,
+            distance_m: 1.0,
+            zone: Zone::Tyre,
+        };
+        let mut r = RunRecorder::begin(&root, 1, &params, 0, "").unwrap();
+        let src = std::net::SocketAddrV4::new([192, 168, 1, 201].into(), 2368);
+        let dst = std::net::SocketAddrV4::new([255, 255, 255, 255].into(), 2368);
+        for i in 0..10u64 {
+            r.lidar_packet(
+                1_700_000_000_000_000_000 + i * 1_327_000,
+                src,
+                dst,
+                &[0; 1206],
+            );
+        }
+        let dir = r.dir().to_owned();
+        assert!(r.finish(RecordedOutcome::Completed).is_empty());
+        // Record 3's original length below its captured length.
+        let pcap = dir.join("lidar.pcap");
+        let mut bytes = fs::read(&pcap).unwrap();
+        let at = 24 + 3 * (16 + 1248);
+        bytes[at + 12..at + 16].copy_from_slice(&7u32.to_le_bytes());
+        fs::write(&pcap, &bytes).unwrap();
+        let err = build_run(&dir, &ProcessConfig::default()).unwrap_err();
+        assert!(
+            err.contains("lidar.pcap")
+                && err.contains(&format!("record 3 at byte {at} is corrupt")),
+            "{err}"
+        );
+        fs::remove_dir_all(&root).unwrap();
+    }
+
+    #[test]
+    fn non_finite_depth_intrinsics_are_refused_naming_the_line() {
+        let dir = std::env::temp_dir().join(format!("passangle-depth-{}", std::process::id()));
+        let _ = fs::remove_dir_all(&dir);
+        fs::create_dir_all(dir.join("depth")).unwrap();
+        fs::write(dir.join("depth/000000.z16"), [0u8; 16]).unwrap();
+        fs::write(dir.join("depth/000001.z16"), [0u8; 16]).unwrap();
+        let head = "frame,wall_us,width,height,fx,fy,cx,cy,depth_scale_m\n";
+        let good = "0,5,4,2,420,420,2,1,0.001\n";
+        fs::write(
+            dir.join("depth/index.csv"),
+            format!("{head}{good}1,6,4,2,NaN,420,2,1,0.001\n"),
+        )
+        .unwrap();
+        let mut builder = RunBuilder::new(&ProcessConfig::default()).unwrap();
+        let err = read_depth(&dir, &mut builder).unwrap_err();
+        assert!(
+            err.contains("depth/index.csv: line 3: intrinsics fx NaN"),
+            "{err}"
+        );
+        // A frame file whose size disagrees with the index is refused before it is read.
+        fs::write(dir.join("depth/index.csv"), format!("{head}{good}")).unwrap();
+        fs::write(dir.join("depth/000000.z16"), [0u8; 18]).unwrap();
+        let err = read_depth(&dir, &mut builder).unwrap_err();
+        assert!(err.contains("frame 0 has 18 bytes, expected 16"), "{err}");
+        fs::remove_dir_all(&dir).unwrap();
+    }
 }

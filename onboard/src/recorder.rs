@@ -619,34 +619,73 @@ impl Recording {
     pub fn odometry(&self) -> Result<(Vec<(u64, Odometry)>, usize), RecorderError> {
         let path = self.dir.join("odometry.csv");
         let text = fs::read_to_string(&path).map_err(|e| RecorderError::io(&path, e))?;
-        let mut out = Vec::new();
-        let mut bad = 0;
-        for (i, line) in text.lines().enumerate().skip(1) {
-            match parse_odometry_line(line) {
-                Some(v) => out.push(v),
-                None if i + 1 == text.lines().count() => bad += 1,
-                None => {
-                    return Err(RecorderError::Parse {
-                        path,
-                        detail: format!("line {}: not 12 numbers: {line:?}", i + 1),
-                    });
-                }
-            }
-        }
-        Ok((out, bad))
+        parse_odometry_csv(&text).map_err(|detail| RecorderError::Parse { path, detail })
     }
 }
 
-fn parse_odometry_line(line: &str) -> Option<(u64, Odometry)> {
+/// Parses the text of an `odometry.csv` (a header line, then one report per line). Pure; never
+/// panics; allocates one entry per line present. A cut-short last line (a crash while
+/// appending) is skipped and counted in the second value; any other malformed or non-finite
+/// line is an error naming the line (1-based, the header is line 1) and the column.
+pub fn parse_odometry_csv(text: &str) -> Result<(Vec<(u64, Odometry)>, usize), String> {
+    let mut out = Vec::new();
+    let mut bad = 0;
+    let lines = text.lines().count();
+    for (i, line) in text.lines().enumerate().skip(1) {
+        match parse_odometry_line(line) {
+            Ok(v) => out.push(v),
+            Err(OdometryLineError::Malformed) if i + 1 == lines => bad += 1,
+            Err(e) => return Err(format!("line {}: {e}: {line:?}", i + 1)),
+        }
+    }
+    Ok((out, bad))
+}
+
+/// Why an `odometry.csv` line was refused.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+enum OdometryLineError {
+    /// Not 12 comma-separated numbers (or a stamp that is not an integer).
+    #[error("not 12 numbers")]
+    Malformed,
+    /// A value that parses but is NaN or infinite: no writer produces it and the pipeline would
+    /// carry it into the trajectory, so it is refused even on the last line.
+    #[error("column {column} ({name}) is not finite")]
+    NonFinite {
+        /// 1-based column.
+        column: usize,
+        /// The column's name in the file's header.
+        name: &'static str,
+    },
+}
+
+const ODOMETRY_COLUMNS: [&str; 12] = [
+    "wall_us", "mcu_us", "x_m", "y_m", "yaw_rad", "vx_mps", "vy_mps", "wz_radps", "w_fl", "w_fr",
+    "w_rl", "w_rr",
+];
+
+fn parse_odometry_line(line: &str) -> Result<(u64, Odometry), OdometryLineError> {
     let f: Vec<&str> = line.split(',').collect();
     if f.len() != 12 {
-        return None;
+        return Err(OdometryLineError::Malformed);
     }
-    let num = |i: usize| f[i].parse::<f32>().ok();
-    Some((
-        f[0].parse().ok()?,
+    let num = |i: usize| -> Result<f32, OdometryLineError> {
+        let v = f[i]
+            .parse::<f32>()
+            .map_err(|_| OdometryLineError::Malformed)?;
+        if v.is_finite() {
+            Ok(v)
+        } else {
+            Err(OdometryLineError::NonFinite {
+                column: i + 1,
+                name: ODOMETRY_COLUMNS[i],
+            })
+        }
+    };
+    let int = |i: usize| f[i].parse().map_err(|_| OdometryLineError::Malformed);
+    Ok((
+        int(0)?,
         Odometry {
-            stamp_us: f[1].parse().ok()?,
+            stamp_us: int(1)?,
             x_m: num(2)?,
             y_m: num(3)?,
             yaw_rad: num(4)?,
@@ -827,6 +866,42 @@ mod tests {
         assert!(rec.result.is_none());
         let (odo, cut) = rec.odometry().unwrap();
         assert_eq!((odo.len(), cut), (5, 1));
+        fs::remove_dir_all(&root).unwrap();
+    }
+
+    #[test]
+    fn non_finite_odometry_is_refused_naming_line_and_column() {
+        let root = tmp("nonfinite");
+        let mut r = RunRecorder::begin(&root, 5, &params(), 0, "").unwrap();
+        for i in 0..3 {
+            r.odometry(i, &odo(i));
+        }
+        let mut bad = odo(3);
+        bad.vx_mps = f32::NAN;
+        r.odometry(3, &bad);
+        r.odometry(4, &odo(4));
+        let mut inf = odo(5);
+        inf.wheel_speed_radps[2] = f32::INFINITY;
+        r.odometry(5, &inf);
+        r.flush();
+        drop(r);
+        let rec = Recording::open_run(&root, 5).unwrap();
+        let path = rec.dir.join("odometry.csv");
+        let err = rec.odometry().unwrap_err().to_string();
+        assert!(
+            err.starts_with(&path.display().to_string())
+                && err.contains("line 5: column 6 (vx_mps) is not finite"),
+            "{err}"
+        );
+        // Non-finite on the last line is refused too, not taken for a cut-short line.
+        let text = fs::read_to_string(&path).unwrap();
+        let without_nan: Vec<&str> = text.lines().filter(|l| !l.contains("NaN")).collect();
+        fs::write(&path, without_nan.join("\n")).unwrap();
+        let err = rec.odometry().unwrap_err().to_string();
+        assert!(
+            err.contains("line 6: column 11 (w_rl) is not finite"),
+            "{err}"
+        );
         fs::remove_dir_all(&root).unwrap();
     }
 

@@ -99,43 +99,54 @@ fn main() -> ExitCode {
 }
 
 fn check_config(file: &Path) -> ExitCode {
-    match OnboardConfig::load(file) {
-        Ok(c) => {
-            println!("{}: ok", file.display());
-            println!(
-                "  radio       {} at {} baud, key {}",
-                c.radio.port,
-                c.radio.baud,
-                c.radio.key_file.display()
-            );
-            println!(
-                "  mcu         {} at {} baud, heartbeat {} ms",
-                c.mcu.port, c.mcu.baud, c.mcu.heartbeat_period_ms
-            );
-            println!(
-                "  lidar       {} (position {:?})",
-                c.lidar.data_addr, c.lidar.position_addr
-            );
-            println!(
-                "  camera      {:?} {}",
-                c.camera.source,
-                c.camera.device.display()
-            );
-            println!("  recordings  {}", c.recording.root.display());
-            println!(
-                "  run         max {} m/s, {} m",
-                c.run.max_speed_mps, c.run.max_distance_m
-            );
-            ExitCode::SUCCESS
-        }
-        Err(e) => {
-            eprintln!("error: {e}");
-            ExitCode::from(match e {
-                onboard::config::ConfigError::Io { .. } => exit::NOINPUT,
-                _ => exit::DATAERR,
-            })
-        }
+    // Every problem is printed (the values', the key and counter files'), not just the first;
+    // the exit code is non-zero if there is any.
+    let (config, problems) = OnboardConfig::check_file(file);
+    for e in &problems {
+        eprintln!("error: {e}");
     }
+    let c = match config {
+        Some(c) if problems.is_empty() => c,
+        _ => {
+            eprintln!("{}: {} problem(s)", file.display(), problems.len());
+            let missing = matches!(
+                problems.as_slice(),
+                [onboard::config::ConfigError::Io { .. }]
+            );
+            return ExitCode::from(if missing {
+                exit::NOINPUT
+            } else {
+                exit::DATAERR
+            });
+        }
+    };
+    println!("{}: ok", file.display());
+    println!(
+        "  radio       {} at {} baud, key {}, counter {}",
+        c.radio.port,
+        c.radio.baud,
+        c.radio.key_file.display(),
+        c.radio.counter_file.display()
+    );
+    println!(
+        "  mcu         {} at {} baud, heartbeat {} ms",
+        c.mcu.port, c.mcu.baud, c.mcu.heartbeat_period_ms
+    );
+    println!(
+        "  lidar       {} (position {:?})",
+        c.lidar.data_addr, c.lidar.position_addr
+    );
+    println!(
+        "  camera      {:?} {}",
+        c.camera.source,
+        c.camera.device.display()
+    );
+    println!("  recordings  {}", c.recording.root.display());
+    println!(
+        "  run         max {} m/s, {} m",
+        c.run.max_speed_mps, c.run.max_distance_m
+    );
+    ExitCode::SUCCESS
 }
 
 fn open_port(path: &str, baud: u32) -> anyhow::Result<Box<dyn Port>> {

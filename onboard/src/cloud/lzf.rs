@@ -5,6 +5,9 @@
 //! reference: length `(c >> 5) + 2` (if `c >> 5 == 7`, the next byte adds to the length), offset
 //! `((c & 0x1f) << 8) + next byte + 1` back from the end of the output.
 
+/// The most bytes one input byte can decode to: a 3-byte back reference copies 264 bytes.
+pub(super) const MAX_RATIO: usize = 88;
+
 pub(super) fn decompress(input: &[u8], expected_len: usize) -> Result<Vec<u8>, String> {
     let mut out = Vec::with_capacity(expected_len.min(input.len().saturating_mul(8) + 64));
     let mut ip = 0;

@@ -18,6 +18,14 @@
 //!   comments; an optional header line naming the `x`, `y`, `z` columns.
 //!
 //! Writers: [`write_ply`] (ascii or binary little endian, `double` x y z) and [`write_xyz`].
+//!
+//! Memory: every count in a header is checked against the bytes present before anything is
+//! allocated for it (a binary record's smallest size, list properties included, times the declared
+//! count must fit in the file), and against [`ParseLimits`]: at most `max_points` points (24 bytes
+//! each) and, for PCD `binary_compressed`, a decoded block of at most `max_decoded_bytes` (which
+//! must also equal FIELDS x POINTS and be reachable from the compressed size at LZF's best ratio).
+//! So a parse allocates at most the file's size, plus `24 x max_points`, plus
+//! `max_decoded_bytes`: with the defaults, 192 MB + 128 MiB beyond the file itself.
 
 mod lzf;
 mod pcd;
@@ -103,6 +111,16 @@ pub enum ParseError {
         /// Complete records present.
         complete: usize,
     },
+    /// A header declares more than a [`ParseLimits`] bound allows; nothing was allocated for it.
+    #[error("{what}: {declared} declared, above the limit of {limit}")]
+    OverLimit {
+        /// What was counted (`points`, `decoded bytes`).
+        what: &'static str,
+        /// What the header declares.
+        declared: usize,
+        /// The limit.
+        limit: usize,
+    },
     /// A compressed block could not be decoded.
     #[error("compressed data: {0}")]
     Compressed(String),
@@ -166,18 +184,72 @@ pub fn detect_format(path: Option<&Path>, bytes: &[u8]) -> Option<CloudFormat> {
     .then_some(CloudFormat::Text)
 }
 
-/// Parse a cloud from bytes. Pure; never panics.
+/// Bounds on what one parse may allocate beyond the file's own size (see the module docs).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ParseLimits {
+    /// Most points a cloud may declare (each costs 24 bytes).
+    pub max_points: usize,
+    /// Largest decoded `binary_compressed` PCD block, bytes.
+    pub max_decoded_bytes: usize,
+}
+
+impl ParseLimits {
+    /// Default `max_points`: eight times the pipeline's clouds of about a million points.
+    pub const DEFAULT_MAX_POINTS: usize = 8_000_000;
+    /// Default `max_decoded_bytes`: 8 M points of 16 bytes (x, y, z, intensity as `float`).
+    pub const DEFAULT_MAX_DECODED_BYTES: usize = 128 << 20;
+
+    pub(crate) fn check_points(&self, declared: usize) -> Result<(), ParseError> {
+        if declared > self.max_points {
+            return Err(ParseError::OverLimit {
+                what: "points",
+                declared,
+                limit: self.max_points,
+            });
+        }
+        Ok(())
+    }
+}
+
+impl Default for ParseLimits {
+    fn default() -> Self {
+        Self {
+            max_points: Self::DEFAULT_MAX_POINTS,
+            max_decoded_bytes: Self::DEFAULT_MAX_DECODED_BYTES,
+        }
+    }
+}
+
+/// Parse a cloud from bytes with the default [`ParseLimits`]. Pure; never panics.
 pub fn parse_cloud(bytes: &[u8], format: CloudFormat) -> Result<(Cloud, ReadStats), ParseError> {
+    parse_cloud_with(bytes, format, &ParseLimits::default())
+}
+
+/// Parse a cloud from bytes within `limits`. Pure; never panics.
+pub fn parse_cloud_with(
+    bytes: &[u8],
+    format: CloudFormat,
+    limits: &ParseLimits,
+) -> Result<(Cloud, ReadStats), ParseError> {
     let raw = match format {
-        CloudFormat::Ply => ply::parse(bytes)?,
-        CloudFormat::Pcd => pcd::parse(bytes)?,
-        CloudFormat::Text => text::parse(bytes)?,
+        CloudFormat::Ply => ply::parse(bytes, limits)?,
+        CloudFormat::Pcd => pcd::parse(bytes, limits)?,
+        CloudFormat::Text => text::parse(bytes, limits)?,
     };
     finish(raw, format)
 }
 
-/// Read a cloud file; the format comes from the extension, else from the first bytes.
+/// Read a cloud file with the default [`ParseLimits`]; the format comes from the extension, else
+/// from the first bytes.
 pub fn read_cloud(path: &Path) -> Result<(Cloud, ReadStats), CloudError> {
+    read_cloud_with(path, &ParseLimits::default())
+}
+
+/// Read a cloud file within `limits`.
+pub fn read_cloud_with(
+    path: &Path,
+    limits: &ParseLimits,
+) -> Result<(Cloud, ReadStats), CloudError> {
     let bytes = std::fs::read(path).map_err(|source| CloudError::Io {
         path: path.to_path_buf(),
         source,
@@ -188,7 +260,7 @@ pub fn read_cloud(path: &Path) -> Result<(Cloud, ReadStats), CloudError> {
     };
     let format =
         detect_format(Some(path), &bytes).ok_or_else(|| parse_err(ParseError::UnknownFormat))?;
-    parse_cloud(&bytes, format).map_err(parse_err)
+    parse_cloud_with(&bytes, format, limits).map_err(parse_err)
 }
 
 /// PLY body encodings the writer can produce.

@@ -2,7 +2,7 @@
 //! `binary_compressed` is the PCL layout: `u32` compressed size, `u32` uncompressed size, then an
 //! LZF block whose decoded bytes hold each field for all points in turn (structure of arrays).
 
-use super::{ParseError, RawCloud, Scalar, lzf, parse_f64, split_header};
+use super::{ParseError, ParseLimits, RawCloud, Scalar, lzf, parse_f64, split_header};
 
 #[derive(Debug)]
 struct Field {
@@ -171,15 +171,16 @@ fn xyz_fields(header: &Header) -> Result<[(usize, usize); 3], ParseError> {
     Ok(out)
 }
 
-pub(super) fn parse(bytes: &[u8]) -> Result<RawCloud, ParseError> {
+pub(super) fn parse(bytes: &[u8], limits: &ParseLimits) -> Result<RawCloud, ParseError> {
     let (lines, body_start) = split_header(bytes, |l| l.trim_start().starts_with("DATA"))?;
     let header = parse_header(&lines)?;
     let xyz = xyz_fields(&header)?;
+    limits.check_points(header.points)?;
     let body = bytes.get(body_start..).unwrap_or_default();
     match header.data.as_str() {
         "ascii" => parse_ascii(body, lines.len(), &header, xyz),
         "binary" => parse_binary(body, &header, xyz),
-        "binary_compressed" => parse_compressed(body, &header, xyz),
+        "binary_compressed" => parse_compressed(body, &header, xyz, limits),
         other => Err(header_err(
             header.data_line,
             format!("unknown DATA encoding `{other}`"),
@@ -280,6 +281,7 @@ fn parse_compressed(
     body: &[u8],
     header: &Header,
     xyz: [(usize, usize); 3],
+    limits: &ParseLimits,
 ) -> Result<RawCloud, ParseError> {
     let word = |at: usize| -> Result<usize, ParseError> {
         body.get(at..at + 4)
@@ -301,12 +303,26 @@ fn parse_compressed(
             expected.map_or_else(|| "more than usize".to_string(), |e| e.to_string())
         )));
     }
+    if uncompressed_len > limits.max_decoded_bytes {
+        return Err(ParseError::OverLimit {
+            what: "decoded bytes of the compressed block",
+            declared: uncompressed_len,
+            limit: limits.max_decoded_bytes,
+        });
+    }
     let block = body.get(8..8 + compressed_len).ok_or_else(|| {
         ParseError::Compressed(format!(
             "block declares {compressed_len} bytes, {} present",
             body.len().saturating_sub(8)
         ))
     })?;
+    // No LZF block decodes to more than MAX_RATIO times its size (a 3-byte back reference of
+    // 264 bytes): a larger claim is refused before decoding.
+    if uncompressed_len > compressed_len.saturating_mul(lzf::MAX_RATIO) {
+        return Err(ParseError::Compressed(format!(
+            "{compressed_len} compressed bytes cannot decode to the declared {uncompressed_len}"
+        )));
+    }
     let decoded = lzf::decompress(block, uncompressed_len).map_err(ParseError::Compressed)?;
     // Structure of arrays: field k occupies [start_k, start_k + points * bytes_k).
     let mut starts = Vec::with_capacity(header.fields.len());

@@ -1,7 +1,7 @@
 //! PLY reader (ascii, binary little and big endian). Only the `vertex` element's x, y, z are kept;
 //! every other property and element is skipped according to its declared types.
 
-use super::{ParseError, RawCloud, Scalar, parse_f64, split_header};
+use super::{ParseError, ParseLimits, RawCloud, Scalar, parse_f64, split_header};
 
 #[derive(Debug)]
 enum Property {
@@ -127,7 +127,7 @@ fn xyz_indices(vertex: &Element) -> Result<[usize; 3], ParseError> {
     Ok([find("x")?, find("y")?, find("z")?])
 }
 
-pub(super) fn parse(bytes: &[u8]) -> Result<RawCloud, ParseError> {
+pub(super) fn parse(bytes: &[u8], limits: &ParseLimits) -> Result<RawCloud, ParseError> {
     let (lines, body_start) = split_header(bytes, |l| l.trim() == "end_header")?;
     let header = parse_header(&lines)?;
     let vertex_index = header
@@ -136,6 +136,7 @@ pub(super) fn parse(bytes: &[u8]) -> Result<RawCloud, ParseError> {
         .position(|e| e.name == "vertex")
         .ok_or_else(|| header_err(lines.len(), "no `element vertex` in the header"))?;
     let xyz = xyz_indices(&header.elements[vertex_index])?;
+    limits.check_points(header.elements[vertex_index].count)?;
     let body = bytes.get(body_start..).unwrap_or_default();
     match header.encoding {
         Encoding::Ascii => parse_ascii(body, lines.len(), &header.elements, vertex_index, xyz),
@@ -250,25 +251,31 @@ fn parse_binary(
         } else {
             "other element items"
         };
-        let fixed: Option<usize> = element
+        // The smallest record: every scalar, and every list's count with no items. The whole
+        // element must fit at that size before anything is allocated for it, so the count a
+        // header declares is bounded by the bytes present, list properties included.
+        let smallest: usize = element
             .properties
             .iter()
             .map(|p| match p {
-                Property::Scalar { ty, .. } => Some(ty.size()),
-                Property::List { .. } => None,
+                Property::Scalar { ty, .. } => ty.size(),
+                Property::List { count_ty, .. } => count_ty.size(),
             })
             .sum();
-        if let Some(record) = fixed {
-            // Fixed-size records: check the whole element fits before touching it.
-            let available = body.len().saturating_sub(at);
-            let needed = record.checked_mul(element.count);
-            if needed.is_none_or(|needed| needed > available) {
-                return Err(ParseError::Truncated {
-                    what,
-                    declared: element.count,
-                    complete: available.checked_div(record).unwrap_or(0),
-                });
-            }
+        if smallest == 0 {
+            // No properties: the items hold no bytes (and the vertex element has x, y, z).
+            continue;
+        }
+        let available = body.len().saturating_sub(at);
+        if smallest
+            .checked_mul(element.count)
+            .is_none_or(|needed| needed > available)
+        {
+            return Err(ParseError::Truncated {
+                what,
+                declared: element.count,
+                complete: available / smallest,
+            });
         }
         if is_vertex {
             points.reserve(element.count);

@@ -3,14 +3,14 @@
 //! line is not numeric it is a header, and the columns named `x`, `y`, `z` (any case) are used;
 //! otherwise the first three columns are x, y, z. Extra columns are ignored.
 
-use super::{ParseError, RawCloud, parse_f64};
+use super::{ParseError, ParseLimits, RawCloud, parse_f64};
 
 fn split(line: &str) -> impl Iterator<Item = &str> {
     line.split(|c: char| c == ',' || c == ';' || c.is_whitespace())
         .filter(|t| !t.is_empty())
 }
 
-pub(super) fn parse(bytes: &[u8]) -> Result<RawCloud, ParseError> {
+pub(super) fn parse(bytes: &[u8], limits: &ParseLimits) -> Result<RawCloud, ParseError> {
     let text = String::from_utf8_lossy(bytes);
     let mut columns: Option<[usize; 3]> = None;
     let mut points = Vec::with_capacity(bytes.len() / 24 + 1);
@@ -50,6 +50,7 @@ pub(super) fn parse(bytes: &[u8]) -> Result<RawCloud, ParseError> {
                 ),
             })?;
         }
+        limits.check_points(points.len() + 1)?;
         points.push(p);
     }
     Ok(RawCloud {

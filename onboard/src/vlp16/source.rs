@@ -130,7 +130,7 @@ pub struct PcapSource {
     reader: PcapReader<BufReader<File>>,
     ports: Ports,
     skips: PcapSkips,
-    /// Set when the file ended with a truncated or corrupt record.
+    /// Set when the file ended inside its last record (see [`PcapError::is_truncated_end`]).
     truncated: Option<String>,
 }
 
@@ -167,8 +167,9 @@ impl PcapSource {
         self.skips
     }
 
-    /// If the file ended in a truncated or corrupt record: the reader's message. The packets
-    /// before it were delivered; [`PacketSource::next_packet`] then reports the end of stream.
+    /// If the file ended inside its last record: the reader's message. The packets before it
+    /// were delivered; [`PacketSource::next_packet`] then reports the end of stream. A corrupt
+    /// record anywhere is an error of [`PacketSource::next_packet`] instead.
     pub fn truncated(&self) -> Option<&str> {
         self.truncated.as_deref()
     }
@@ -189,10 +190,19 @@ impl PacketSource for PcapSource {
                         source,
                     });
                 }
-                Err(err) => {
-                    // A damaged tail: deliver what came before, remember why it stopped.
+                Err(err) if err.is_truncated_end() => {
+                    // A cut-short last record (a crash while recording): deliver what came
+                    // before, remember why it stopped.
                     self.truncated = Some(err.to_string());
                     return Ok(None);
+                }
+                Err(source) => {
+                    // Corruption: the reader cannot tell where the next record starts, so the
+                    // stream ends in an error naming the byte offset; the caller decides.
+                    return Err(SourceError::Pcap {
+                        path: self.path.clone(),
+                        source,
+                    });
                 }
             };
             let Ok(udp) = udp_in_frame(record.link_type, record.data) else {
@@ -350,5 +360,71 @@ impl PacketSource for UdpSource {
                 source,
             }),
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::net::{Ipv4Addr, SocketAddrV4};
+
+    use super::*;
+    use crate::pcap::PcapWriter;
+
+    fn capture(name: &str, records: usize) -> (PathBuf, Vec<u8>) {
+        let mut w = PcapWriter::new(Vec::new()).unwrap();
+        let src = SocketAddrV4::new(Ipv4Addr::new(192, 168, 1, 201), 2368);
+        let dst = SocketAddrV4::new(Ipv4Addr::BROADCAST, DATA_PORT);
+        for k in 0..records {
+            w.write_udp(1_000_000 * k as u64, src, dst, &[k as u8; 100])
+                .unwrap();
+        }
+        let path = std::env::temp_dir().join(format!(
+            "passangle-source-{name}-{}.pcap",
+            std::process::id()
+        ));
+        (path, w.into_inner())
+    }
+
+    fn drain(path: &Path) -> (usize, Result<(), SourceError>, Option<String>) {
+        let mut source = PcapSource::open(path).unwrap();
+        let mut buf = [0u8; PACKET_BUF_LEN];
+        let mut n = 0;
+        let end = loop {
+            match source.next_packet(&mut buf) {
+                Ok(Some(_)) => n += 1,
+                Ok(None) => break Ok(()),
+                Err(e) => break Err(e),
+            }
+        };
+        (n, end, source.truncated().map(str::to_owned))
+    }
+
+    #[test]
+    fn corrupt_record_mid_file_is_an_error_not_a_truncated_end() {
+        // 10 records of 16 + 142 bytes after the 24-byte header; corrupt record 3's lengths.
+        let (path, mut bytes) = capture("corrupt", 10);
+        let at = 24 + 3 * 158;
+        bytes[at + 8..at + 12].copy_from_slice(&900_000u32.to_le_bytes());
+        std::fs::write(&path, &bytes).unwrap();
+        let (n, end, truncated) = drain(&path);
+        std::fs::remove_file(&path).unwrap();
+        assert_eq!(n, 3);
+        assert_eq!(truncated, None);
+        let err = end.unwrap_err().to_string();
+        assert!(
+            err.contains(&format!("record 3 at byte {at}")) && err.contains("passangle-source"),
+            "{err}"
+        );
+    }
+
+    #[test]
+    fn cut_short_last_record_ends_the_stream_with_a_note() {
+        let (path, bytes) = capture("cut", 10);
+        std::fs::write(&path, &bytes[..bytes.len() - 50]).unwrap();
+        let (n, end, truncated) = drain(&path);
+        std::fs::remove_file(&path).unwrap();
+        assert_eq!(n, 9);
+        assert!(end.is_ok());
+        assert!(truncated.unwrap().contains("record 9"));
     }
 }
