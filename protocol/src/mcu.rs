@@ -38,7 +38,7 @@ pub struct Stop {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, MaxSize)]
 pub struct ClearFaults {}
 
-/// The firmware's configuration (the firmware starts from built-in defaults; see the README).
+/// The firmware's configuration (the firmware starts from built-in defaults; see docs/firmware.md).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, MaxSize)]
 pub struct McuConfig {
     /// Wheel radius, m.

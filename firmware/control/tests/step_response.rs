@@ -1,6 +1,6 @@
 //! Wheel-speed PID step response and constant-velocity ripple on the plant model
 //! (tests/common/plant.rs: approximate, independent wheels). Figures are printed with
-//! `cargo test -p control --test step_response -- --nocapture` and copied into the README (Firmware, measured figures).
+//! `cargo test -p control --test step_response -- --nocapture` and reported in docs/firmware.md (measured figures).
 #![allow(clippy::cast_precision_loss, clippy::cast_possible_truncation)]
 
 mod common;

@@ -1,4 +1,4 @@
-//! `passangle-onboard`: the robot's service (see `onboard::service` and the README).
+//! `passangle-onboard`: the robot's service (see `onboard::service` and docs/operator/run.md).
 //!
 //! ```text
 //! passangle-onboard run --config /etc/passangle/onboard.toml

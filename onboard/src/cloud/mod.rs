@@ -1,7 +1,7 @@
 //! Point clouds: the shared point type and PLY / PCD / XYZ / CSV input and output.
 //!
 //! A [`Cloud`] is a plain list of points in metres (`points_m`). The frame is whatever the producer
-//! says it is; the angle calculator expects the vehicle-cloud frame of DESIGN.md section 8 (z roughly
+//! says it is; the angle calculator expects the vehicle-cloud frame of docs/architecture.md section 8 (z roughly
 //! up, x roughly toward the vehicle front) but tolerates tilt, yaw and offsets.
 //!
 //! Reading is split the usual way: [`parse_cloud`] is a pure function over bytes (it never panics on

@@ -1,4 +1,4 @@
-//! VLP-16 decoding, frame assembly and sources (DESIGN.md section 6 step 1).
+//! VLP-16 decoding, frame assembly and sources (docs/architecture.md section 6 step 1).
 //!
 //! - [`packet`]: the 1206-byte data packet as a checked view [`Vlp16Packet`] plus
 //!   [`DataPacketRepr`] parse/emit (the simulator builds byte-exact packets with `emit`).
