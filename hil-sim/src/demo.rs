@@ -411,7 +411,7 @@ pub fn run(options: &DemoOptions, quiet: bool) -> anyhow::Result<DemoReport> {
             key,
             onboard::link::session::Entropy::from_test_seed(options.seed),
         );
-        client.connect(Duration::from_secs(10))?;
+        client.connect(Duration::from_secs(30))?;
         // Let the service see the firmware and the lidar before the checks.
         thread::sleep(Duration::from_millis(500));
         let params = StartMeasurement {

@@ -277,6 +277,9 @@ pub struct ServiceStats {
     /// Longest time between the starts of two loop iterations since the service started, us
     /// (the MCU heartbeat leaves once per iteration; the firmware stops after 100 ms without).
     pub max_loop_gap_us: u64,
+    /// Longest time one loop iteration spent working (the gap less the sleep and the
+    /// scheduler's lateness), us: what the loop itself waited for.
+    pub max_loop_work_us: u64,
     /// Fetches refused because the IO worker's queue was full.
     pub fetches_busy: u64,
     /// Lidar data packets that passed the checked view.
@@ -797,6 +800,8 @@ impl Service {
             if let Ok(mut shared) = self.shared.lock() {
                 *shared = self.stats;
             }
+            let work = u64::try_from(loop_start.elapsed().as_micros()).unwrap_or(u64::MAX);
+            self.stats.max_loop_work_us = self.stats.max_loop_work_us.max(work);
             if let Some(rest) = LOOP_PERIOD.checked_sub(loop_start.elapsed()) {
                 thread::sleep(rest);
             }

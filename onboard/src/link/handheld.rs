@@ -48,7 +48,7 @@ impl Default for HandheldConfig {
             link: LinkConfig::RADIO,
             resend_quiet_us: 700_000,
             init_retry_us: 300_000,
-            init_retry_max_us: 1_500_000,
+            init_retry_max_us: 1_000_000,
         }
     }
 }
