@@ -397,6 +397,15 @@ enum IoJob {
     Fetch { run_id: u32, seq: u16 },
     /// Mark a run's result delivered (`DELIVERED` file).
     MarkDelivered { run_id: u32 },
+    /// Close a run's recording: `result.json` (if any), fsync the streams, the outcome in
+    /// `meta.json`, remove `INCOMPLETE`. The jobs run in order, so a later fetch of the run finds
+    /// its result on disk.
+    Finish {
+        run_id: u32,
+        recorder: Box<RunRecorder>,
+        result: Option<ResultRecord>,
+        outcome: RecordedOutcome,
+    },
 }
 
 /// What the IO worker reports.
@@ -410,19 +419,24 @@ enum IoDone {
         run_id: u32,
         error: Option<String>,
     },
+    Finished {
+        run_id: u32,
+        errors: Vec<String>,
+    },
 }
 
 /// The IO worker thread (see the module docs): bounded job and result queues.
 struct IoWorker {
     jobs: SyncSender<IoJob>,
     done: Receiver<IoDone>,
+    handle: Option<thread::JoinHandle<()>>,
 }
 
 impl IoWorker {
     fn spawn(root: PathBuf, preview: config::PreviewConfig) -> io::Result<Self> {
         let (jobs, job_rx) = sync_channel::<IoJob>(IO_QUEUE);
         let (done_tx, done) = sync_channel::<IoDone>(IO_QUEUE);
-        thread::Builder::new()
+        let handle = thread::Builder::new()
             .name("radio-io".into())
             .spawn(move || {
                 while let Ok(job) = job_rx.recv() {
@@ -440,13 +454,59 @@ impl IoWorker {
                                 .err()
                                 .map(|e| e.to_string()),
                         },
+                        IoJob::Finish {
+                            run_id,
+                            mut recorder,
+                            result,
+                            outcome,
+                        } => {
+                            if let Some(r) = &result {
+                                recorder.save_result(r);
+                            }
+                            IoDone::Finished {
+                                run_id,
+                                errors: recorder.finish(outcome),
+                            }
+                        }
                     };
                     if done_tx.send(out).is_err() {
                         return;
                     }
                 }
             })?;
-        Ok(Self { jobs, done })
+        Ok(Self {
+            jobs,
+            done,
+            handle: Some(handle),
+        })
+    }
+
+    /// Runs `waiting` and everything queued to the end (closing recordings), then stops the
+    /// thread. Results are read and dropped meanwhile, so the worker never blocks on them.
+    fn drain(mut self, waiting: impl IntoIterator<Item = IoJob>) {
+        for job in waiting {
+            let mut job = job;
+            loop {
+                match self.jobs.try_send(job) {
+                    Ok(()) => break,
+                    Err(TrySendError::Full(j)) => {
+                        job = j;
+                        while self.done.try_recv().is_ok() {}
+                        thread::sleep(Duration::from_millis(1));
+                    }
+                    Err(TrySendError::Disconnected(_)) => return,
+                }
+            }
+        }
+        let Some(handle) = self.handle.take() else {
+            return;
+        };
+        drop(self.jobs);
+        while !handle.is_finished() {
+            while self.done.try_recv().is_ok() {}
+            thread::sleep(Duration::from_millis(1));
+        }
+        let _ = handle.join();
     }
 }
 
@@ -468,8 +528,11 @@ struct Service {
     config_text: String,
     radio: OnboardRadio,
     io_worker: IoWorker,
-    /// Delivered marks waiting for room in the IO worker's queue.
-    marks_waiting: std::collections::VecDeque<u32>,
+    /// Jobs (delivered marks, closing recordings) waiting for room in the IO worker's queue, in
+    /// order; bounded by the runs and results there are.
+    io_waiting: std::collections::VecDeque<IoJob>,
+    /// The current run's result, saved with its recording when the run ends.
+    result_record: Option<ResultRecord>,
     /// Radio counters at the last drop log line.
     logged_radio: crate::link::radio::RadioStats,
     next_drop_log_us: u64,
@@ -548,7 +611,8 @@ pub fn run(
                 source,
             },
         )?,
-        marks_waiting: std::collections::VecDeque::new(),
+        io_waiting: std::collections::VecDeque::new(),
+        result_record: None,
         logged_radio: crate::link::radio::RadioStats::default(),
         next_drop_log_us: DROP_LOG_PERIOD_US,
         mcu,
@@ -589,6 +653,9 @@ pub fn run(
     if let Some(r) = s.recorder.take() {
         r.finish(RecordedOutcome::Aborted("service stopped".into()));
     }
+    // Recordings the IO worker still has to close are closed before the service ends.
+    let waiting: Vec<IoJob> = s.io_waiting.drain(..).collect();
+    s.io_worker.drain(waiting);
     notifier.stopping();
     result
 }
@@ -646,16 +713,18 @@ impl Service {
 
     /// Results of the IO worker; delivered marks that waited for room.
     fn check_io(&mut self) {
-        while let Some(&run_id) = self.marks_waiting.front() {
-            if self
-                .io_worker
-                .jobs
-                .try_send(IoJob::MarkDelivered { run_id })
-                .is_err()
-            {
-                break;
+        while let Some(job) = self.io_waiting.pop_front() {
+            match self.io_worker.jobs.try_send(job) {
+                Ok(()) => {}
+                Err(TrySendError::Full(job)) => {
+                    self.io_waiting.push_front(job);
+                    break;
+                }
+                Err(TrySendError::Disconnected(_)) => {
+                    tracing::error!("the radio IO thread ended: recordings are not closed");
+                    break;
+                }
             }
-            self.marks_waiting.pop_front();
         }
         while let Ok(done) = self.io_worker.done.try_recv() {
             match done {
@@ -686,6 +755,11 @@ impl Service {
                     run_id,
                     error: Some(e),
                 } => tracing::warn!("run {run_id}: result acknowledged, but {e}"),
+                IoDone::Finished { run_id, errors } => {
+                    for e in errors {
+                        tracing::error!(run_id, "{e}");
+                    }
+                }
             }
         }
     }
@@ -843,9 +917,15 @@ impl Service {
                 self.execute(now, actions);
             }
             RadioRequest::ResultAck { run_id } => {
-                // Bounded: one entry per acknowledged run still waiting for the worker.
-                if !self.marks_waiting.contains(&run_id) && self.marks_waiting.len() < 64 {
-                    self.marks_waiting.push_back(run_id);
+                // Bounded: at most 64 marks wait for the worker (a handheld acks each run once
+                // per offer, and the link drops duplicates).
+                let waiting = self
+                    .io_waiting
+                    .iter()
+                    .filter(|j| matches!(j, IoJob::MarkDelivered { .. }))
+                    .count();
+                if waiting < 64 {
+                    self.io_waiting.push_back(IoJob::MarkDelivered { run_id });
                 }
             }
             RadioRequest::Fetch { run_id, seq } => {
@@ -1067,14 +1147,14 @@ impl Service {
         }
     }
 
-    /// The result goes out first; `result.json` follows (small); the cloud and the SVG are
-    /// written by the processing thread.
+    /// The result goes out first; `result.json` is written when the run's recording closes (on
+    /// the IO worker); the cloud and the SVG are written by the processing thread.
     fn deliver(&mut self, r: &Ready) {
         if let Err(e) = self.radio.deliver(r.result.clone(), &r.preview_mm) {
             tracing::error!("cannot send the result: {e}");
         }
-        if let Some(rec) = &mut self.recorder {
-            rec.save_result(&ResultRecord::from_wire(&r.result));
+        if self.recorder.is_some() {
+            self.result_record = Some(ResultRecord::from_wire(&r.result));
         }
     }
 
@@ -1137,9 +1217,14 @@ impl Service {
                             Outcome::Aborted(s) => RecordedOutcome::Aborted(s),
                             Outcome::Failed(s) => RecordedOutcome::Failed(s),
                         };
-                        for e in r.finish(recorded) {
-                            tracing::error!(run_id, "{e}");
-                        }
+                        // The fsyncs and the final files go to the IO worker.
+                        self.io_waiting.push_back(IoJob::Finish {
+                            run_id,
+                            recorder: Box::new(r),
+                            result: self.result_record.take(),
+                            outcome: recorded,
+                        });
+                        self.check_io();
                     }
                 }
                 Action::Progress(p) => {
