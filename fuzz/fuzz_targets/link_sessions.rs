@@ -1,6 +1,6 @@
 //! Any bytes from the radio or the UART, fed in arbitrary chunks at arbitrary times into the
 //! onboard radio session, the handheld session and the MCU session: nothing panics, and after the
-//! junk a genuine signed start is still accepted (the sessions resynchronise).
+//! junk a genuine handheld still connects and its start is accepted (the sessions resynchronise).
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
@@ -8,14 +8,26 @@ use onboard::link::handheld::{HandheldConfig, HandheldRadio};
 use onboard::link::mcu::{McuSession, McuSessionConfig};
 use onboard::link::radio::{OnboardRadio, RadioRequest};
 use onboard::link::reliable::LinkConfig;
+use onboard::link::session::Entropy;
 use protocol::auth::{KEY_LEN, Key};
 use protocol::bounded::Text;
 use protocol::radio::{StartMeasurement, Zone};
 
 fuzz_target!(|data: &[u8]| {
     let key = Key([3; KEY_LEN]);
-    let mut onboard = OnboardRadio::new(LinkConfig::RADIO, key.clone(), 0, 0);
-    let mut handheld = HandheldRadio::new(HandheldConfig::default(), key.clone(), 100);
+    let mut onboard = OnboardRadio::new(
+        LinkConfig::RADIO,
+        vec![key.clone()],
+        Entropy::from_test_seed(0),
+        5000,
+    );
+    let mut handheld = HandheldRadio::new(
+        HandheldConfig::default(),
+        key.clone(),
+        Entropy::from_test_seed(100),
+        1000,
+    );
+    handheld.connect(0).expect("a handshake encodes");
     let mcu_config = McuSessionConfig {
         link: LinkConfig::MCU,
         heartbeat_period_us: 20_000,
@@ -39,18 +51,31 @@ fuzz_target!(|data: &[u8]| {
         let _ = handheld.transmit(now);
         let _ = mcu.transmit(now);
     }
-    // A delimiter ends any partial frame; then a real start must get through.
+    // A delimiter ends any partial frame; then a genuine handheld connects and its start gets
+    // through.
     let _ = onboard.receive(now, &[0]);
-    let mut sender = HandheldRadio::new(HandheldConfig::default(), key, 40_000);
+    let mut sender = HandheldRadio::new(
+        HandheldConfig::default(),
+        key,
+        Entropy::from_test_seed(40_000),
+        1000,
+    );
+    let later = now + 120_000_000;
+    sender.connect(later).expect("a handshake encodes");
+    sender.poll(later);
+    let _ = onboard.receive(later, &sender.transmit(later));
+    onboard.poll(later);
+    let _ = sender.receive(later, &onboard.transmit(later + 1_000_000));
+    assert!(sender.is_connected());
     let params = StartMeasurement {
         vehicle_id: Text::truncated("F"),
         speed_mps: 0.2,
         distance_m: 1.0,
         zone: Zone::Tyre,
     };
-    sender.start(params, u64::MAX - 1).expect("a start encodes");
-    let bytes = sender.transmit(now + 120_000_000);
-    let requests = onboard.receive(now + 120_000_000, &bytes);
+    sender.start(&params).expect("a start encodes");
+    sender.poll(later + 1);
+    let requests = onboard.receive(later + 2, &sender.transmit(later + 2));
     assert!(
         requests.iter().any(|r| matches!(r, RadioRequest::Start { .. })),
         "{requests:?}"

@@ -40,9 +40,15 @@ pub struct LinkArgs {
 /// `passangle pair`.
 #[derive(Args, Debug)]
 pub struct PairArgs {
-    /// Where to write the new key (mode 0600); copy it to the robot's `radio.key-file`.
+    /// Where to write the new key (mode 0600); its line goes into the robot's `radio.key-file`.
     #[arg(long, default_value_os_t = default_key_file())]
     pub key_file: PathBuf,
+    /// Also add the key to this robot key list (the robot's `radio.key-file`, one key per line).
+    #[arg(long)]
+    pub robot_keys: Option<PathBuf>,
+    /// Label stored with the key in the robot's list (e.g. the handheld's name).
+    #[arg(long, default_value = "")]
+    pub label: String,
 }
 
 /// Zone convention.
@@ -117,17 +123,35 @@ pub fn pair(args: &PairArgs, out: &mut dyn Write) -> anyhow::Result<()> {
     std::fs::File::open("/dev/urandom")
         .and_then(|mut f| std::io::Read::read_exact(&mut f, &mut key))
         .context("reading /dev/urandom")?;
-    onboard::config::write_key(&args.key_file, &protocol::auth::Key(key))?;
+    let key = protocol::auth::Key(key);
+    onboard::config::write_key(&args.key_file, &key)?;
+    let id = protocol::auth::key_id(&key);
     writeln!(
         out,
-        "wrote a new pairing key to {} (mode 0600).\ncopy it to the robot's radio.key-file (default /etc/passangle/pairing.key), owned by the service user, mode 0600.",
+        "wrote a new pairing key {id:08x} to {} (mode 0600).",
         args.key_file.display()
     )?;
+    match &args.robot_keys {
+        Some(robot) => {
+            onboard::link::keys::add(robot, &key, &args.label)?;
+            writeln!(
+                out,
+                "added key {id:08x} to the robot's key list {}; restart the service to use it.",
+                robot.display()
+            )?;
+        }
+        None => writeln!(
+            out,
+            "add its line to the robot's radio.key-file (default /etc/passangle/pairing.key, one key per line, mode 0600), e.g. with `passangle pair --robot-keys FILE` where that file is reachable, then restart the service."
+        )?,
+    }
     Ok(())
 }
 
 fn open(link: &LinkArgs) -> anyhow::Result<Client> {
-    let key = onboard::config::read_key(&link.key_file)?;
+    let key = onboard::link::keys::read(&link.key_file)?
+        .swap_remove(0)
+        .key;
     let port: Box<dyn Port> = Box::new(
         serialport::new(&link.port, link.baud)
             .timeout(Duration::from_millis(2))
@@ -136,7 +160,7 @@ fn open(link: &LinkArgs) -> anyhow::Result<Client> {
                 format!("opening the radio port {} at {} baud", link.port, link.baud)
             })?,
     );
-    Ok(Client::new(port, key))
+    Ok(Client::new(port, key)?)
 }
 
 fn timeout(s: f64) -> Duration {
@@ -267,19 +291,9 @@ pub fn measure(args: &MeasureArgs, out: &mut dyn Write) -> anyhow::Result<()> {
     let vehicle_id = Text::new(&args.vehicle_id)
         .with_context(|| format!("--vehicle-id {:?} is longer than 32 bytes", args.vehicle_id))?;
     let mut client = open(&args.link)?;
-    let hello = client
+    client
         .connect(timeout(args.link.timeout_s))
         .context("connecting to the robot")?;
-    if hello.version != protocol::PROTOCOL_VERSION {
-        anyhow::bail!(
-            "the robot speaks protocol version {}, this handheld {}",
-            hello.version,
-            protocol::PROTOCOL_VERSION
-        );
-    }
-    let counter_file = args.link.key_file.with_extension("counter");
-    let counter = onboard::client::next_counter(&counter_file)
-        .with_context(|| format!("updating {}", counter_file.display()))?;
     let params = StartMeasurement {
         vehicle_id,
         speed_mps: args.speed,
@@ -292,7 +306,7 @@ pub fn measure(args: &MeasureArgs, out: &mut dyn Write) -> anyhow::Result<()> {
     let mut bar = Bar {
         tty: std::io::stderr().is_terminal(),
     };
-    let m = client.measure(params, counter, timeout(args.run_timeout_s), &mut bar)?;
+    let m = client.measure(&params, timeout(args.run_timeout_s), &mut bar)?;
     if bar.tty {
         eprintln!();
     }

@@ -406,8 +406,12 @@ pub fn run(options: &DemoOptions, quiet: bool) -> anyhow::Result<DemoReport> {
 
     let t0 = Instant::now();
     let outcome = (|| -> anyhow::Result<Measured> {
-        let mut client = Client::new(Box::new(handheld_port), key);
-        client.connect(Duration::from_secs(10))?;
+        let mut client = Client::with_entropy(
+            Box::new(handheld_port),
+            key,
+            onboard::link::session::Entropy::from_test_seed(options.seed),
+        );
+        client.connect(Duration::from_secs(30))?;
         // Let the service see the firmware and the lidar before the checks.
         thread::sleep(Duration::from_millis(500));
         let params = StartMeasurement {
@@ -416,11 +420,8 @@ pub fn run(options: &DemoOptions, quiet: bool) -> anyhow::Result<DemoReport> {
             distance_m: run_spec.distance_m as f32,
             zone: Zone::Tyre,
         };
-        let counter = std::time::SystemTime::now()
-            .duration_since(std::time::UNIX_EPOCH)
-            .map_or(1, |d| d.as_micros() as u64);
         let time_limit = Duration::from_secs_f64(run_spec.distance_m / run_spec.speed_mps + 300.0);
-        Ok(client.measure(params, counter, time_limit, &mut StderrObserver { quiet })?)
+        Ok(client.measure(&params, time_limit, &mut StderrObserver { quiet })?)
     })();
     stop.store(true, Ordering::Relaxed);
     for t in threads {

@@ -9,13 +9,12 @@ use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 use protocol::auth::Key;
 use protocol::common::LogLine;
-use protocol::radio::{
-    MeasurementResult, Phase, Progress, Refused, RobotStatus, SignedStart, StartMeasurement,
-};
-use protocol::{Message, ids};
+use protocol::ids;
+use protocol::radio::{MeasurementResult, Phase, Progress, Refused, RobotStatus, StartMeasurement};
 
 use crate::link::handheld::{HandheldConfig, HandheldEvent, HandheldRadio};
 use crate::link::preview;
+use crate::link::session::{Entropy, SessionError};
 use crate::recorder::ResultRecord;
 use crate::service::Port;
 
@@ -61,6 +60,17 @@ pub enum ClientError {
     /// A command could not be encoded.
     #[error("{0}")]
     Send(#[from] crate::link::reliable::SendError),
+    /// The session could not be set up (no random source).
+    #[error("radio session: {0}")]
+    Session(#[from] SessionError),
+    /// The robot speaks another protocol version.
+    #[error("the robot speaks protocol version {theirs}, this handheld {ours}: update one of them")]
+    Version {
+        /// The robot's.
+        theirs: u8,
+        /// Ours.
+        ours: u8,
+    },
 }
 
 /// What the operator sees while a run goes on.
@@ -112,10 +122,20 @@ fn wall_us() -> u64 {
 }
 
 impl Client {
-    /// A client over `port` with the pairing key.
-    pub fn new(port: Box<dyn Port>, key: Key) -> Self {
+    /// A client over `port` with the pairing key; the handshake's randomness comes from the OS.
+    pub fn new(port: Box<dyn Port>, key: Key) -> Result<Self, ClientError> {
+        Ok(Self::with_entropy(port, key, Entropy::from_os()?))
+    }
+
+    /// A client with the given randomness (reproducible simulations and tests).
+    pub fn with_entropy(port: Box<dyn Port>, key: Key, entropy: Entropy) -> Self {
         Self {
-            radio: HandheldRadio::new(HandheldConfig::default(), key, (wall_us() / 1000) as u16),
+            radio: HandheldRadio::new(
+                HandheldConfig::default(),
+                key,
+                entropy,
+                (wall_us() / 1000) as u16,
+            ),
             port,
             epoch: Instant::now(),
             buf: vec![0; 4096],
@@ -192,17 +212,38 @@ impl Client {
         }
     }
 
-    /// Says hello and waits for the robot's.
-    pub fn connect(&mut self, timeout: Duration) -> Result<protocol::Hello, ClientError> {
-        self.radio.hello()?;
+    /// Opens the radio session (the handshake init is repeated until the robot answers).
+    pub fn connect(&mut self, timeout: Duration) -> Result<(), ClientError> {
+        let now = self.now_us();
+        self.radio.connect(now)?;
         self.pump(timeout, |_, e| match e {
-            HandheldEvent::Hello(h) => Some(Ok(*h)),
+            HandheldEvent::Connected { .. } => Some(Ok(())),
+            HandheldEvent::Version(h) if h.version != protocol::PROTOCOL_VERSION => {
+                Some(Err(ClientError::Version {
+                    theirs: h.version,
+                    ours: protocol::PROTOCOL_VERSION,
+                }))
+            }
             _ => None,
         })
     }
 
+    fn ensure_connected(&mut self, timeout: Duration) -> Result<(), ClientError> {
+        if self.radio.is_connected() {
+            Ok(())
+        } else {
+            self.connect(timeout)
+        }
+    }
+
+    /// The radio end (counters, session).
+    pub fn radio(&self) -> &HandheldRadio {
+        &self.radio
+    }
+
     /// Asks for the robot's status.
     pub fn status(&mut self, timeout: Duration) -> Result<RobotStatus, ClientError> {
+        self.ensure_connected(timeout)?;
         self.radio.request_status()?;
         self.pump(timeout, |_, e| match e {
             HandheldEvent::Status(s) => Some(Ok(*s)),
@@ -212,6 +253,7 @@ impl Client {
 
     /// Sends an abort and waits for its ack.
     pub fn abort(&mut self, run_id: u32, timeout: Duration) -> Result<(), ClientError> {
+        self.ensure_connected(timeout)?;
         let seq = self.radio.abort(run_id)?;
         self.pump(timeout, |_, e| match e {
             HandheldEvent::Acked { msg_id, seq: s } if *msg_id == ids::ABORT && *s == seq => {
@@ -228,6 +270,7 @@ impl Client {
         timeout: Duration,
         observer: &mut dyn Observer,
     ) -> Result<Measured, ClientError> {
+        self.ensure_connected(timeout)?;
         let seq = self.radio.fetch(run_id)?;
         let mut result_at = None;
         let out = self.pump(timeout, |radio, e| match e {
@@ -261,24 +304,22 @@ impl Client {
     /// Starts a measurement and follows it to the result and its preview.
     pub fn measure(
         &mut self,
-        params: StartMeasurement,
-        counter: u64,
+        params: &StartMeasurement,
         timeout: Duration,
         observer: &mut dyn Observer,
     ) -> Result<Measured, ClientError> {
-        let seq = self.radio.start(params, counter)?;
+        self.ensure_connected(timeout)?;
+        let seq = self.radio.start(params)?;
         let mut run_id = None;
         let mut at_rest = None;
         let mut result_at: Option<Instant> = None;
         let mut stop_to_result = None;
         let out = self.pump(timeout, |radio, e| {
             match e {
-                HandheldEvent::Refused(r)
-                    if r.msg_id == <SignedStart as Message>::ID && r.seq == seq =>
-                {
+                HandheldEvent::Refused(r) if r.msg_id == ids::START_MEASUREMENT && r.seq == seq => {
                     return Some(Err(refused("the start", r)));
                 }
-                HandheldEvent::Lost { msg_id, .. } if *msg_id == <SignedStart as Message>::ID => {
+                HandheldEvent::Lost { msg_id, .. } if *msg_id == ids::START_MEASUREMENT => {
                     return Some(Err(ClientError::NotDelivered {
                         what: "the start",
                         attempts: radio.link().config().max_attempts,
@@ -452,16 +493,4 @@ fn xml_escape(s: &str) -> String {
         .replace('<', "&lt;")
         .replace('>', "&gt;")
         .replace('"', "&quot;")
-}
-
-/// A start counter that never repeats for a key: microseconds since the Unix epoch, kept above
-/// the last one used (stored in `counter_file`).
-pub fn next_counter(counter_file: &Path) -> io::Result<u64> {
-    let last = std::fs::read_to_string(counter_file)
-        .ok()
-        .and_then(|t| t.trim().parse::<u64>().ok())
-        .unwrap_or(0);
-    let next = wall_us().max(last + 1);
-    std::fs::write(counter_file, format!("{next}\n"))?;
-    Ok(next)
 }

@@ -4,10 +4,11 @@
 //! (toml's own span report). Every key has a documented default except the two serial ports; the
 //! shipped `onboard/onboard.example.toml` lists them all and is checked by a test.
 //!
-//! Pairing: the pre-shared key is 32 random bytes stored as 64 hex digits in a file readable only
-//! by its owner (`passangle pair` writes it on the handheld; the same file is copied to the robot).
-//! The robot keeps the last accepted start counter in `counter-file` (written atomically before
-//! the robot moves), so a captured start cannot be replayed even after a restart.
+//! Pairing: a pre-shared key is 32 random bytes stored as 64 hex digits in a file readable only by
+//! its owner (`passangle pair` writes it on the handheld). The robot's `key-file` lists one key per
+//! paired handheld ([`crate::link::keys`]). Every radio session is a fresh Noise handshake keyed
+//! with one of them, so nothing needs to persist between runs to refuse a replay
+//! (docs/security.md).
 
 use std::fs;
 use std::io;
@@ -18,7 +19,7 @@ use protocol::auth::{KEY_LEN, Key};
 use protocol::mcu::McuConfig;
 use serde::{Deserialize, Serialize};
 
-use crate::recorder::{Intrinsics, write_atomic};
+use crate::recorder::Intrinsics;
 use crate::run::RunConfig;
 
 /// A configuration or pairing-file error, naming the file and what was wrong.
@@ -108,12 +109,9 @@ pub struct RadioConfig {
     /// Baud rate (default 57600).
     #[serde(default = "default_radio_baud")]
     pub baud: u32,
-    /// Pairing key file (default `/etc/passangle/pairing.key`).
+    /// The paired handhelds' keys, one per line (default `/etc/passangle/pairing.key`).
     #[serde(default = "default_key_file")]
     pub key_file: PathBuf,
-    /// Last accepted start counter (default `/var/lib/passangle/start-counter`).
-    #[serde(default = "default_counter_file")]
-    pub counter_file: PathBuf,
 }
 
 fn default_radio_baud() -> u32 {
@@ -121,9 +119,6 @@ fn default_radio_baud() -> u32 {
 }
 fn default_key_file() -> PathBuf {
     PathBuf::from("/etc/passangle/pairing.key")
-}
-fn default_counter_file() -> PathBuf {
-    PathBuf::from("/var/lib/passangle/start-counter")
 }
 
 /// `[mcu]`.
@@ -378,7 +373,7 @@ impl OnboardConfig {
     }
 
     /// What `check-config` reports: the configuration if it parses, and every problem of the
-    /// file, of its values and of the key and counter files it names (empty: all good).
+    /// file, of its values and of the key file it names (empty: all good).
     pub fn check_file(path: &Path) -> (Option<Self>, Vec<ConfigError>) {
         let text = match fs::read_to_string(path) {
             Ok(text) => text,
@@ -593,23 +588,25 @@ impl OnboardConfig {
         problems
     }
 
-    /// Problems with the pairing key and start-counter files (`check-config`; the service reads
-    /// them at start). Each must exist, be a regular file owned by root or by the user running
-    /// the check (run it as the service user), grant nothing to others and at most read to the
-    /// group (modes 0600, 0640, 0400, 0440), and parse.
+    /// Problems with the paired handhelds' key file (`check-config`; the service reads it at
+    /// start). It must exist, be a regular file owned by root or by the user running the check
+    /// (run it as the service user), grant nothing to others and at most read to the group
+    /// (modes 0600, 0640, 0400, 0440), and hold at least one well-formed key.
     pub fn file_problems(&self) -> Vec<ConfigError> {
-        let mut problems = Vec::new();
-        if let Err(e) = check_secret_file(&self.radio.key_file, "radio.key-file")
-            .and_then(|()| read_key(&self.radio.key_file).map(drop))
-        {
-            problems.push(e);
-        }
-        if let Err(e) = check_secret_file(&self.radio.counter_file, "radio.counter-file")
-            .and_then(|()| read_counter(&self.radio.counter_file).map(drop))
-        {
-            problems.push(e);
-        }
-        problems
+        let path = &self.radio.key_file;
+        check_secret_file(path, "radio.key-file")
+            .and_then(|()| {
+                crate::link::keys::read(path)
+                    .map(drop)
+                    .map_err(|e| ConfigError::Invalid {
+                        path: path.clone(),
+                        key: "radio.key-file".into(),
+                        problem: e.to_string(),
+                    })
+            })
+            .err()
+            .into_iter()
+            .collect()
     }
 }
 
@@ -750,29 +747,6 @@ pub fn write_key(path: &Path, key: &Key) -> Result<(), ConfigError> {
     f.sync_all().map_err(io_err)
 }
 
-/// Reads the persisted last start counter (0 if the file does not exist yet).
-pub fn read_counter(path: &Path) -> Result<u64, ConfigError> {
-    match fs::read_to_string(path) {
-        Ok(text) => text.trim().parse().map_err(|e| ConfigError::Parse {
-            path: path.to_owned(),
-            message: format!("expected one decimal counter: {e}"),
-        }),
-        Err(e) if e.kind() == io::ErrorKind::NotFound => Ok(0),
-        Err(source) => Err(ConfigError::Io {
-            path: path.to_owned(),
-            source,
-        }),
-    }
-}
-
-/// Persists the last start counter atomically.
-pub fn write_counter(path: &Path, counter: u64) -> Result<(), ConfigError> {
-    write_atomic(path, format!("{counter}\n").as_bytes()).map_err(|e| ConfigError::Parse {
-        path: path.to_owned(),
-        message: e.to_string(),
-    })
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -879,21 +853,13 @@ mod tests {
     }
 
     #[test]
-    fn key_and_counter_files_are_checked() {
+    fn the_key_file_is_checked() {
         use std::os::unix::fs::PermissionsExt;
         let dir = std::env::temp_dir().join(format!("passangle-cfgchk-{}", std::process::id()));
         let _ = fs::remove_dir_all(&dir);
         fs::create_dir_all(&dir).unwrap();
         let key = dir.join("pairing.key");
-        let counter = dir.join("start-counter");
-        let text = MINIMAL.replace(
-            "[mcu]",
-            &format!(
-                "key-file = \"{}\"\ncounter-file = \"{}\"\n[mcu]",
-                key.display(),
-                counter.display()
-            ),
-        );
+        let text = MINIMAL.replace("[mcu]", &format!("key-file = \"{}\"\n[mcu]", key.display()));
         let config_path = dir.join("onboard.toml");
         fs::write(&config_path, &text).unwrap();
         let problems = |path: &Path| -> Vec<String> {
@@ -903,41 +869,36 @@ mod tests {
                 .map(ToString::to_string)
                 .collect()
         };
-        // Neither file exists: both reported.
         let p = problems(&config_path);
-        assert_eq!(p.len(), 2, "{p:#?}");
+        assert_eq!(p.len(), 1, "{p:#?}");
         assert!(
             p[0].contains("`radio.key-file` the file does not exist"),
             "{p:#?}"
         );
+        crate::link::keys::add(&key, &Key([7; KEY_LEN]), "handheld 1").unwrap();
+        assert_eq!(problems(&config_path), Vec::<String>::new());
+        // World-readable.
+        fs::set_permissions(&key, fs::Permissions::from_mode(0o644)).unwrap();
+        let p = problems(&config_path);
+        assert!(p[0].contains("mode 0644 is too open"), "{p:#?}");
+        // Not a key.
+        fs::set_permissions(&key, fs::Permissions::from_mode(0o600)).unwrap();
+        fs::write(&key, "twelve\n").unwrap();
+        let p = problems(&config_path);
         assert!(
-            p[1].contains("`radio.counter-file` the file does not exist"),
+            p[0].contains("`radio.key-file`") && p[0].contains("line 1"),
             "{p:#?}"
         );
-        write_key(&key, &Key([7; KEY_LEN])).unwrap();
-        write_counter(&counter, 5).unwrap();
-        fs::set_permissions(&counter, fs::Permissions::from_mode(0o640)).unwrap();
-        assert_eq!(problems(&config_path), Vec::<String>::new());
-        // World-readable key, group-writable counter.
-        fs::set_permissions(&key, fs::Permissions::from_mode(0o644)).unwrap();
-        fs::set_permissions(&counter, fs::Permissions::from_mode(0o660)).unwrap();
-        let p = problems(&config_path);
-        assert_eq!(p.len(), 2, "{p:#?}");
-        assert!(p[0].contains("mode 0644 is too open"), "{p:#?}");
-        assert!(p[1].contains("mode 0660 is too open"), "{p:#?}");
-        // A directory where the key should be, and a counter that does not parse.
+        // A directory where the key should be.
         fs::remove_file(&key).unwrap();
         fs::create_dir(&key).unwrap();
-        fs::set_permissions(&counter, fs::Permissions::from_mode(0o600)).unwrap();
-        fs::write(&counter, "twelve\n").unwrap();
         let p = problems(&config_path);
         assert!(p[0].contains("is not a regular file"), "{p:#?}");
-        assert!(p[1].contains("expected one decimal counter"), "{p:#?}");
         fs::remove_dir_all(&dir).unwrap();
     }
 
     #[test]
-    fn key_and_counter_files_round_trip() {
+    fn handheld_key_files_round_trip() {
         use std::os::unix::fs::PermissionsExt;
         let dir = std::env::temp_dir().join(format!("passangle-cfg-{}", std::process::id()));
         let _ = fs::remove_dir_all(&dir);
@@ -958,10 +919,6 @@ mod tests {
                 .to_string()
                 .contains("64 hex digits")
         );
-        let c = dir.join("c");
-        assert_eq!(read_counter(&c).unwrap(), 0);
-        write_counter(&c, 1_700_000_000_000_123).unwrap();
-        assert_eq!(read_counter(&c).unwrap(), 1_700_000_000_000_123);
         fs::remove_dir_all(&dir).unwrap();
     }
 }

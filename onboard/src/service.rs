@@ -6,7 +6,11 @@
 //! very same loop: the binary opens real serial ports and sockets, the simulator hands in
 //! pseudo-terminals and a simulated camera. One thread runs the loop (every
 //! [`LOOP_PERIOD`]); the lidar socket and the camera have their own reader threads feeding bounded
-//! channels; processing a run runs on a worker thread so the loop (heartbeats, radio) never stalls.
+//! channels; processing a run runs on a worker thread, and the radio's disk work (reading an
+//! earlier run's cloud for a fetch, decimating its preview, marking a result delivered) runs on
+//! the IO worker ([`IoWorker`], bounded queues), so the loop (MCU heartbeat, radio) never waits on
+//! disk or CPU work. Warnings about dropped radio frames are rate limited (one line per
+//! [`DROP_LOG_PERIOD_US`] with the counts), so a flood cannot fill the log.
 //!
 //! Safety: on shutdown, and whenever the loop ends for any reason, the MCU gets an immediate stop;
 //! if the process dies instead, the firmware stops by heartbeat loss.
@@ -243,9 +247,15 @@ pub struct Io {
 /// Why the service could not start or had to stop.
 #[derive(Debug, thiserror::Error)]
 pub enum ServiceError {
-    /// Configuration or pairing files.
+    /// Configuration files.
     #[error(transparent)]
     Config(#[from] config::ConfigError),
+    /// The pairing-key file.
+    #[error(transparent)]
+    Keys(#[from] crate::link::keys::KeyFileError),
+    /// No random source for the radio sessions.
+    #[error("radio session: {0}")]
+    Session(#[from] crate::link::session::SessionError),
     /// The recording root.
     #[error(transparent)]
     Recorder(#[from] recorder::RecorderError),
@@ -262,6 +272,16 @@ pub enum ServiceError {
 /// Counters exposed for logs and tests.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct ServiceStats {
+    /// What the radio end dropped (unauthenticated, unopened, rate limited) and opened.
+    pub radio: crate::link::radio::RadioStats,
+    /// Longest time between the starts of two loop iterations since the service started, us
+    /// (the MCU heartbeat leaves once per iteration; the firmware stops after 100 ms without).
+    pub max_loop_gap_us: u64,
+    /// Longest time one loop iteration spent working (the gap less the sleep and the
+    /// scheduler's lateness), us: what the loop itself waited for.
+    pub max_loop_work_us: u64,
+    /// Fetches refused because the IO worker's queue was full.
+    pub fetches_busy: u64,
     /// Lidar data packets that passed the checked view.
     pub lidar_packets: u64,
     /// Lidar packets that did not (wrong length, bad block flags, ...): dropped and counted.
@@ -365,11 +385,157 @@ fn complete(
     let _ = tx.send(WorkerMsg::Saved(errors));
 }
 
+/// How often the loop logs the radio frames it dropped (one line with the counts), us.
+pub const DROP_LOG_PERIOD_US: u64 = 10_000_000;
+
+/// Jobs the IO worker's queue holds: a handheld asking for more waits for a refusal (`Busy`).
+const IO_QUEUE: usize = 4;
+
+/// Disk and CPU work the loop hands off.
+enum IoJob {
+    /// Read an earlier run's result and cloud, decimate the preview.
+    Fetch { run_id: u32, seq: u16 },
+    /// Mark a run's result delivered (`DELIVERED` file).
+    MarkDelivered { run_id: u32 },
+    /// Close a run's recording: `result.json` (if any), fsync the streams, the outcome in
+    /// `meta.json`, remove `INCOMPLETE`. The jobs run in order, so a later fetch of the run finds
+    /// its result on disk.
+    Finish {
+        run_id: u32,
+        recorder: Box<RunRecorder>,
+        result: Option<ResultRecord>,
+        outcome: RecordedOutcome,
+    },
+}
+
+/// What the IO worker reports.
+enum IoDone {
+    Fetched {
+        run_id: u32,
+        seq: u16,
+        ready: Option<Ready>,
+    },
+    Marked {
+        run_id: u32,
+        error: Option<String>,
+    },
+    Finished {
+        run_id: u32,
+        errors: Vec<String>,
+    },
+}
+
+/// The IO worker thread (see the module docs): bounded job and result queues.
+struct IoWorker {
+    jobs: SyncSender<IoJob>,
+    done: Receiver<IoDone>,
+    handle: Option<thread::JoinHandle<()>>,
+}
+
+impl IoWorker {
+    fn spawn(root: PathBuf, preview: config::PreviewConfig) -> io::Result<Self> {
+        let (jobs, job_rx) = sync_channel::<IoJob>(IO_QUEUE);
+        let (done_tx, done) = sync_channel::<IoDone>(IO_QUEUE);
+        let handle = thread::Builder::new()
+            .name("radio-io".into())
+            .spawn(move || {
+                while let Ok(job) = job_rx.recv() {
+                    let out = match job {
+                        IoJob::Fetch { run_id, seq } => IoDone::Fetched {
+                            run_id,
+                            seq,
+                            ready: Recording::open_run(&root, run_id)
+                                .ok()
+                                .and_then(|rec| recorded_ready(&rec, preview)),
+                        },
+                        IoJob::MarkDelivered { run_id } => IoDone::Marked {
+                            run_id,
+                            error: recorder::mark_delivered(&root, run_id)
+                                .err()
+                                .map(|e| e.to_string()),
+                        },
+                        IoJob::Finish {
+                            run_id,
+                            mut recorder,
+                            result,
+                            outcome,
+                        } => {
+                            if let Some(r) = &result {
+                                recorder.save_result(r);
+                            }
+                            IoDone::Finished {
+                                run_id,
+                                errors: recorder.finish(outcome),
+                            }
+                        }
+                    };
+                    if done_tx.send(out).is_err() {
+                        return;
+                    }
+                }
+            })?;
+        Ok(Self {
+            jobs,
+            done,
+            handle: Some(handle),
+        })
+    }
+
+    /// Runs `waiting` and everything queued to the end (closing recordings), then stops the
+    /// thread. Results are read and dropped meanwhile, so the worker never blocks on them.
+    fn drain(mut self, waiting: impl IntoIterator<Item = IoJob>) {
+        for job in waiting {
+            let mut job = job;
+            loop {
+                match self.jobs.try_send(job) {
+                    Ok(()) => break,
+                    Err(TrySendError::Full(j)) => {
+                        job = j;
+                        while self.done.try_recv().is_ok() {}
+                        thread::sleep(Duration::from_millis(1));
+                    }
+                    Err(TrySendError::Disconnected(_)) => return,
+                }
+            }
+        }
+        let Some(handle) = self.handle.take() else {
+            return;
+        };
+        drop(self.jobs);
+        while !handle.is_finished() {
+            while self.done.try_recv().is_ok() {}
+            thread::sleep(Duration::from_millis(1));
+        }
+        let _ = handle.join();
+    }
+}
+
+/// A recorded run's result with its preview decimated from `cloud.ply` (none without a result).
+fn recorded_ready(rec: &Recording, preview: config::PreviewConfig) -> Option<Ready> {
+    let result = rec.result.as_ref()?;
+    let points = crate::cloud::read_cloud(&rec.dir.join("cloud.ply"))
+        .map(|(c, _)| c.points_m)
+        .unwrap_or_default();
+    Some(Ready {
+        result: result.to_wire(),
+        preview_mm: preview::decimate(&points, preview.voxel_m, preview.max_points),
+    })
+}
+
 /// The service state between loop iterations.
 struct Service {
     config: OnboardConfig,
     config_text: String,
     radio: OnboardRadio,
+    io_worker: IoWorker,
+    /// Jobs (delivered marks, closing recordings) waiting for room in the IO worker's queue, in
+    /// order; bounded by the runs and results there are.
+    io_waiting: std::collections::VecDeque<IoJob>,
+    /// The current run's result, saved with its recording when the run ends.
+    result_record: Option<ResultRecord>,
+    /// Radio counters at the last drop log line.
+    logged_radio: crate::link::radio::RadioStats,
+    next_drop_log_us: u64,
     mcu: McuSession,
     run: RunMachine,
     recorder: Option<RunRecorder>,
@@ -404,8 +570,14 @@ pub fn run(
     notifier: &mut dyn Notifier,
     shared: SharedStats,
 ) -> Result<(), ServiceError> {
-    let key = config::read_key(&config.radio.key_file)?;
-    let last_counter = config::read_counter(&config.radio.counter_file)?;
+    let keys: Vec<_> = crate::link::keys::read(&config.radio.key_file)?
+        .into_iter()
+        .map(|e| {
+            tracing::info!(key_id = %format_args!("{:08x}", e.id), label = %e.label, "paired handheld");
+            e.key
+        })
+        .collect();
+    let entropy = crate::link::session::Entropy::from_os()?;
     std::fs::create_dir_all(&config.recording.root).map_err(|e| recorder::RecorderError::Io {
         path: config.recording.root.clone(),
         source: e,
@@ -429,10 +601,20 @@ pub fn run(
     let mut s = Service {
         radio: OnboardRadio::new(
             LinkConfig::RADIO,
-            key,
-            last_counter,
+            keys,
+            entropy,
             seed_seq.wrapping_add(0x8000),
         ),
+        io_worker: IoWorker::spawn(config.recording.root.clone(), config.preview).map_err(
+            |source| ServiceError::Io {
+                what: "starting the radio IO thread",
+                source,
+            },
+        )?,
+        io_waiting: std::collections::VecDeque::new(),
+        result_record: None,
+        logged_radio: crate::link::radio::RadioStats::default(),
+        next_drop_log_us: DROP_LOG_PERIOD_US,
         mcu,
         run: RunMachine::new(config.run, next_run_id),
         recorder: None,
@@ -471,6 +653,9 @@ pub fn run(
     if let Some(r) = s.recorder.take() {
         r.finish(RecordedOutcome::Aborted("service stopped".into()));
     }
+    // Recordings the IO worker still has to close are closed before the service ends.
+    let waiting: Vec<IoJob> = s.io_waiting.drain(..).collect();
+    s.io_worker.drain(waiting);
     notifier.stopping();
     result
 }
@@ -514,21 +699,96 @@ impl Service {
     }
 
     fn offer_recorded(&mut self, rec: &Recording) -> bool {
-        let Some(result) = &rec.result else {
+        let Some(ready) = recorded_ready(rec, self.config.preview) else {
             return false;
         };
-        let points = crate::cloud::read_cloud(&rec.dir.join("cloud.ply"))
-            .map(|(c, _)| c.points_m)
-            .unwrap_or_default();
-        let p = self.config.preview;
-        let preview_mm = preview::decimate(&points, p.voxel_m, p.max_points);
-        match self.radio.deliver(result.to_wire(), &preview_mm) {
+        match self.radio.deliver(ready.result, &ready.preview_mm) {
             Ok(()) => true,
             Err(e) => {
-                tracing::error!("cannot offer run {}: {e}", result.run_id);
+                tracing::error!("cannot offer run {}: {e}", rec.dir.display());
                 false
             }
         }
+    }
+
+    /// Results of the IO worker; delivered marks that waited for room.
+    fn check_io(&mut self) {
+        while let Some(job) = self.io_waiting.pop_front() {
+            match self.io_worker.jobs.try_send(job) {
+                Ok(()) => {}
+                Err(TrySendError::Full(job)) => {
+                    self.io_waiting.push_front(job);
+                    break;
+                }
+                Err(TrySendError::Disconnected(_)) => {
+                    tracing::error!("the radio IO thread ended: recordings are not closed");
+                    break;
+                }
+            }
+        }
+        while let Ok(done) = self.io_worker.done.try_recv() {
+            match done {
+                IoDone::Fetched {
+                    run_id,
+                    seq: _,
+                    ready: Some(r),
+                } => {
+                    if let Err(e) = self.radio.deliver(r.result, &r.preview_mm) {
+                        tracing::error!("cannot offer run {run_id}: {e}");
+                    }
+                }
+                IoDone::Fetched {
+                    run_id,
+                    seq,
+                    ready: None,
+                } => self.radio.refuse(
+                    protocol::ids::FETCH_RUN,
+                    seq,
+                    RefuseReason::UnknownRun,
+                    &format!("run {run_id} has no result on the robot"),
+                ),
+                IoDone::Marked {
+                    run_id,
+                    error: None,
+                } => tracing::info!(run_id, "result delivered to the handheld"),
+                IoDone::Marked {
+                    run_id,
+                    error: Some(e),
+                } => tracing::warn!("run {run_id}: result acknowledged, but {e}"),
+                IoDone::Finished { run_id, errors } => {
+                    for e in errors {
+                        tracing::error!(run_id, "{e}");
+                    }
+                }
+            }
+        }
+    }
+
+    /// One warning per [`DROP_LOG_PERIOD_US`] with what the radio dropped since the last one.
+    fn log_radio_drops(&mut self, now: u64) {
+        if now < self.next_drop_log_us {
+            return;
+        }
+        self.next_drop_log_us = now + DROP_LOG_PERIOD_US;
+        let s = self.radio.stats();
+        let l = self.logged_radio;
+        let d = |a: u64, b: u64| a.saturating_sub(b);
+        let dropped = d(s.unauthenticated, l.unauthenticated)
+            + d(s.unopened, l.unopened)
+            + d(s.inits_refused, l.inits_refused)
+            + d(s.rate_limited, l.rate_limited);
+        if dropped > 0 {
+            tracing::warn!(
+                unauthenticated = d(s.unauthenticated, l.unauthenticated),
+                unopened = d(s.unopened, l.unopened),
+                inits_refused = d(s.inits_refused, l.inits_refused),
+                rate_limited = d(s.rate_limited, l.rate_limited),
+                replies_suppressed = d(s.replies_suppressed, l.replies_suppressed),
+                "radio frames dropped in the last {} s",
+                DROP_LOG_PERIOD_US / 1_000_000
+            );
+        }
+        self.logged_radio = s;
     }
 
     fn main_loop(
@@ -541,11 +801,16 @@ impl Service {
         let mut next_watchdog = 0;
         let mut next_flush = 0;
         let mut last_phase = Phase::Idle;
+        let mut last_start: Option<u64> = None;
         while !shutdown.load(Ordering::Relaxed)
             && !io.crash.as_ref().is_some_and(|c| c.load(Ordering::Relaxed))
         {
             let loop_start = Instant::now();
             let now = self.now_us();
+            if let Some(t) = last_start {
+                self.stats.max_loop_gap_us = self.stats.max_loop_gap_us.max(now - t);
+            }
+            last_start = Some(now);
             let n =
                 read_available(io.radio.as_mut(), &mut buf).map_err(|source| ServiceError::Io {
                     what: "radio port",
@@ -567,6 +832,8 @@ impl Service {
                 self.drain_depth(now, depth);
             }
             self.check_worker(now);
+            self.check_io();
+            self.log_radio_drops(now);
             let obs = self.observations(now);
             let actions = self.run.tick(now, &obs);
             self.execute(now, actions);
@@ -603,9 +870,12 @@ impl Service {
                 last_phase = self.run.phase();
                 notifier.status(&format!("run {}: {}", self.run.run_id(), last_phase));
             }
+            self.stats.radio = self.radio.stats();
             if let Ok(mut shared) = self.shared.lock() {
                 *shared = self.stats;
             }
+            let work = u64::try_from(loop_start.elapsed().as_micros()).unwrap_or(u64::MAX);
+            self.stats.max_loop_work_us = self.stats.max_loop_work_us.max(work);
             if let Some(rest) = LOOP_PERIOD.checked_sub(loop_start.elapsed()) {
                 thread::sleep(rest);
             }
@@ -633,22 +903,12 @@ impl Service {
 
     fn on_request(&mut self, now: u64, req: RadioRequest) {
         match req {
-            RadioRequest::Start { params, seq } => {
-                // Persist the counter before acting, or a restart would accept a replay.
-                if let Err(e) = config::write_counter(
-                    &self.config.radio.counter_file,
-                    self.radio.last_counter(),
-                ) {
-                    tracing::error!("refusing start: {e}");
-                    self.stats.starts_refused += 1;
-                    self.radio.refuse(
-                        START_ID,
-                        seq,
-                        RefuseReason::Interlocked,
-                        "cannot persist the start counter",
-                    );
-                    return;
-                }
+            RadioRequest::Start {
+                params,
+                seq,
+                key_id,
+            } => {
+                tracing::info!(key_id = %format_args!("{key_id:08x}"), "start from a paired handheld");
                 let actions = self.run.start(now, params, seq);
                 self.execute(now, actions);
             }
@@ -657,21 +917,30 @@ impl Service {
                 self.execute(now, actions);
             }
             RadioRequest::ResultAck { run_id } => {
-                if let Err(e) = recorder::mark_delivered(&self.config.recording.root, run_id) {
-                    tracing::warn!("run {run_id}: result acknowledged, but {e}");
-                } else {
-                    tracing::info!(run_id, "result delivered to the handheld");
+                // Bounded: at most 64 marks wait for the worker (a handheld acks each run once
+                // per offer, and the link drops duplicates).
+                let waiting = self
+                    .io_waiting
+                    .iter()
+                    .filter(|j| matches!(j, IoJob::MarkDelivered { .. }))
+                    .count();
+                if waiting < 64 {
+                    self.io_waiting.push_back(IoJob::MarkDelivered { run_id });
                 }
             }
             RadioRequest::Fetch { run_id, seq } => {
-                let offered = Recording::open_run(&self.config.recording.root, run_id)
-                    .is_ok_and(|rec| self.offer_recorded(&rec));
-                if !offered {
+                if self
+                    .io_worker
+                    .jobs
+                    .try_send(IoJob::Fetch { run_id, seq })
+                    .is_err()
+                {
+                    self.stats.fetches_busy += 1;
                     self.radio.refuse(
                         protocol::ids::FETCH_RUN,
                         seq,
-                        RefuseReason::UnknownRun,
-                        &format!("run {run_id} has no result on the robot"),
+                        RefuseReason::Busy,
+                        "earlier fetches are still being read from disk; ask again",
                     );
                 }
             }
@@ -682,9 +951,6 @@ impl Service {
                 }
             }
             RadioRequest::Refused { reason, detail } => {
-                if matches!(reason, RefuseReason::BadTag | RefuseReason::Replay) {
-                    self.stats.starts_refused += 1;
-                }
                 tracing::warn!(%reason, "refused radio command: {detail}");
             }
         }
@@ -881,14 +1147,14 @@ impl Service {
         }
     }
 
-    /// The result goes out first; `result.json` follows (small); the cloud and the SVG are
-    /// written by the processing thread.
+    /// The result goes out first; `result.json` is written when the run's recording closes (on
+    /// the IO worker); the cloud and the SVG are written by the processing thread.
     fn deliver(&mut self, r: &Ready) {
         if let Err(e) = self.radio.deliver(r.result.clone(), &r.preview_mm) {
             tracing::error!("cannot send the result: {e}");
         }
-        if let Some(rec) = &mut self.recorder {
-            rec.save_result(&ResultRecord::from_wire(&r.result));
+        if self.recorder.is_some() {
+            self.result_record = Some(ResultRecord::from_wire(&r.result));
         }
     }
 
@@ -951,9 +1217,14 @@ impl Service {
                             Outcome::Aborted(s) => RecordedOutcome::Aborted(s),
                             Outcome::Failed(s) => RecordedOutcome::Failed(s),
                         };
-                        for e in r.finish(recorded) {
-                            tracing::error!(run_id, "{e}");
-                        }
+                        // The fsyncs and the final files go to the IO worker.
+                        self.io_waiting.push_back(IoJob::Finish {
+                            run_id,
+                            recorder: Box::new(r),
+                            result: self.result_record.take(),
+                            outcome: recorded,
+                        });
+                        self.check_io();
                     }
                 }
                 Action::Progress(p) => {

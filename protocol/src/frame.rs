@@ -151,6 +151,15 @@ pub fn encode_raw(header: Header, payload: &[u8], out: &mut [u8]) -> Result<usiz
     Ok(n + 1)
 }
 
+/// Encodes `msg` as a postcard payload into `out` (at most [`MAX_PAYLOAD_LEN`] bytes are used);
+/// returns its length. The radio seals header and payload before framing.
+pub fn encode_payload<M: Serialize>(msg: &M, out: &mut [u8]) -> Result<usize, EncodeError> {
+    let out_len = out.len().min(MAX_PAYLOAD_LEN);
+    postcard::to_slice(msg, &mut out[..out_len])
+        .map(|s| s.len())
+        .map_err(|_| EncodeError::PayloadTooLarge)
+}
+
 /// Serialises `msg` with postcard and encodes it under `header` into `out`; returns the frame
 /// length including the trailing 0x00.
 pub fn encode<M: Serialize>(header: Header, msg: &M, out: &mut [u8]) -> Result<usize, EncodeError> {

@@ -45,8 +45,9 @@
 //!
 //! ## Authentication
 //!
-//! The radio command that moves the robot ([`radio::SignedStart`]) carries a counter and a truncated
-//! HMAC-SHA256 tag over header and payload with the pre-shared pairing key; see [`auth`].
+//! Every radio frame but the two handshake messages is sealed in a Noise `NNpsk0` session keyed
+//! with the pre-shared pairing key (ChaCha20-Poly1305 with explicit nonces and a replay window);
+//! see [`auth`] and [`radio`].
 #![cfg_attr(not(any(test, feature = "std")), no_std)]
 #![forbid(unsafe_code)]
 #![warn(
@@ -71,7 +72,7 @@ pub use frame::{Deframer, Flags, Frame, Header};
 pub use message::{DecodeError, Message};
 
 /// Version of this protocol. Bump on any change to the bytes of any message.
-pub const PROTOCOL_VERSION: u8 = 2;
+pub const PROTOCOL_VERSION: u8 = 3;
 
 /// Message ids. Explicit, never derived from declaration order; never reused.
 pub mod ids {
@@ -81,6 +82,8 @@ pub mod ids {
     pub const HEARTBEAT: u16 = 0x0002;
     /// [`crate::LogLine`].
     pub const LOG_LINE: u16 = 0x0003;
+    /// A sealed radio frame (both directions; see [`crate::auth`]).
+    pub const SEALED: u16 = 0x0004;
 
     /// [`crate::mcu::Drive`].
     pub const DRIVE: u16 = 0x0101;
@@ -97,7 +100,7 @@ pub mod ids {
     /// [`crate::mcu::Rejected`].
     pub const REJECTED: u16 = 0x0183;
 
-    /// [`crate::radio::SignedStart`].
+    /// [`crate::radio::StartMeasurement`].
     pub const START_MEASUREMENT: u16 = 0x0201;
     /// [`crate::radio::Abort`].
     pub const ABORT: u16 = 0x0202;
@@ -109,6 +112,8 @@ pub mod ids {
     pub const STATUS_REQUEST: u16 = 0x0205;
     /// [`crate::radio::FetchRun`].
     pub const FETCH_RUN: u16 = 0x0206;
+    /// [`crate::radio::HandshakeInit`].
+    pub const HANDSHAKE_INIT: u16 = 0x0207;
     /// [`crate::radio::Progress`].
     pub const PROGRESS: u16 = 0x0281;
     /// [`crate::radio::MeasurementResult`].
@@ -119,4 +124,6 @@ pub mod ids {
     pub const ROBOT_STATUS: u16 = 0x0284;
     /// [`crate::radio::Refused`].
     pub const REFUSED: u16 = 0x0285;
+    /// [`crate::radio::HandshakeReply`].
+    pub const HANDSHAKE_REPLY: u16 = 0x0286;
 }

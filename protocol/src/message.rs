@@ -242,6 +242,16 @@ macro_rules! message_set {
                 match self { $(Self::$variant(m) => crate::message::Message::encode_frame(m, seq, flags, out),)+ }
             }
 
+            /// Largest postcard payload of any message in this set.
+            pub const MAX_PAYLOAD_LEN: usize = {
+                let mut max = 0;
+                $(
+                    let len = <$ty as postcard::experimental::max_size::MaxSize>::POSTCARD_MAX_SIZE;
+                    if len > max { max = len; }
+                )+
+                max
+            };
+
             /// Largest encoded frame of any message in this set, delimiter included.
             pub const MAX_FRAME_LEN: usize = {
                 let mut max = 0;

@@ -1,15 +1,17 @@
 //! Radio link: handheld <-> onboard, transparent serial radio at 57600 baud, slow and lossy.
 //!
+//! The handheld opens a session with [`HandshakeInit`] (answered by [`HandshakeReply`]); every
+//! message of [`ToOnboard`] and [`ToHandheld`], acks and heartbeats included, then travels sealed
+//! inside it (see [`crate::auth`]). Nothing else is accepted on the radio.
+//!
 //! Every command is sent with [`Flags::ACK_REQUESTED`](crate::frame::Flags) and retransmitted until
-//! acked. The one command that moves the robot, [`SignedStart`], is authenticated (see
-//! [`crate::auth`]); a refused command is answered with [`Refused`]. Results are resent until the
-//! handheld sends [`ResultAck`]; the cloud preview goes as [`CloudChunk`]s and the handheld asks for
-//! the missing ones with [`ResendChunks`].
+//! acked; a refused command is answered with [`Refused`]. Results are resent until the handheld
+//! sends [`ResultAck`]; the cloud preview goes as [`CloudChunk`]s and the handheld asks for the
+//! missing ones with [`ResendChunks`].
 
 use postcard::experimental::max_size::MaxSize;
 use serde::{Deserialize, Serialize};
 
-use crate::auth::Authenticated;
 use crate::bounded::{List, Text};
 use crate::common::{Heartbeat, Hello, LogLine};
 use crate::message::{bit_set, message_set, wire_enum};
@@ -24,7 +26,7 @@ wire_enum! {
     }
 }
 
-/// Start a measurement run (carried inside [`SignedStart`]).
+/// Start a measurement run: the one radio command that moves the robot.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, MaxSize)]
 pub struct StartMeasurement {
     /// Free-form vehicle identifier (plate, VIN, test number), up to 32 bytes.
@@ -37,11 +39,29 @@ pub struct StartMeasurement {
     pub zone: Zone,
 }
 
-/// [`StartMeasurement`] with its authentication envelope: the only radio command that moves the robot.
-pub type SignedStart = Authenticated<StartMeasurement>;
+/// First handshake message, handheld -> onboard (outside any session): Noise `NNpsk0`'s
+/// `-> psk, e` with an empty payload, under the pairing key named by `key_id`.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize, MaxSize)]
+pub struct HandshakeInit {
+    /// Id of the pairing key ([`crate::auth::key_id`]); also in the Noise prologue.
+    pub key_id: u32,
+    /// The Noise message ([`crate::auth::HANDSHAKE_MSG_LEN`] bytes).
+    pub noise: List<u8, 64>,
+}
 
-/// Abort the running measurement: the robot stops first. Not authenticated, on purpose: stopping
-/// is always allowed.
+/// Second handshake message, onboard -> handheld: Noise `NNpsk0`'s `<- e, ee`. From here on both
+/// ends have the session's transport keys.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize, MaxSize)]
+pub struct HandshakeReply {
+    /// Id of the pairing key the init named.
+    pub key_id: u32,
+    /// The session id the sealed frames of this session carry in their header's seq field.
+    pub session: u16,
+    /// The Noise message ([`crate::auth::HANDSHAKE_MSG_LEN`] bytes).
+    pub noise: List<u8, 64>,
+}
+
+/// Abort the running measurement: the robot stops first. Any paired handheld may abort.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, MaxSize)]
 pub struct Abort {
     /// Run to abort (0 = whatever is running).
@@ -165,9 +185,9 @@ pub struct MeasurementResult {
     pub preview_chunks: u16,
 }
 
-/// Points of the cloud preview per chunk (i16 varints take up to 3 bytes each, so 24 points fit
-/// the payload limit in the worst case).
-pub const CHUNK_POINTS: usize = 24;
+/// Points of the cloud preview per chunk (i16 varints take up to 3 bytes each, so 21 points fit
+/// a sealed frame's inner payload limit in the worst case).
+pub const CHUNK_POINTS: usize = 21;
 
 /// One chunk of the decimated, quantised cloud preview.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize, MaxSize)]
@@ -208,9 +228,9 @@ pub struct RobotStatus {
 wire_enum! {
     /// Why the onboard refused a command.
     pub enum RefuseReason {
-        /// The authentication tag is wrong (wrong key, or tampered).
+        /// Reserved (a value of protocol version 2's signed start; never sent now).
         BadTag = 1,
-        /// The counter is not newer than the last accepted one: a replay.
+        /// Reserved (a value of protocol version 2's signed start; never sent now).
         Replay = 2,
         /// A run is already active.
         Busy = 3,
@@ -241,7 +261,9 @@ pub struct Refused {
 }
 
 crate::message::impl_message! {
-    SignedStart => crate::ids::START_MEASUREMENT,
+    StartMeasurement => crate::ids::START_MEASUREMENT,
+    HandshakeInit => crate::ids::HANDSHAKE_INIT,
+    HandshakeReply => crate::ids::HANDSHAKE_REPLY,
     Abort => crate::ids::ABORT,
     ResultAck => crate::ids::RESULT_ACK,
     ResendChunks => crate::ids::RESEND_CHUNKS,
@@ -255,14 +277,14 @@ crate::message::impl_message! {
 }
 
 message_set! {
-    /// Everything the onboard accepts from the handheld.
+    /// Everything the onboard accepts from the handheld inside a session.
     pub enum ToOnboard {
-        /// Handshake.
+        /// Version announcement.
         Hello(Hello),
         /// Liveness.
         Heartbeat(Heartbeat),
-        /// Authenticated start.
-        Start(SignedStart),
+        /// Start.
+        Start(StartMeasurement),
         /// Abort.
         Abort(Abort),
         /// Result received.
@@ -277,9 +299,9 @@ message_set! {
 }
 
 message_set! {
-    /// Everything the handheld accepts from the onboard.
+    /// Everything the handheld accepts from the onboard inside a session.
     pub enum ToHandheld {
-        /// Handshake answer.
+        /// Version announcement.
         Hello(Hello),
         /// Liveness.
         Heartbeat(Heartbeat),
@@ -298,6 +320,8 @@ message_set! {
     }
 }
 
-// Every message of every set fits the links' receive buffer (a compile-time check).
-const _: () = assert!(ToOnboard::MAX_FRAME_LEN <= crate::frame::MAX_FRAME_LEN);
-const _: () = assert!(ToHandheld::MAX_FRAME_LEN <= crate::frame::MAX_FRAME_LEN);
+// Every message of every set fits a sealed frame, and the handshake fits a frame (compile-time
+// checks).
+const _: () = assert!(ToOnboard::MAX_PAYLOAD_LEN <= crate::auth::MAX_INNER_PAYLOAD_LEN);
+const _: () = assert!(ToHandheld::MAX_PAYLOAD_LEN <= crate::auth::MAX_INNER_PAYLOAD_LEN);
+const _: () = assert!(HandshakeReply::POSTCARD_MAX_SIZE <= crate::frame::MAX_PAYLOAD_LEN);

@@ -44,6 +44,16 @@ enum Command {
         /// Configuration file.
         file: PathBuf,
     },
+    /// List the paired handhelds' keys (`radio.key-file`), or revoke one (takes effect when the
+    /// service restarts).
+    Keys {
+        /// Configuration file (its `radio.key-file` is used).
+        #[arg(long, default_value = "/etc/passangle/onboard.toml")]
+        config: PathBuf,
+        /// Key id to revoke (eight hex digits, as listed).
+        #[arg(long)]
+        revoke: Option<String>,
+    },
 }
 
 /// sysexits(3) codes.
@@ -88,6 +98,13 @@ fn main() -> ExitCode {
     }
     match cli.command {
         Command::CheckConfig { file } => check_config(&file),
+        Command::Keys { config, revoke } => match keys(&config, revoke.as_deref()) {
+            Ok(()) => ExitCode::SUCCESS,
+            Err((code, e)) => {
+                eprintln!("passangle-onboard keys: {e:#}");
+                ExitCode::from(code)
+            }
+        },
         Command::Run { config } => match run(&config) {
             Ok(()) => ExitCode::SUCCESS,
             Err((code, e)) => {
@@ -98,8 +115,35 @@ fn main() -> ExitCode {
     }
 }
 
+/// `keys`: lists the paired keys, or revokes one.
+fn keys(config_path: &Path, revoke: Option<&str>) -> Result<(), (u8, anyhow::Error)> {
+    let config = OnboardConfig::load(config_path).map_err(|e| (exit::DATAERR, e.into()))?;
+    let file = &config.radio.key_file;
+    if let Some(id) = revoke {
+        let id = u32::from_str_radix(id.trim(), 16).map_err(|e| {
+            (
+                exit::DATAERR,
+                anyhow::anyhow!("--revoke {id:?}: expected eight hex digits ({e})"),
+            )
+        })?;
+        let gone = onboard::link::keys::revoke(file, id).map_err(|e| (exit::DATAERR, e.into()))?;
+        println!(
+            "revoked key {:08x} {} from {}; restart the service for it to take effect",
+            gone.id,
+            gone.label,
+            file.display()
+        );
+        return Ok(());
+    }
+    let entries = onboard::link::keys::read(file).map_err(|e| (exit::NOINPUT, e.into()))?;
+    for e in entries {
+        println!("{:08x} {}", e.id, e.label);
+    }
+    Ok(())
+}
+
 fn check_config(file: &Path) -> ExitCode {
-    // Every problem is printed (the values', the key and counter files'), not just the first;
+    // Every problem is printed (the values' and the key file's), not just the first;
     // the exit code is non-zero if there is any.
     let (config, problems) = OnboardConfig::check_file(file);
     for e in &problems {
@@ -122,11 +166,10 @@ fn check_config(file: &Path) -> ExitCode {
     };
     println!("{}: ok", file.display());
     println!(
-        "  radio       {} at {} baud, key {}, counter {}",
+        "  radio       {} at {} baud, keys {}",
         c.radio.port,
         c.radio.baud,
-        c.radio.key_file.display(),
-        c.radio.counter_file.display()
+        c.radio.key_file.display()
     );
     println!(
         "  mcu         {} at {} baud, heartbeat {} ms",

@@ -1,24 +1,33 @@
 //! The handheld end of the radio link (used by `passangle measure/status/abort/fetch`).
 //!
-//! Commands are reliable; the start is signed with the pairing key over the exact header it
-//! travels under. Results are reassembled with their preview: once the result has arrived, chunks
+//! [`HandheldRadio::connect`] opens a session: the [`HandshakeInit`] is sent again (with backoff)
+//! until the onboard's reply arrives, so any one init and reply that get through connect. From
+//! then on every frame both ways is sealed in the session; frames that do not open in it (plain
+//! frames, forged or replayed sealed frames) are dropped and counted, never reported.
+//!
+//! Commands are reliable. Results are reassembled with their preview: once the result has arrived, chunks
 //! still missing after a quiet spell ([`HandheldConfig::resend_quiet_us`]) are asked for again with
 //! [`ResendChunks`] (32 at a time); when the preview is complete the handheld sends [`ResultAck`]
 //! and reports [`HandheldEvent::Complete`]. A result that arrives again after that is acked again.
 
 use std::collections::BTreeMap;
 
-use protocol::auth::{self, Key};
+use protocol::auth::Key;
 use protocol::bounded::List;
-use protocol::common::{Hello, LogLine, Role};
-use protocol::message::DecodeError;
+use protocol::common::{Hello, LogLine};
+use protocol::frame::{Deframer, Frame, Header, MAX_FRAME_LEN};
+use protocol::ids;
+use protocol::message::{self, DecodeError};
 use protocol::radio::{
-    Abort, FetchRun, MeasurementResult, Progress, Refused, ResendChunks, ResultAck, RobotStatus,
-    SignedStart, StartMeasurement, StatusRequest, ToHandheld,
+    Abort, FetchRun, HandshakeReply, MeasurementResult, Progress, Refused, ResendChunks, ResultAck,
+    RobotStatus, StartMeasurement, StatusRequest, ToHandheld,
 };
 
 use super::preview::Assembler;
-use super::reliable::{Delivery, LinkConfig, LinkEvent, Priority, ReliableLink, SendError};
+use super::reliable::{
+    Delivery, LinkConfig, LinkEvent, Priority, Received, ReliableLink, SendError,
+};
+use super::session::{Entropy, Initiator, Session, SessionError};
 
 /// Tuning of the handheld session.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -27,6 +36,10 @@ pub struct HandheldConfig {
     pub link: LinkConfig,
     /// Quiet time (no new chunk) after which missing chunks are asked for again.
     pub resend_quiet_us: u64,
+    /// First interval between handshake inits while no reply came (grows 1.5x per try).
+    pub init_retry_us: u64,
+    /// Ceiling of the init interval.
+    pub init_retry_max_us: u64,
 }
 
 impl Default for HandheldConfig {
@@ -34,6 +47,8 @@ impl Default for HandheldConfig {
         Self {
             link: LinkConfig::RADIO,
             resend_quiet_us: 700_000,
+            init_retry_us: 300_000,
+            init_retry_max_us: 1_000_000,
         }
     }
 }
@@ -41,8 +56,13 @@ impl Default for HandheldConfig {
 /// What the operator should see.
 #[derive(Debug, Clone, PartialEq)]
 pub enum HandheldEvent {
-    /// The onboard answered our hello.
-    Hello(Hello),
+    /// The session is open (the onboard answered the handshake).
+    Connected {
+        /// Its id.
+        session: u16,
+    },
+    /// The onboard speaks another protocol version (its unauthenticated announcement).
+    Version(Hello),
     /// Run progress.
     Progress(Progress),
     /// A result arrived (the preview follows).
@@ -86,24 +106,61 @@ struct Incoming {
     complete: bool,
 }
 
+/// Counters of frames the handheld dropped.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct HandheldStats {
+    /// Valid-CRC frames outside the session: dropped.
+    pub unauthenticated: u64,
+    /// Sealed frames that did not open (other session, bad tag, replayed nonce): dropped.
+    pub unopened: u64,
+    /// Handshake inits sent (first and repeats).
+    pub inits_sent: u64,
+}
+
 /// The handheld end of the radio link. See the module docs.
 #[derive(Debug)]
 pub struct HandheldRadio {
     config: HandheldConfig,
     link: ReliableLink,
+    deframer: Deframer<MAX_FRAME_LEN>,
     key: Key,
+    entropy: Entropy,
+    initiator: Option<Initiator>,
+    next_init_us: u64,
+    init_interval_us: u64,
+    session: Option<Session>,
+    wire_out: Vec<u8>,
+    stats: HandheldStats,
     incoming: BTreeMap<u32, Incoming>,
 }
 
 impl HandheldRadio {
-    /// A session with the pairing key.
-    pub fn new(config: HandheldConfig, key: Key, initial_seq: u16) -> Self {
+    /// A radio end with the pairing key; `entropy` seeds the handshake.
+    pub fn new(config: HandheldConfig, key: Key, entropy: Entropy, initial_seq: u16) -> Self {
         Self {
             config,
             link: ReliableLink::new(config.link, initial_seq),
+            deframer: Deframer::new(),
             key,
+            entropy,
+            initiator: None,
+            next_init_us: 0,
+            init_interval_us: config.init_retry_us,
+            session: None,
+            wire_out: Vec::new(),
+            stats: HandheldStats::default(),
             incoming: BTreeMap::new(),
         }
+    }
+
+    /// Dropped-frame counters.
+    pub fn stats(&self) -> HandheldStats {
+        self.stats
+    }
+
+    /// The open session's id, if any.
+    pub fn session_id(&self) -> Option<u16> {
+        self.session.as_ref().map(Session::id)
     }
 
     /// The link core (stats, liveness).
@@ -111,28 +168,30 @@ impl HandheldRadio {
         &self.link
     }
 
-    /// Says hello (reliable).
-    pub fn hello(&mut self) -> Result<u16, SendError> {
-        self.link.send(
-            &Hello::new(Role::Handheld),
-            Delivery::Reliable,
-            Priority::Control,
-        )
+    /// Starts the handshake (a new session; the init leaves at the next [`Self::poll`]).
+    pub fn connect(&mut self, now_us: u64) -> Result<(), SessionError> {
+        self.initiator = Some(Initiator::new(&self.key, &mut self.entropy)?);
+        self.next_init_us = now_us;
+        self.init_interval_us = self.config.init_retry_us;
+        Ok(())
     }
 
-    /// Sends the signed start with `counter` (never reused for this key; e.g. microseconds since
-    /// the Unix epoch, kept above the last one used). Returns the seq.
-    pub fn start(&mut self, params: StartMeasurement, counter: u64) -> Result<u16, SendError> {
-        let header = self.link.next_header::<SignedStart>(Delivery::Reliable);
-        let signed = auth::sign(&self.key, header, counter, params).map_err(SendError::Auth)?;
+    /// Whether the session is open.
+    pub fn is_connected(&self) -> bool {
+        self.session.is_some()
+    }
+
+    /// Sends the start. Returns the seq.
+    pub fn start(&mut self, params: &StartMeasurement) -> Result<u16, SendError> {
         self.link
-            .send(&signed, Delivery::Reliable, Priority::Control)
+            .send(params, Delivery::Reliable, Priority::Control)
     }
 
-    /// Sends an abort (reliable; not authenticated, stopping is always allowed).
+    /// Sends an abort (reliable, ahead of every queued frame).
     pub fn abort(&mut self, run_id: u32) -> Result<u16, SendError> {
+        // In front of anything queued: stopping the robot waits for nothing.
         self.link
-            .send(&Abort { run_id }, Delivery::Reliable, Priority::Control)
+            .send(&Abort { run_id }, Delivery::Reliable, Priority::Urgent)
     }
 
     /// Asks for the robot status.
@@ -165,22 +224,86 @@ impl HandheldRadio {
 
     /// Feeds bytes from the radio; returns what happened, in order.
     pub fn receive(&mut self, now_us: u64, bytes: &[u8]) -> Vec<HandheldEvent> {
+        let mut frames = Vec::new();
+        let mut errors = 0u64;
+        self.deframer.feed_all(bytes, |r| match r {
+            Ok(f) => frames.push((f.header, f.payload.to_vec())),
+            Err(_) => errors += 1,
+        });
+        self.link.count_receive_errors(errors);
         let mut out = Vec::new();
-        for r in self.link.receive(now_us, bytes) {
-            match ToHandheld::decode(&r.frame()) {
-                Ok(msg) => self.on_message(now_us, msg, &mut out),
-                Err(DecodeError::IsAck) => {}
-                Err(e) => out.push(HandheldEvent::Undecodable(e.to_string())),
-            }
+        for (header, payload) in frames {
+            self.on_frame(now_us, header, &payload, &mut out);
         }
         self.drain_link_events(&mut out);
         out
     }
 
+    fn on_frame(
+        &mut self,
+        now_us: u64,
+        header: Header,
+        payload: &[u8],
+        out: &mut Vec<HandheldEvent>,
+    ) {
+        let frame = Frame { header, payload };
+        if header.version != protocol::PROTOCOL_VERSION {
+            self.stats.unauthenticated += 1;
+            match message::decode::<Hello>(&frame) {
+                Ok(h) => out.push(HandheldEvent::Version(h)),
+                Err(e) => out.push(HandheldEvent::Undecodable(e.to_string())),
+            }
+            return;
+        }
+        match header.msg_id {
+            ids::SEALED => {
+                let Some(session) = self.session.as_mut().filter(|s| s.id() == header.seq) else {
+                    self.stats.unopened += 1;
+                    return;
+                };
+                let sid = session.id();
+                let Ok((inner, inner_payload)) = session.open(payload) else {
+                    self.stats.unopened += 1;
+                    return;
+                };
+                let r = Received {
+                    header: inner,
+                    payload: inner_payload,
+                };
+                if let Some(r) = self.link.accept(now_us, sid, r) {
+                    match ToHandheld::decode(&r.frame()) {
+                        Ok(msg) => self.on_message(now_us, msg, out),
+                        Err(DecodeError::IsAck) => {}
+                        Err(e) => out.push(HandheldEvent::Undecodable(e.to_string())),
+                    }
+                }
+            }
+            ids::HANDSHAKE_REPLY => {
+                let (Some(initiator), Ok(reply)) = (
+                    self.initiator.take(),
+                    message::decode::<HandshakeReply>(&frame),
+                ) else {
+                    self.stats.unauthenticated += 1;
+                    return;
+                };
+                if let Ok(session) = initiator.finish(&reply) {
+                    out.push(HandheldEvent::Connected {
+                        session: session.id(),
+                    });
+                    self.session = Some(session);
+                } else {
+                    // A forged or mangled reply spent the handshake: start a new one.
+                    self.stats.unauthenticated += 1;
+                    let _ = self.connect(now_us);
+                }
+            }
+            _ => self.stats.unauthenticated += 1,
+        }
+    }
+
     fn on_message(&mut self, now_us: u64, msg: ToHandheld, out: &mut Vec<HandheldEvent>) {
         match msg {
-            ToHandheld::Hello(h) => out.push(HandheldEvent::Hello(h)),
-            ToHandheld::Heartbeat(_) => {}
+            ToHandheld::Hello(_) | ToHandheld::Heartbeat(_) => {}
             ToHandheld::Progress(p) => out.push(HandheldEvent::Progress(p)),
             ToHandheld::Result(result) => {
                 let run_id = result.run_id;
@@ -256,6 +379,19 @@ impl HandheldRadio {
     /// Timers: heartbeats, retransmits, preview resend requests. Returns link events (acks,
     /// commands given up).
     pub fn poll(&mut self, now_us: u64) -> Vec<HandheldEvent> {
+        if let Some(init) = &self.initiator
+            && now_us >= self.next_init_us
+        {
+            self.wire_out.extend_from_slice(init.init_frame());
+            self.stats.inits_sent += 1;
+            self.next_init_us = now_us + self.init_interval_us;
+            self.init_interval_us =
+                (self.init_interval_us * 3 / 2).min(self.config.init_retry_max_us);
+        }
+        if self.session.is_none() {
+            // Nothing but the handshake leaves before the session: commands wait in the queue.
+            return Vec::new();
+        }
         self.link.poll(now_us);
         let quiet = self.config.resend_quiet_us;
         let mut wanted = Vec::new();
@@ -292,11 +428,22 @@ impl HandheldRadio {
             .filter(|i| !i.complete)
             .map(|i| i.last_chunk_us + self.config.resend_quiet_us)
             .min();
-        [self.link.poll_at(), resend].into_iter().flatten().min()
+        let init = self.initiator.as_ref().map(|_| self.next_init_us);
+        [self.link.poll_at(), resend, init]
+            .into_iter()
+            .flatten()
+            .min()
     }
 
-    /// Bytes to write to the radio now.
+    /// Bytes to write to the radio now: handshake inits, then sealed frames of the session.
     pub fn transmit(&mut self, now_us: u64) -> Vec<u8> {
-        self.link.transmit(now_us)
+        let mut out = std::mem::take(&mut self.wire_out);
+        if let Some(session) = self.session.as_mut() {
+            out.extend(
+                self.link
+                    .transmit_with(now_us, &mut |inner| session.seal(inner)),
+            );
+        }
+        out
     }
 }

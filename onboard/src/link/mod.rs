@@ -4,19 +4,23 @@
 //!
 //! - [`reliable`]: acks, retransmits with backoff, duplicate suppression by seq, heartbeats,
 //!   liveness and a byte-rate limit; used by every end.
-//! - [`radio`]: the onboard's radio session (authenticated start, refusals, results held until
-//!   acknowledged, preview chunks with selective resend).
-//! - [`handheld`]: the handheld's radio session (signed start, preview reassembly and resend
-//!   requests, result acks).
+//! - [`session`]: the radio's Noise session (handshake, sealed frames, replay window).
+//! - [`keys`]: pairing-key files (per-handheld keys with public ids).
+//! - [`radio`]: the onboard's radio end (sessions, refusals, results held until acknowledged,
+//!   preview chunks with selective resend, per-session rate limits).
+//! - [`handheld`]: the handheld's radio end (handshake, preview reassembly and resend requests,
+//!   result acks).
 //! - [`mcu`]: the onboard's MCU session (hello, config, drive/stop, 20 ms heartbeat).
 //! - [`preview`]: cloud decimation, quantisation and chunking.
 //! - [`sim`]: a seeded lossy byte pipe for tests and the simulator.
 
 pub mod handheld;
+pub mod keys;
 pub mod mcu;
 pub mod preview;
 pub mod radio;
 pub mod reliable;
+pub mod session;
 pub mod sim;
 
 #[cfg(test)]

@@ -1,31 +1,43 @@
-//! The onboard end of the radio link: turns frames from the handheld into [`RadioRequest`]s for the
-//! run state machine, answers what it can itself (hello, auth refusals, preview resends), and holds
-//! results until the handheld acknowledges them.
+//! The onboard end of the radio link: opens the handheld's sealed frames, turns them into
+//! [`RadioRequest`]s for the run state machine, answers what it can itself (handshakes, preview
+//! resends), and holds results until the handheld acknowledges them.
 //!
-//! - The start command is verified with [`ReplayGuard`]: a bad tag or an old counter is refused
-//!   ([`Refused`] with [`RefuseReason::BadTag`] / [`RefuseReason::Replay`]) and never reaches the
-//!   run state machine, so the robot cannot move on it. After a fresh start the caller persists
-//!   [`OnboardRadio::last_counter`] before acting (see `recorder::CounterFile`).
+//! - Only frames that open in a session of a paired key ([`SessionTable`]) reach the link core:
+//!   everything else (plain frames of any message, forged or replayed sealed frames, inits for
+//!   unknown keys) is dropped and counted in [`RadioStats`]; it changes no state and does not
+//!   count as liveness. Handshake replies and version announcements are rate limited.
+//! - Replies are sealed for the session the handheld last spoke in, so each handheld hears the
+//!   answers to its own commands; any paired handheld may abort.
 //! - A result goes out with [`Delivery::Persistent`] (retransmitted until the link acks it) and
 //!   stays in [`OnboardRadio::pending_results`] until the handheld's [`ResultAck`], which comes
 //!   after the handheld has the whole preview.
 //! - Preview chunks are best effort and paced through the bulk queue; [`ResendChunks`] puts the
 //!   wanted ones back in front.
+//! - Per-session rate limit: commands beyond [`COMMANDS_PER_S`] (burst [`COMMAND_BURST`]) are
+//!   dropped unacked (the sender retries); aborts and acks are never limited.
 
 use std::collections::VecDeque;
 
-use protocol::auth::{AuthError, Key, ReplayGuard, Verified};
+use protocol::auth::Key;
 use protocol::common::{Hello, LogLevel, LogLine, Role};
-use protocol::frame::Header;
-use protocol::message::DecodeError;
+use protocol::frame::{Deframer, Header, MAX_FRAME_LEN};
+use protocol::message::{self, DecodeError};
 use protocol::radio::{
-    CloudChunk, MeasurementResult, Progress, RefuseReason, Refused, RobotStatus, StartMeasurement,
-    ToOnboard,
+    CloudChunk, HandshakeInit, MeasurementResult, Progress, RefuseReason, Refused, RobotStatus,
+    StartMeasurement, ToOnboard,
 };
-use protocol::{Message, bounded::Text};
+use protocol::{Message, bounded::Text, ids};
 
 use super::preview;
-use super::reliable::{Delivery, LinkConfig, Priority, ReliableLink, SendError};
+use super::reliable::{Delivery, LinkConfig, Priority, Received, ReliableLink, SendError};
+use super::session::{Entropy, InitOutcome, SessionError, SessionTable};
+
+/// Commands per second one session may send (beyond the burst).
+pub const COMMANDS_PER_S: f64 = 10.0;
+/// Commands one session may send at once.
+pub const COMMAND_BURST: f64 = 20.0;
+/// Handshake replies and version announcements per second, all senders together.
+const REPLIES_PER_S: f64 = 4.0;
 
 /// Chunks kept in the link's bulk queue at a time: enough to keep the line busy, few enough that a
 /// resend request or a progress message is not stuck behind a long queue.
@@ -34,13 +46,15 @@ const BULK_DEPTH: usize = 4;
 /// What the handheld asked for, after authentication and decoding.
 #[derive(Debug, Clone, PartialEq)]
 pub enum RadioRequest {
-    /// An authenticated, fresh start. Persist [`OnboardRadio::last_counter`], then act or refuse
-    /// (busy, interlocked, bad parameter) with [`OnboardRadio::refuse`].
+    /// A start from a paired handheld: act or refuse (busy, interlocked, bad parameter) with
+    /// [`OnboardRadio::refuse`].
     Start {
         /// The command.
         params: StartMeasurement,
         /// Its seq (for a refusal).
         seq: u16,
+        /// Id of the pairing key of the session it came in.
+        key_id: u32,
     },
     /// Abort: stop first.
     Abort {
@@ -61,13 +75,57 @@ pub enum RadioRequest {
     },
     /// Answer with [`OnboardRadio::send_status`].
     Status,
-    /// A command was refused by the session itself (authentication, version, decoding): log it.
+    /// A message inside a session did not decode (refused to the handheld): log it.
     Refused {
         /// Why.
         reason: RefuseReason,
         /// What, for the log.
         detail: String,
     },
+}
+
+/// Counters of what the radio end dropped or did, for logs, status and tests.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct RadioStats {
+    /// Valid-CRC frames outside any session (plain messages of any kind): dropped.
+    pub unauthenticated: u64,
+    /// Sealed frames that did not open (unknown session, bad tag, replayed nonce): dropped.
+    pub unopened: u64,
+    /// Handshake inits refused (unknown key, bad Noise message, late copies).
+    pub inits_refused: u64,
+    /// Sessions opened.
+    pub sessions_opened: u64,
+    /// Commands dropped by the per-session rate limit.
+    pub rate_limited: u64,
+    /// Handshake replies or version announcements not sent (reply rate limit).
+    pub replies_suppressed: u64,
+}
+
+#[derive(Debug, Clone, Copy)]
+struct Bucket {
+    tokens: f64,
+    at_us: u64,
+}
+
+impl Bucket {
+    fn new(burst: f64, now_us: u64) -> Self {
+        Self {
+            tokens: burst,
+            at_us: now_us,
+        }
+    }
+
+    fn take(&mut self, now_us: u64, rate: f64, burst: f64) -> bool {
+        let dt = now_us.saturating_sub(self.at_us) as f64 * 1e-6;
+        self.tokens = (self.tokens + dt * rate).min(burst);
+        self.at_us = now_us;
+        if self.tokens >= 1.0 {
+            self.tokens -= 1.0;
+            true
+        } else {
+            false
+        }
+    }
 }
 
 #[derive(Debug)]
@@ -82,27 +140,31 @@ struct Pending {
 #[derive(Debug)]
 pub struct OnboardRadio {
     link: ReliableLink,
-    key: Key,
-    guard: ReplayGuard,
+    deframer: Deframer<MAX_FRAME_LEN>,
+    sessions: SessionTable,
+    /// The session the handheld last spoke in: replies are sealed for it.
+    active: Option<u16>,
     pending: Vec<Pending>,
     refused: u64,
+    stats: RadioStats,
+    replies: Bucket,
+    limits: Vec<(u16, Bucket)>,
 }
 
 impl OnboardRadio {
-    /// A session with the pairing key and the persisted last start counter.
-    pub fn new(link: LinkConfig, key: Key, last_counter: u64, initial_seq: u16) -> Self {
+    /// A radio end for the paired `keys`; `entropy` seeds the handshakes.
+    pub fn new(link: LinkConfig, keys: Vec<Key>, entropy: Entropy, initial_seq: u16) -> Self {
         Self {
             link: ReliableLink::new(link, initial_seq),
-            key,
-            guard: ReplayGuard::new(last_counter),
+            deframer: Deframer::new(),
+            sessions: SessionTable::new(keys, entropy),
+            active: None,
             pending: Vec::new(),
             refused: 0,
+            stats: RadioStats::default(),
+            replies: Bucket::new(REPLIES_PER_S, 0),
+            limits: Vec::new(),
         }
-    }
-
-    /// The last accepted start counter (persist it after every [`RadioRequest::Start`]).
-    pub fn last_counter(&self) -> u64 {
-        self.guard.last_counter()
     }
 
     /// The link core (stats, liveness).
@@ -110,52 +172,147 @@ impl OnboardRadio {
         &self.link
     }
 
-    /// Commands refused by the session (authentication, version, decoding) so far.
+    /// What was dropped, refused or opened so far.
+    pub fn stats(&self) -> RadioStats {
+        self.stats
+    }
+
+    /// Sessions held (confirmed or not).
+    pub fn session_count(&self) -> usize {
+        self.sessions.len()
+    }
+
+    /// Commands refused inside sessions (undecodable) so far.
     pub fn refused_count(&self) -> u64 {
         self.refused
     }
 
-    /// Microseconds since the handheld was last heard (`None`: never).
+    /// Microseconds since the handheld was last heard in a session (`None`: never).
     pub fn handheld_silent_us(&self, now_us: u64) -> Option<u64> {
         self.link.peer_silent_us(now_us)
     }
 
     /// Feeds bytes from the radio; returns the requests in order.
     pub fn receive(&mut self, now_us: u64, bytes: &[u8]) -> Vec<RadioRequest> {
+        let mut frames = Vec::new();
+        let mut errors = 0u64;
+        self.deframer.feed_all(bytes, |r| match r {
+            Ok(f) => frames.push((f.header, f.payload.to_vec())),
+            Err(_) => errors += 1,
+        });
+        self.link.count_receive_errors(errors);
         let mut out = Vec::new();
-        for r in self.link.receive(now_us, bytes) {
-            let header = r.header;
-            match ToOnboard::decode(&r.frame()) {
-                Ok(msg) => self.on_message(header, msg, &mut out),
-                Err(DecodeError::VersionMismatch { theirs }) => {
-                    let detail = format!("peer speaks protocol version {theirs}");
-                    self.send_hello();
-                    self.refuse_into(header, RefuseReason::VersionMismatch, &detail, &mut out);
-                }
-                Err(e) => {
-                    self.refuse_into(header, RefuseReason::Malformed, &e.to_string(), &mut out);
-                }
-            }
+        for (header, payload) in frames {
+            self.on_frame(now_us, header, &payload, &mut out);
         }
         out
     }
 
-    fn on_message(&mut self, header: Header, msg: ToOnboard, out: &mut Vec<RadioRequest>) {
-        match msg {
-            ToOnboard::Hello(_) => self.send_hello(),
-            ToOnboard::Heartbeat(_) => {}
-            ToOnboard::Start(signed) => match self.guard.verify(&self.key, header, &signed) {
-                Ok(Verified::Fresh) => out.push(RadioRequest::Start {
-                    params: signed.body,
-                    seq: header.seq,
-                }),
-                Ok(Verified::Duplicate) => {}
-                Err(AuthError::Replay { counter, last }) => {
-                    let detail = format!("counter {counter} not above {last}");
-                    self.refuse_into(header, RefuseReason::Replay, &detail, out);
+    fn on_frame(
+        &mut self,
+        now_us: u64,
+        header: Header,
+        payload: &[u8],
+        out: &mut Vec<RadioRequest>,
+    ) {
+        if header.version != protocol::PROTOCOL_VERSION {
+            // Tell a handheld of another version which one this robot speaks (rate limited).
+            self.stats.unauthenticated += 1;
+            self.send_hello(now_us);
+            return;
+        }
+        match header.msg_id {
+            ids::SEALED => {
+                let session = header.seq;
+                match self.sessions.open(now_us, session, payload) {
+                    Ok((inner, inner_payload)) => {
+                        self.active = Some(session);
+                        // Over the session's rate: dropped before the link core, so unacked
+                        // (the sender retries later).
+                        let limited = !inner.flags.contains(protocol::frame::Flags::IS_ACK)
+                            && !matches!(
+                                inner.msg_id,
+                                ids::ABORT | ids::HEARTBEAT | ids::RESULT_ACK
+                            );
+                        if limited && !self.allow(now_us, session) {
+                            self.stats.rate_limited += 1;
+                            return;
+                        }
+                        let r = Received {
+                            header: inner,
+                            payload: inner_payload,
+                        };
+                        if let Some(r) = self.link.accept(now_us, session, r) {
+                            self.on_inner(session, &r, out);
+                        }
+                    }
+                    Err(_) => self.stats.unopened += 1,
                 }
-                Err(e) => self.refuse_into(header, RefuseReason::BadTag, &e.to_string(), out),
-            },
+            }
+            ids::HANDSHAKE_INIT => {
+                let frame = protocol::frame::Frame { header, payload };
+                let outcome = message::decode::<HandshakeInit>(&frame)
+                    .map_err(|_| SessionError::Size)
+                    .and_then(|init| self.sessions.on_init(&init));
+                match outcome {
+                    Ok(InitOutcome::New { reply, .. }) => {
+                        self.stats.sessions_opened += 1;
+                        self.send_reply(now_us, reply);
+                    }
+                    Ok(InitOutcome::Repeat { reply }) => self.send_reply(now_us, reply),
+                    Err(_) => self.stats.inits_refused += 1,
+                }
+            }
+            _ => self.stats.unauthenticated += 1,
+        }
+    }
+
+    fn send_reply(&mut self, now_us: u64, reply: Vec<u8>) {
+        if self.replies.take(now_us, REPLIES_PER_S, REPLIES_PER_S) {
+            self.link.send_wire(reply);
+        } else {
+            self.stats.replies_suppressed += 1;
+        }
+    }
+
+    fn on_inner(&mut self, session: u16, r: &Received, out: &mut Vec<RadioRequest>) {
+        let header = r.header;
+        match ToOnboard::decode(&r.frame()) {
+            Ok(msg) => self.on_message(header, session, msg, out),
+            Err(DecodeError::IsAck) => {}
+            Err(e) => {
+                self.refuse_into(header, RefuseReason::Malformed, &e.to_string(), out);
+            }
+        }
+    }
+
+    fn allow(&mut self, now_us: u64, session: u16) -> bool {
+        if let Some((_, b)) = self.limits.iter_mut().find(|(s, _)| *s == session) {
+            return b.take(now_us, COMMANDS_PER_S, COMMAND_BURST);
+        }
+        // One bucket per session held; buckets of sessions gone are dropped.
+        let sessions = &self.sessions;
+        self.limits.retain(|(s, _)| sessions.key_of(*s).is_some());
+        let mut b = Bucket::new(COMMAND_BURST, now_us);
+        let ok = b.take(now_us, COMMANDS_PER_S, COMMAND_BURST);
+        self.limits.push((session, b));
+        ok
+    }
+
+    fn on_message(
+        &mut self,
+        header: Header,
+        session: u16,
+        msg: ToOnboard,
+        out: &mut Vec<RadioRequest>,
+    ) {
+        match msg {
+            ToOnboard::Hello(_) | ToOnboard::Heartbeat(_) => {}
+            ToOnboard::Start(params) => out.push(RadioRequest::Start {
+                params,
+                seq: header.seq,
+                key_id: self.sessions.key_of(session).unwrap_or(0),
+            }),
             ToOnboard::Abort(a) => out.push(RadioRequest::Abort { run_id: a.run_id }),
             ToOnboard::ResultAck(a) => {
                 if let Some(i) = self
@@ -189,13 +346,14 @@ impl OnboardRadio {
         }
     }
 
-    fn send_hello(&mut self) {
+    fn send_hello(&mut self, now_us: u64) {
+        let mut buf = [0u8; MAX_FRAME_LEN];
         // Hello is two bytes: encoding cannot fail.
-        let _ = self.link.send(
-            &Hello::new(Role::Onboard),
-            Delivery::BestEffort,
-            Priority::Control,
-        );
+        if let Ok(n) =
+            Hello::new(Role::Onboard).encode_frame(0, protocol::frame::Flags::NONE, &mut buf)
+        {
+            self.send_reply(now_us, buf[..n].to_vec());
+        }
     }
 
     fn refuse_into(
@@ -310,9 +468,13 @@ impl OnboardRadio {
         self.link.poll_at()
     }
 
-    /// Bytes to write to the radio now.
+    /// Bytes to write to the radio now: handshake replies as they are, everything else sealed
+    /// for the session the handheld last spoke in (dropped while there is none).
     pub fn transmit(&mut self, now_us: u64) -> Vec<u8> {
-        self.link.transmit(now_us)
+        let sessions = &mut self.sessions;
+        let active = self.active;
+        self.link
+            .transmit_with(now_us, &mut |inner| sessions.seal(active?, inner))
     }
 
     /// Whether bytes wait for the rate limiter or preview chunks wait to be queued.
@@ -322,4 +484,4 @@ impl OnboardRadio {
 }
 
 /// Message id of the start command, for refusals.
-pub const START_ID: u16 = <protocol::radio::SignedStart as Message>::ID;
+pub const START_ID: u16 = <StartMeasurement as Message>::ID;

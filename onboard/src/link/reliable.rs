@@ -11,18 +11,22 @@
 //!   starts when the frame actually leaves (after rate limiting), and backs off by 1.5x per attempt
 //!   up to a ceiling. Retransmissions are the same bytes (same seq), as the ICD requires.
 //! - **Duplicate suppression by seq.** Received reliable frames are acked every time, but delivered
-//!   to the session once: `(msg id, seq)` pairs are remembered for [`LinkConfig::dedup_memory_us`],
-//!   longer than a sender keeps retransmitting, so a restarted peer (that starts from another
-//!   initial seq) is never confused with an old one for long.
+//!   to the session once: `(peer, msg id, seq)` triples are remembered for
+//!   [`LinkConfig::dedup_memory_us`], longer than a sender keeps retransmitting. `peer` is the
+//!   radio session id (0 on the MCU link), so two handhelds never shadow each other's commands.
 //! - **Heartbeats both ways.** A [`Heartbeat`] leaves every [`LinkConfig::heartbeat_period_us`];
-//!   any valid frame from the peer counts as liveness ([`ReliableLink::peer_silent_us`]).
+//!   any frame accepted from the peer counts as liveness ([`ReliableLink::peer_silent_us`]). On
+//!   the radio only frames that opened in a session are handed to [`ReliableLink::accept`].
+//! - **Sealing.** Frames are kept as inner frames (header and payload); [`ReliableLink::transmit`]
+//!   frames them as they are (MCU link), [`ReliableLink::transmit_with`] hands each to a sealing
+//!   function (radio) when it leaves, so every retransmission gets its own nonce.
 //! - **Rate limit.** A token bucket at the link's byte rate (57600 baud 8N1 = 5760 bytes/s) keeps
 //!   the radio modem's buffer from overflowing. Control frames (acks, heartbeats, commands,
 //!   progress, results) go before bulk frames (cloud preview chunks).
 
 use std::collections::VecDeque;
 
-use protocol::frame::{self, Deframer, Flags, Header, MAX_FRAME_LEN};
+use protocol::frame::{self, Deframer, Flags, HEADER_LEN, Header, MAX_FRAME_LEN};
 use protocol::{Heartbeat, Message};
 
 /// Tuning of one link end. All times are microseconds.
@@ -35,26 +39,32 @@ pub struct LinkConfig {
     /// Attempts before a reliable message is given up ([`LinkEvent::GaveUp`]); results use
     /// [`Delivery::Persistent`] instead, which never gives up.
     pub max_attempts: u32,
-    /// Period of the heartbeats this end sends (0 = none).
+    /// Period of the heartbeats this end sends (0 = none). The radio's 200 ms let the onboard
+    /// count missed beats (`run.handheld-missed-beats`) rather than wait seconds per beat.
     pub heartbeat_period_us: u64,
     /// How long received `(msg id, seq)` pairs are remembered for duplicate suppression.
     pub dedup_memory_us: u64,
     /// Link byte rate (bytes per second, after start/stop bits).
     pub bytes_per_s: u32,
+    /// Largest payload this link carries (the radio's sealed frames leave less room).
+    pub max_payload_len: usize,
     /// Bytes that may leave at once (token-bucket depth).
     pub burst_bytes: u32,
 }
 
 impl LinkConfig {
     /// The 57600-baud radio: about 5760 bytes/s; a 256-byte frame takes 44 ms, so the first
-    /// retransmit after 400 ms leaves room for the ack's round trip through both modems.
+    /// retransmit after 400 ms leaves room for the ack's round trip through both modems. A
+    /// command is tried for about two minutes (40 attempts, the last ones 3 s apart): on a radio
+    /// that loses 40 % of the frames each way a try fails two times in three.
     pub const RADIO: Self = Self {
         retransmit_initial_us: 400_000,
         retransmit_max_us: 3_000_000,
-        max_attempts: 12,
-        heartbeat_period_us: 500_000,
+        max_attempts: 40,
+        heartbeat_period_us: 200_000,
         dedup_memory_us: 60_000_000,
         bytes_per_s: 5_760,
+        max_payload_len: protocol::auth::MAX_INNER_PAYLOAD_LEN,
         burst_bytes: 600,
     };
 
@@ -67,6 +77,7 @@ impl LinkConfig {
         heartbeat_period_us: 0,
         dedup_memory_us: 5_000_000,
         bytes_per_s: 92_160,
+        max_payload_len: frame::MAX_PAYLOAD_LEN,
         burst_bytes: 4_096,
     };
 }
@@ -87,6 +98,8 @@ pub enum Delivery {
 pub enum Priority {
     /// Acks, heartbeats, commands, progress, results.
     Control,
+    /// In front of every queued frame (an abort).
+    Urgent,
     /// Cloud preview chunks: only when no control frame waits.
     Bulk,
 }
@@ -140,9 +153,6 @@ pub enum SendError {
         /// Why.
         error: frame::EncodeError,
     },
-    /// The authenticated command could not be signed.
-    #[error("cannot sign the command: {0}")]
-    Auth(protocol::auth::AuthError),
 }
 
 /// Counters for logs, status and tests.
@@ -178,8 +188,12 @@ struct InFlight {
 
 #[derive(Debug)]
 enum Queued {
+    /// An inner frame (header and payload).
     Frame(Vec<u8>),
+    /// A reliable inner frame, by seq.
     Reliable { seq: u16 },
+    /// A finished wire frame sent as it is (the radio handshake).
+    Wire(Vec<u8>),
 }
 
 /// One end of a reliable link. See the module docs.
@@ -191,7 +205,7 @@ pub struct ReliableLink {
     in_flight: Vec<InFlight>,
     control: VecDeque<Queued>,
     bulk: VecDeque<Queued>,
-    seen: VecDeque<(u16, u16, u64)>,
+    seen: VecDeque<(u16, u16, u16, u64)>,
     events: VecDeque<LinkEvent>,
     tokens: f64,
     tokens_at_us: Option<u64>,
@@ -233,12 +247,6 @@ impl ReliableLink {
         self.stats
     }
 
-    /// The header the next message of type `M` sent with `delivery` will carry (an
-    /// authenticated command signs it before [`Self::send`]).
-    pub fn next_header<M: Message>(&self, delivery: Delivery) -> Header {
-        Header::new(M::ID, self.next_seq, Self::flags(delivery))
-    }
-
     fn flags(delivery: Delivery) -> Flags {
         if delivery == Delivery::BestEffort {
             Flags::NONE
@@ -257,12 +265,21 @@ impl ReliableLink {
         let seq = self.next_seq;
         let header = Header::new(M::ID, seq, Self::flags(delivery));
         let mut buf = [0u8; MAX_FRAME_LEN];
-        let len = frame::encode(header, msg, &mut buf).map_err(|error| SendError::Encode {
-            name: M::NAME,
-            error,
+        buf[..HEADER_LEN].copy_from_slice(&header.to_bytes());
+        let len = frame::encode_payload(msg, &mut buf[HEADER_LEN..]).map_err(|error| {
+            SendError::Encode {
+                name: M::NAME,
+                error,
+            }
         })?;
+        if len > self.config.max_payload_len {
+            return Err(SendError::Encode {
+                name: M::NAME,
+                error: frame::EncodeError::PayloadTooLarge,
+            });
+        }
         self.next_seq = self.next_seq.wrapping_add(1);
-        let bytes = buf[..len].to_vec();
+        let bytes = buf[..HEADER_LEN + len].to_vec();
         let queued = if delivery == Delivery::BestEffort {
             Queued::Frame(bytes)
         } else {
@@ -279,6 +296,7 @@ impl ReliableLink {
         };
         match priority {
             Priority::Control => self.control.push_back(queued),
+            Priority::Urgent => self.control.push_front(queued),
             Priority::Bulk => self.bulk.push_back(queued),
         }
         Ok(seq)
@@ -304,8 +322,9 @@ impl ReliableLink {
         self.in_flight.retain(|f| f.seq != seq);
     }
 
-    /// Feeds received bytes; returns the accepted messages in order. Acks are consumed here (see
-    /// [`Self::poll_event`]); reliable frames are acked, duplicates acked again and dropped.
+    /// Feeds received bytes (plain frames: the MCU link); returns the accepted messages in
+    /// order. Acks are consumed here (see [`Self::poll_event`]); reliable frames are acked,
+    /// duplicates acked again and dropped.
     pub fn receive(&mut self, now_us: u64, bytes: &[u8]) -> Vec<Received> {
         let mut frames = Vec::new();
         let mut errors = 0u64;
@@ -317,31 +336,47 @@ impl ReliableLink {
             Err(_) => errors += 1,
         });
         self.stats.receive_errors += errors;
+        frames
+            .into_iter()
+            .filter_map(|r| self.accept(now_us, 0, r))
+            .collect()
+    }
+
+    /// Counts byte runs a radio end's own deframer could not read as frames.
+    pub fn count_receive_errors(&mut self, n: u64) {
+        self.stats.receive_errors += n;
+    }
+
+    /// Takes one received inner frame from `peer` (an authenticated radio session, or 0): the
+    /// message to deliver, or `None` for acks and duplicates.
+    pub fn accept(&mut self, now_us: u64, peer: u16, r: Received) -> Option<Received> {
         self.forget_old(now_us);
-        let mut out = Vec::new();
-        for r in frames {
-            self.stats.frames_received += 1;
-            self.last_rx_us = Some(now_us);
-            let h = r.header;
-            if h.flags.contains(Flags::IS_ACK) {
-                self.on_ack(h);
-                continue;
-            }
-            if h.flags.contains(Flags::ACK_REQUESTED) {
-                self.queue_ack(h);
-                if self
-                    .seen
-                    .iter()
-                    .any(|&(id, seq, _)| id == h.msg_id && seq == h.seq)
-                {
-                    self.stats.duplicates += 1;
-                    continue;
-                }
-                self.seen.push_back((h.msg_id, h.seq, now_us));
-            }
-            out.push(r);
+        self.stats.frames_received += 1;
+        self.last_rx_us = Some(now_us);
+        let h = r.header;
+        if h.flags.contains(Flags::IS_ACK) {
+            self.on_ack(h);
+            return None;
         }
-        out
+        if h.flags.contains(Flags::ACK_REQUESTED) {
+            self.queue_ack(h);
+            if self
+                .seen
+                .iter()
+                .any(|&(p, id, seq, _)| p == peer && id == h.msg_id && seq == h.seq)
+            {
+                self.stats.duplicates += 1;
+                return None;
+            }
+            self.seen.push_back((peer, h.msg_id, h.seq, now_us));
+        }
+        Some(r)
+    }
+
+    /// Queues a finished wire frame (the radio handshake) in front of the control queue; it
+    /// leaves within the rate limit but is not sealed.
+    pub fn send_wire(&mut self, frame: Vec<u8>) {
+        self.control.push_front(Queued::Wire(frame));
     }
 
     fn on_ack(&mut self, h: Header) {
@@ -359,15 +394,13 @@ impl ReliableLink {
     }
 
     fn queue_ack(&mut self, h: Header) {
-        let mut buf = [0u8; MAX_FRAME_LEN];
-        if let Ok(len) = frame::encode_raw(h.ack(), &[], &mut buf) {
-            // Acks jump the queue: the peer's retransmit timer is running.
-            self.control.push_front(Queued::Frame(buf[..len].to_vec()));
-        }
+        // Acks jump the queue: the peer's retransmit timer is running.
+        self.control
+            .push_front(Queued::Frame(h.ack().to_bytes().to_vec()));
     }
 
     fn forget_old(&mut self, now_us: u64) {
-        while let Some(&(_, _, at)) = self.seen.front() {
+        while let Some(&(_, _, _, at)) = self.seen.front() {
             if now_us.saturating_sub(at) > self.config.dedup_memory_us || self.seen.len() > 4096 {
                 self.seen.pop_front();
             } else {
@@ -430,8 +463,27 @@ impl ReliableLink {
         !self.control.is_empty() || !self.bulk.is_empty()
     }
 
-    /// Bytes to write to the transport now, within the rate limit (possibly empty).
+    /// Bytes to write to the transport now, within the rate limit (possibly empty), each inner
+    /// frame framed as it is.
     pub fn transmit(&mut self, now_us: u64) -> Vec<u8> {
+        self.transmit_with(now_us, &mut |inner| {
+            let mut header = [0u8; HEADER_LEN];
+            header.copy_from_slice(inner.get(..HEADER_LEN)?);
+            let mut buf = [0u8; MAX_FRAME_LEN];
+            let n = frame::encode_raw(Header::from_bytes(header), &inner[HEADER_LEN..], &mut buf)
+                .ok()?;
+            Some(buf[..n].to_vec())
+        })
+    }
+
+    /// Like [`Self::transmit`], but each inner frame goes through `wrap` (the radio session's
+    /// seal) as it leaves. A frame `wrap` refuses (no session) is dropped; a reliable one stays
+    /// in flight and is retransmitted later.
+    pub fn transmit_with(
+        &mut self,
+        now_us: u64,
+        wrap: &mut dyn FnMut(&[u8]) -> Option<Vec<u8>>,
+    ) -> Vec<u8> {
         self.refill(now_us);
         let mut out = Vec::new();
         while self.tokens > 0.0 {
@@ -439,7 +491,11 @@ impl ReliableLink {
                 break;
             };
             let bytes = match q {
-                Queued::Frame(bytes) => bytes,
+                Queued::Wire(bytes) => bytes,
+                Queued::Frame(inner) => match wrap(&inner) {
+                    Some(b) => b,
+                    None => continue,
+                },
                 Queued::Reliable { seq } => {
                     let Some(f) = self.in_flight.iter_mut().find(|f| f.seq == seq) else {
                         continue; // acked while queued
@@ -450,7 +506,10 @@ impl ReliableLink {
                     f.attempts += 1;
                     f.due_us = Some(now_us + f.backoff_us);
                     f.backoff_us = (f.backoff_us * 3 / 2).min(self.config.retransmit_max_us);
-                    f.bytes.clone()
+                    match wrap(&f.bytes) {
+                        Some(b) => b,
+                        None => continue,
+                    }
                 }
             };
             self.tokens -= bytes.len() as f64;
@@ -669,9 +728,9 @@ mod tests {
         for now in (0..3_000_000).step_by(10_000) {
             a.poll(now);
             b.receive(now, &a.transmit(now));
-            assert!(now < 10_000 || b.peer_silent_us(now).unwrap() <= 500_000);
+            assert!(now < 10_000 || b.peer_silent_us(now).unwrap() <= 200_000);
         }
-        // The last heartbeat left at 2.5 s.
-        assert_eq!(b.peer_silent_us(5_000_000), Some(2_500_000));
+        // The last heartbeat left at 2.8 s.
+        assert_eq!(b.peer_silent_us(5_000_000), Some(2_200_000));
     }
 }

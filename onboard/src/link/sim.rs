@@ -4,6 +4,8 @@
 //! The pipe cuts its input at frame delimiters (0x00) and treats each delimited run as one radio
 //! packet: it is dropped with probability `loss`, or has one random bit flipped with probability
 //! `corrupt` (which may hit the delimiter and merge two frames, as a real corrupted byte would).
+//! With `burst_len` above 1 losses come in runs of that many frames (a fade), at the same
+//! average loss.
 //! Surviving bytes arrive after `latency_us` plus their serialisation time at `bytes_per_s`.
 
 use std::collections::VecDeque;
@@ -20,6 +22,8 @@ pub struct PipeConfig {
     pub corrupt: f64,
     /// One-way latency, microseconds.
     pub latency_us: u64,
+    /// Frames lost together in one loss event (1: independent losses).
+    pub burst_len: u32,
     /// Byte rate of the line (0 = unlimited).
     pub bytes_per_s: u32,
 }
@@ -30,6 +34,7 @@ impl PipeConfig {
         loss: 0.0,
         corrupt: 0.0,
         latency_us: 0,
+        burst_len: 1,
         bytes_per_s: 0,
     };
 
@@ -39,8 +44,16 @@ impl PipeConfig {
             loss,
             corrupt,
             latency_us: 20_000,
+            burst_len: 1,
             bytes_per_s: 5_760,
         }
+    }
+
+    /// The same with losses in runs of `burst_len` frames.
+    #[must_use]
+    pub const fn with_bursts(mut self, burst_len: u32) -> Self {
+        self.burst_len = burst_len;
+        self
     }
 }
 
@@ -65,6 +78,7 @@ pub struct LossyPipe {
     line_free_us: u64,
     stats: PipeStats,
     cut: bool,
+    burst_left: u32,
 }
 
 impl LossyPipe {
@@ -78,6 +92,7 @@ impl LossyPipe {
             line_free_us: 0,
             stats: PipeStats::default(),
             cut: false,
+            burst_left: 0,
         }
     }
 
@@ -104,7 +119,7 @@ impl LossyPipe {
 
     fn offer(&mut self, now_us: u64, mut frame: Vec<u8>) {
         self.stats.frames += 1;
-        if self.cut || self.rng.random_bool(self.config.loss.clamp(0.0, 1.0)) {
+        if self.cut || self.lose() {
             self.stats.lost += 1;
             return;
         }
@@ -123,6 +138,27 @@ impl LossyPipe {
         self.line_free_us = start + tx_us;
         self.in_transit
             .push_back((start + tx_us + self.config.latency_us, frame));
+    }
+
+    /// Whether the next frame is lost: a new loss event starts with the probability that keeps
+    /// the average at `loss` (q = f / (L (1 - f) + f) for runs of L frames).
+    fn lose(&mut self) -> bool {
+        if self.burst_left > 0 {
+            self.burst_left -= 1;
+            return true;
+        }
+        let f = self.config.loss.clamp(0.0, 1.0);
+        let l = f64::from(self.config.burst_len.max(1));
+        let q = if f >= 1.0 {
+            1.0
+        } else {
+            f / (l * (1.0 - f) + f)
+        };
+        if self.rng.random_bool(q.clamp(0.0, 1.0)) {
+            self.burst_left = self.config.burst_len.max(1) - 1;
+            return true;
+        }
+        false
     }
 
     /// Bytes that have arrived by `now_us`.
@@ -155,6 +191,7 @@ mod tests {
             loss: 0.2,
             corrupt: 0.2,
             latency_us: 0,
+            burst_len: 1,
             bytes_per_s: 0,
         };
         let run = |seed| {

@@ -13,6 +13,7 @@ use super::handheld::{HandheldConfig, HandheldEvent, HandheldRadio};
 use super::mcu::{McuEvent, McuSession, McuSessionConfig, MotionIntent};
 use super::radio::{OnboardRadio, RadioRequest};
 use super::reliable::LinkConfig;
+use super::session::Entropy;
 use super::sim::{LossyPipe, PipeConfig};
 
 fn key(b: u8) -> Key {
@@ -54,17 +55,49 @@ struct Pair {
     up: LossyPipe,
     down: LossyPipe,
     now: u64,
+    /// Longest handheld silence the onboard saw once it had heard the handheld.
+    max_silence_us: u64,
+}
+
+fn onboard(keys: Vec<Key>, seed: u64) -> OnboardRadio {
+    OnboardRadio::new(LinkConfig::RADIO, keys, Entropy::from_test_seed(seed), 5000)
+}
+
+fn handheld(key: Key, seed: u64) -> HandheldRadio {
+    HandheldRadio::new(
+        HandheldConfig::default(),
+        key,
+        Entropy::from_test_seed(seed),
+        1000,
+    )
 }
 
 impl Pair {
     fn new(pipe: PipeConfig, seed: u64, hh_key: Key, ob_key: Key) -> Self {
+        Self::with_keys(pipe, seed, hh_key, vec![ob_key])
+    }
+
+    fn with_keys(pipe: PipeConfig, seed: u64, hh_key: Key, ob_keys: Vec<Key>) -> Self {
         Self {
-            hh: HandheldRadio::new(HandheldConfig::default(), hh_key, 1000),
-            ob: OnboardRadio::new(LinkConfig::RADIO, ob_key, 0, 5000),
+            hh: handheld(hh_key, seed + 7),
+            ob: onboard(ob_keys, seed + 8),
             up: LossyPipe::new(pipe, seed),
             down: LossyPipe::new(pipe, seed + 1),
             now: 0,
+            max_silence_us: 0,
         }
+    }
+
+    /// A pair whose session is open (over a clean line).
+    fn connected(seed: u64) -> Self {
+        let mut p = Self::new(PipeConfig::CLEAN, seed, key(1), key(1));
+        p.hh.connect(0).unwrap();
+        let (hev, _) = p.run(200_000);
+        assert!(
+            hev.iter()
+                .any(|e| matches!(e, HandheldEvent::Connected { .. }))
+        );
+        p
     }
 
     /// Runs both ends for `us` microseconds in 2 ms steps.
@@ -79,6 +112,9 @@ impl Pair {
             self.down.push(now, &self.ob.transmit(now));
             req.extend(self.ob.receive(now, &self.up.pop(now)));
             hev.extend(self.hh.receive(now, &self.down.pop(now)));
+            if let Some(s) = self.ob.handheld_silent_us(now) {
+                self.max_silence_us = self.max_silence_us.max(s);
+            }
             self.now += 2_000;
         }
         (hev, req)
@@ -91,63 +127,334 @@ fn starts(req: &[RadioRequest]) -> usize {
         .count()
 }
 
+fn aborts(req: &[RadioRequest]) -> usize {
+    req.iter()
+        .filter(|r| matches!(r, RadioRequest::Abort { .. }))
+        .count()
+}
+
+/// A plain (unsealed) frame of `msg`, as an attacker without the key builds it: right version,
+/// valid CRC, ack requested.
+fn plain<M: protocol::Message>(msg: &M, seq: u16, flags: Flags) -> Vec<u8> {
+    let mut buf = [0u8; MAX_FRAME_LEN];
+    let n = msg.encode_frame(seq, flags, &mut buf).unwrap();
+    buf[..n].to_vec()
+}
+
+fn sealed_frames(bytes: &[u8]) -> Vec<Vec<u8>> {
+    let mut frames = Vec::new();
+    let mut cur = Vec::new();
+    for &b in bytes {
+        cur.push(b);
+        if b == 0 {
+            frames.push(std::mem::take(&mut cur));
+        }
+    }
+    frames
+}
+
 #[test]
-fn signed_start_arrives_once_over_a_lossy_radio() {
+fn start_arrives_once_over_a_lossy_radio() {
     for seed in 0..5 {
         let mut p = Pair::new(PipeConfig::radio_lossy(0.2, 0.2), seed * 10, key(1), key(1));
-        p.hh.start(params(), 1_700_000_000_000_000).unwrap();
-        let (_, req) = p.run(15_000_000);
+        p.hh.connect(0).unwrap();
+        p.hh.start(&params()).unwrap();
+        let (hev, req) = p.run(15_000_000);
+        assert!(
+            hev.iter()
+                .any(|e| matches!(e, HandheldEvent::Connected { .. }))
+        );
         assert_eq!(starts(&req), 1, "seed {seed}: {req:?}");
-        assert_eq!(p.ob.last_counter(), 1_700_000_000_000_000);
+        assert!(matches!(
+            req.iter().find(|r| matches!(r, RadioRequest::Start { .. })),
+            Some(RadioRequest::Start { key_id, .. }) if *key_id == protocol::auth::key_id(&key(1))
+        ));
     }
 }
 
 #[test]
-fn wrong_key_start_is_refused_and_never_reaches_the_run() {
+fn a_handheld_with_another_key_never_connects_and_changes_nothing() {
     let mut p = Pair::new(PipeConfig::CLEAN, 0, key(2), key(1));
-    p.hh.start(params(), 10).unwrap();
-    let (hev, req) = p.run(2_000_000);
-    assert_eq!(starts(&req), 0);
-    assert!(req.iter().any(|r| matches!(
-        r,
-        RadioRequest::Refused {
-            reason: RefuseReason::BadTag,
-            ..
-        }
-    )));
+    p.hh.connect(0).unwrap();
+    p.hh.start(&params()).unwrap();
+    p.hh.abort(0).unwrap();
+    let (hev, req) = p.run(5_000_000);
+    assert!(req.is_empty(), "{req:?}");
+    assert!(!p.hh.is_connected());
     assert!(
-        hev.iter()
-            .any(|e| matches!(e, HandheldEvent::Refused(r) if r.reason == RefuseReason::BadTag))
+        !hev.iter()
+            .any(|e| matches!(e, HandheldEvent::Connected { .. }))
     );
-    assert_eq!(p.ob.last_counter(), 0);
+    assert_eq!(p.ob.session_count(), 0);
+    assert!(p.ob.stats().inits_refused >= 5, "{:?}", p.ob.stats());
+    assert_eq!(p.ob.handheld_silent_us(p.now), None, "not liveness");
+    assert!(p.ob.transmit(p.now).is_empty(), "nothing answered");
+}
+
+/// Every message of the handheld's set, and acks, as plain frames (what protocol version 2
+/// accepted unauthenticated): none reaches the run machine, none is acked, none is liveness,
+/// and the pending result stays pending.
+#[test]
+fn unauthenticated_frames_of_every_kind_change_nothing() {
+    use protocol::common::Heartbeat;
+    use protocol::radio::{
+        Abort, FetchRun, HandshakeReply, ResendChunks, ResultAck, StatusRequest,
+    };
+    let mut ob = onboard(vec![key(1)], 1);
+    ob.deliver(result(4), &[[1, 2, 3]; 30]).unwrap();
+    let ack = Flags::ACK_REQUESTED;
+    let mut attack = Vec::new();
+    for seq in 0..50u16 {
+        attack.extend(plain(&Abort { run_id: 0 }, seq, ack));
+        attack.extend(plain(&ResultAck { run_id: 4 }, seq, ack));
+        attack.extend(plain(&params(), seq, ack));
+        attack.extend(plain(
+            &ResendChunks {
+                run_id: 4,
+                indices: protocol::bounded::List::from_slice(&[0, 1]).unwrap(),
+            },
+            seq,
+            ack,
+        ));
+        attack.extend(plain(&StatusRequest {}, seq, ack));
+        attack.extend(plain(&FetchRun { run_id: 4 }, seq, ack));
+        attack.extend(plain(&Heartbeat { counter: 1 }, seq, Flags::NONE));
+        attack.extend(plain(
+            &protocol::Hello::new(protocol::Role::Handheld),
+            seq,
+            ack,
+        ));
+        // Acks of every seq the onboard could have used for the result.
+        let ack_header =
+            protocol::Header::new(protocol::ids::RESULT, seq.wrapping_add(4990), Flags::IS_ACK);
+        let mut buf = [0u8; MAX_FRAME_LEN];
+        let n = protocol::frame::encode_raw(ack_header, &[], &mut buf).unwrap();
+        attack.extend(&buf[..n]);
+        // Sealed-looking frames with garbage, for sessions that do not exist.
+        let mut junk = [0u8; 60];
+        junk[..8].copy_from_slice(&u64::from(seq).to_le_bytes());
+        let h = protocol::Header::new(protocol::ids::SEALED, seq, Flags::NONE);
+        let n = protocol::frame::encode_raw(h, &junk, &mut buf).unwrap();
+        attack.extend(&buf[..n]);
+        // A handshake reply sent to the robot.
+        let reply = HandshakeReply {
+            key_id: 0,
+            session: seq,
+            noise: protocol::bounded::List::from_slice(&[7; 48]).unwrap(),
+        };
+        attack.extend(plain(&reply, seq, Flags::NONE));
+    }
+    let mut req = Vec::new();
+    for (i, chunk) in attack.chunks(97).enumerate() {
+        req.extend(ob.receive(i as u64 * 1_000, chunk));
+    }
+    assert!(req.is_empty(), "{req:?}");
+    assert_eq!(ob.pending_results(), 1, "the result is still owed");
+    assert_eq!(ob.handheld_silent_us(1_000_000), None, "no liveness");
+    assert_eq!(ob.link().stats().frames_received, 0);
+    assert!(ob.stats().unauthenticated >= 450, "{:?}", ob.stats());
+    assert!(ob.stats().unopened >= 50, "{:?}", ob.stats());
+    assert_eq!(
+        ob.transmit(2_000_000),
+        Vec::<u8>::new(),
+        "no acks, no replies"
+    );
 }
 
 #[test]
-fn replayed_start_bytes_are_refused() {
-    let mut p = Pair::new(PipeConfig::CLEAN, 0, key(1), key(1));
-    p.hh.start(params(), 50).unwrap();
-    // Capture the start frame as an eavesdropper would.
-    let captured = p.hh.transmit(0);
-    let req = p.ob.receive(0, &captured);
-    assert_eq!(starts(&req), 1);
+fn forged_results_and_frames_to_the_handheld_are_dropped() {
+    let mut p = Pair::connected(3);
+    let sid = p.hh.session_id().unwrap();
+    let mut attack = plain(&result(66), 1, Flags::ACK_REQUESTED);
+    attack.extend(plain(
+        &protocol::radio::Refused {
+            msg_id: 0,
+            seq: 0,
+            reason: RefuseReason::Busy,
+            detail: Text::truncated("x"),
+        },
+        2,
+        Flags::NONE,
+    ));
+    // A sealed frame claiming the real session id, with a made-up nonce and ciphertext.
+    let mut junk = [0x55u8; 80];
+    junk[..8].copy_from_slice(&7u64.to_le_bytes());
+    let mut buf = [0u8; MAX_FRAME_LEN];
+    let h = protocol::Header::new(protocol::ids::SEALED, sid, Flags::NONE);
+    let n = protocol::frame::encode_raw(h, &junk, &mut buf).unwrap();
+    attack.extend(&buf[..n]);
+    let hev = p.hh.receive(p.now, &attack);
+    assert!(hev.is_empty(), "{hev:?}");
+    assert_eq!(p.hh.stats().unauthenticated, 2);
+    assert_eq!(p.hh.stats().unopened, 1);
+    // The real session still works.
+    p.ob.deliver(result(5), &[[1, 2, 3]]).unwrap();
+    let (hev, _) = p.run(3_000_000);
+    assert!(
+        hev.iter()
+            .any(|e| matches!(e, HandheldEvent::Complete { result, .. } if result.run_id == 5))
+    );
+    assert!(
+        !hev.iter()
+            .any(|e| matches!(e, HandheldEvent::Result(r) if r.run_id == 66))
+    );
+}
+
+#[test]
+fn replayed_sealed_frames_and_sessions_change_nothing() {
+    let mut p = Pair::connected(4);
+    p.hh.abort(0).unwrap();
+    // Capture the sealed abort as an eavesdropper would, and let the onboard see it once.
+    let captured = p.hh.transmit(p.now);
+    assert_eq!(aborts(&p.ob.receive(p.now, &captured)), 1);
     // Much later (past the link's duplicate memory) the attacker replays the same bytes.
-    let later = LinkConfig::RADIO.dedup_memory_us + 1_000_000;
-    let req = p.ob.receive(later, &captured);
-    assert_eq!(starts(&req), 0, "{req:?}");
-    // The guard saw the same counter and tag: a duplicate of the accepted command, acked and
-    // ignored. A replay of an *older* start is refused outright:
-    let mut old_handheld = HandheldRadio::new(HandheldConfig::default(), key(1), 2000);
-    old_handheld.start(params(), 40).unwrap();
-    let old = old_handheld.transmit(0);
-    let req = p.ob.receive(later + 10, &old);
-    assert_eq!(starts(&req), 0);
-    assert!(req.iter().any(|r| matches!(
-        r,
-        RadioRequest::Refused {
-            reason: RefuseReason::Replay,
-            ..
-        }
-    )));
+    let later = p.now + LinkConfig::RADIO.dedup_memory_us + 1_000_000;
+    assert_eq!(aborts(&p.ob.receive(later, &captured)), 0);
+    assert!(p.ob.stats().unopened >= 1);
+
+    // A whole recorded session (handshake init and sealed commands) replayed to a restarted
+    // robot: the init is answered with a new session the attacker cannot use, and no sealed
+    // frame of the old session opens (no counter file is involved).
+    let mut hh = handheld(key(1), 50);
+    let mut ob = onboard(vec![key(1)], 51);
+    hh.connect(0).unwrap();
+    hh.poll(0);
+    let init = hh.transmit(0);
+    ob.receive(0, &init);
+    ob.poll(0);
+    hh.receive(0, &ob.transmit(0));
+    hh.start(&params()).unwrap();
+    hh.abort(0).unwrap();
+    hh.poll(1_000);
+    let commands = hh.transmit(1_000);
+    let req = ob.receive(1_000, &commands);
+    assert_eq!(
+        (starts(&req), aborts(&req)),
+        (1, 1),
+        "the genuine session works"
+    );
+    let mut restarted = onboard(vec![key(1)], 52);
+    let mut req = restarted.receive(5_000_000, &init);
+    for f in sealed_frames(&commands) {
+        req.extend(restarted.receive(5_000_100, &f));
+    }
+    assert!(req.is_empty(), "{req:?}");
+    assert_eq!(restarted.handheld_silent_us(6_000_000), None);
+    assert!(restarted.stats().unopened >= 2);
+}
+
+#[test]
+fn a_replayed_init_does_not_disturb_the_confirmed_session() {
+    let mut p = Pair::new(PipeConfig::CLEAN, 9, key(1), key(1));
+    p.hh.connect(0).unwrap();
+    p.hh.poll(0);
+    let init = p.hh.transmit(0);
+    p.ob.receive(0, &init);
+    p.run(300_000);
+    assert!(p.hh.is_connected());
+    p.hh.request_status().unwrap();
+    p.run(300_000);
+    let refused = p.ob.stats().inits_refused;
+    p.ob.receive(p.now, &init);
+    assert_eq!(
+        p.ob.stats().inits_refused,
+        refused + 1,
+        "a late copy is refused"
+    );
+    p.hh.abort(0).unwrap();
+    let (_, req) = p.run(1_000_000);
+    assert_eq!(aborts(&req), 1);
+    assert_eq!(p.ob.stats().sessions_opened, 1);
+}
+
+#[test]
+fn connect_succeeds_when_the_first_replies_are_lost() {
+    let mut p = Pair::new(PipeConfig::radio_lossy(0.0, 0.0), 11, key(1), key(1));
+    p.hh.connect(0).unwrap();
+    p.down.set_cut(true);
+    p.run(2_000_000);
+    assert!(!p.hh.is_connected());
+    assert!(p.hh.stats().inits_sent >= 3);
+    p.down.set_cut(false);
+    let (hev, _) = p.run(2_000_000);
+    assert!(
+        hev.iter()
+            .any(|e| matches!(e, HandheldEvent::Connected { .. }))
+    );
+    assert_eq!(
+        p.ob.stats().sessions_opened,
+        1,
+        "repeats answered, not new sessions"
+    );
+    p.hh.request_status().unwrap();
+    let (_, req) = p.run(1_000_000);
+    assert!(req.iter().any(|r| matches!(r, RadioRequest::Status)));
+}
+
+#[test]
+fn two_paired_handhelds_each_hear_their_answers_and_either_aborts() {
+    // One shared radio channel: both handhelds hear everything the robot sends.
+    let mut ob = onboard(vec![key(1), key(2)], 20);
+    let mut a = handheld(key(1), 21);
+    let mut b = handheld(key(2), 22);
+    a.connect(0).unwrap();
+    b.connect(100_000).unwrap();
+    let (mut ha, mut hb, mut req) = (Vec::new(), Vec::new(), Vec::new());
+    let mut now = 0;
+    let mut step =
+        |ob: &mut OnboardRadio, a: &mut HandheldRadio, b: &mut HandheldRadio, now: u64| {
+            ha.extend(a.poll(now));
+            hb.extend(b.poll(now));
+            ob.poll(now);
+            let mut up = a.transmit(now);
+            up.extend(b.transmit(now));
+            req.extend(ob.receive(now, &up));
+            let down = ob.transmit(now);
+            ha.extend(a.receive(now, &down));
+            hb.extend(b.receive(now, &down));
+        };
+    while now < 1_000_000 {
+        step(&mut ob, &mut a, &mut b, now);
+        now += 2_000;
+    }
+    assert!(a.is_connected() && b.is_connected());
+    a.request_status().unwrap();
+    let abort_seq = b.abort(0).unwrap();
+    while now < 3_000_000 {
+        step(&mut ob, &mut a, &mut b, now);
+        now += 2_000;
+    }
+    assert!(ha.iter().any(|e| matches!(e, HandheldEvent::Acked { .. })));
+    assert!(hb.iter().any(|e| matches!(e, HandheldEvent::Acked { msg_id, seq } if *msg_id == protocol::ids::ABORT && *seq == abort_seq)));
+    assert_eq!(
+        req.iter()
+            .filter(|r| matches!(r, RadioRequest::Status))
+            .count(),
+        1
+    );
+    assert_eq!(aborts(&req), 1);
+}
+
+#[test]
+fn a_flood_of_commands_from_one_session_is_rate_limited_but_abort_is_not() {
+    let mut p = Pair::connected(12);
+    for _ in 0..200 {
+        p.hh.request_status().unwrap();
+    }
+    p.hh.abort(0).unwrap();
+    let (_, req) = p.run(3_000_000);
+    let statuses = req
+        .iter()
+        .filter(|r| matches!(r, RadioRequest::Status))
+        .count();
+    // Burst 20 plus 10 per second.
+    assert!(statuses <= 51, "{statuses} status requests passed in 3 s");
+    assert!(
+        statuses >= 40,
+        "{statuses}: the limit lets the rate through"
+    );
+    assert_eq!(aborts(&req), 1);
+    assert!(p.ob.stats().rate_limited > 0);
 }
 
 #[test]
@@ -162,6 +469,7 @@ fn result_and_preview_arrive_exactly_over_20_percent_loss_and_corruption() {
             key(1),
             key(1),
         );
+        p.hh.connect(0).unwrap();
         p.ob.deliver(result(7), &preview).unwrap();
         let (hev, req) = p.run(60_000_000);
         let complete: Vec<_> = hev
@@ -173,7 +481,7 @@ fn result_and_preview_arrive_exactly_over_20_percent_loss_and_corruption() {
             .collect();
         assert_eq!(complete.len(), 1, "seed {seed}");
         let mut expect = result(7);
-        expect.preview_chunks = 42;
+        expect.preview_chunks = 1_000usize.div_ceil(protocol::radio::CHUNK_POINTS) as u16;
         assert_eq!(complete[0].0, &expect, "exact result");
         assert_eq!(complete[0].1, &preview, "exact preview");
         assert!(
@@ -188,6 +496,7 @@ fn result_and_preview_arrive_exactly_over_20_percent_loss_and_corruption() {
 #[test]
 fn result_is_held_until_the_handheld_comes_back() {
     let mut p = Pair::new(PipeConfig::radio_lossy(0.0, 0.0), 3, key(1), key(1));
+    p.hh.connect(0).unwrap();
     p.up.set_cut(true);
     p.down.set_cut(true);
     p.ob.deliver(result(9), &[[1, 2, 3]]).unwrap();
@@ -205,12 +514,99 @@ fn result_is_held_until_the_handheld_comes_back() {
 
 #[test]
 fn handheld_silence_is_visible_to_the_onboard() {
-    let mut p = Pair::new(PipeConfig::CLEAN, 0, key(1), key(1));
+    let mut p = Pair::connected(0);
     p.run(1_000_000);
-    assert!(p.ob.handheld_silent_us(p.now).unwrap() <= 600_000);
+    assert!(p.ob.handheld_silent_us(p.now).unwrap() <= 300_000);
     p.up.set_cut(true);
     p.run(3_000_000);
-    assert!(p.ob.handheld_silent_us(p.now).unwrap() >= 2_400_000);
+    assert!(p.ob.handheld_silent_us(p.now).unwrap() >= 2_700_000);
+}
+
+/// One cell of the lossy-radio matrix: connect, start, a result with a 1000-point preview, then
+/// an abort, all over the impaired line in simulated time. Returns (connect time, whole exchange
+/// time, longest handheld silence the onboard saw after connecting), or what did not arrive.
+fn matrix_cell(pipe: PipeConfig, seed: u64) -> Result<(u64, u64, u64), String> {
+    let preview: Vec<[i16; 3]> = (0..1_000).map(|i: i16| [i, 2 * i, -i]).collect();
+    let mut p = Pair::new(pipe, seed, key(1), key(1));
+    p.hh.connect(0).unwrap();
+    let mut connected_at = None;
+    let (mut started, mut complete, mut aborted, mut abort_acked) = (false, false, false, false);
+    let mut abort_seq = None;
+    while p.now < 120_000_000 {
+        let (hev, req) = p.run(100_000);
+        if connected_at.is_none()
+            && hev
+                .iter()
+                .any(|e| matches!(e, HandheldEvent::Connected { .. }))
+        {
+            connected_at = Some(p.now);
+            p.max_silence_us = 0;
+            p.hh.start(&params()).unwrap();
+        }
+        if starts(&req) > 0 {
+            assert!(!started, "start delivered twice");
+            started = true;
+            p.ob.deliver(result(3), &preview).unwrap();
+        }
+        if hev.iter().any(|e| matches!(e, HandheldEvent::Complete { result, preview_mm } if result.run_id == 3 && *preview_mm == preview)) {
+            complete = true;
+            abort_seq = Some(p.hh.abort(3).unwrap());
+        }
+        if aborts(&req) > 0 {
+            assert!(!aborted, "abort delivered twice");
+            aborted = true;
+        }
+        if hev
+            .iter()
+            .any(|e| matches!(e, HandheldEvent::Acked { seq, .. } if Some(*seq) == abort_seq))
+        {
+            abort_acked = true;
+        }
+        if hev.iter().any(|e| matches!(e, HandheldEvent::Lost { .. })) {
+            return Err(format!("a command was given up at {} ms", p.now / 1000));
+        }
+        if abort_acked && p.ob.pending_results() == 0 {
+            return Ok((connected_at.unwrap_or(0), p.now, p.max_silence_us));
+        }
+    }
+    Err(format!(
+        "connected {connected_at:?}, started {started}, complete {complete}, aborted {aborted}, abort acked {abort_acked}, pending {}",
+        p.ob.pending_results()
+    ))
+}
+
+/// The lossy-radio matrix: loss 0-40 %, corruption 0-20 %, independent and burst losses, three
+/// seeds each. Everything arrives exactly once; up to 30 % loss and 10 % corruption the onboard
+/// never misses 12 heartbeats in a row (the run's default `handheld-missed-beats`).
+#[test]
+fn lossy_radio_matrix() {
+    let mut report = Vec::new();
+    for &loss in &[0.0, 0.1, 0.2, 0.3, 0.4] {
+        for &corrupt in &[0.0, 0.1, 0.2] {
+            for &burst in &[1, 4] {
+                for seed in 0..3 {
+                    let pipe = PipeConfig::radio_lossy(loss, corrupt).with_bursts(burst);
+                    let cell = matrix_cell(pipe, 1_000 + seed);
+                    let (connect, total, silence) = cell.unwrap_or_else(|e| {
+                        panic!("loss {loss} corrupt {corrupt} burst {burst} seed {seed}: {e}")
+                    });
+                    if loss <= 0.3 && corrupt <= 0.1 && burst == 1 {
+                        assert!(
+                            silence < 12 * LinkConfig::RADIO.heartbeat_period_us,
+                            "loss {loss} corrupt {corrupt} seed {seed}: silent {silence} us"
+                        );
+                    }
+                    report.push(format!(
+                        "loss {loss:.1} corrupt {corrupt:.1} burst {burst} seed {seed}: connect {:.1} s, all {:.1} s, longest silence {:.1} s",
+                        connect as f64 * 1e-6,
+                        total as f64 * 1e-6,
+                        silence as f64 * 1e-6
+                    ));
+                }
+            }
+        }
+    }
+    println!("{}", report.join("\n"));
 }
 
 // ---- MCU session against a scripted firmware ----
@@ -423,29 +819,39 @@ fn a_drive_refused_for_a_late_heartbeat_is_sent_once_more() {
 // ---- never panics on arbitrary bytes (the fuzz target `link_sessions` does the same) ----
 
 fn all_sessions_eat(data: &[u8], chunk: usize) {
-    let mut onboard = OnboardRadio::new(LinkConfig::RADIO, key(3), 0, 0);
-    let mut handheld = HandheldRadio::new(HandheldConfig::default(), key(3), 100);
+    let mut onboard = onboard(vec![key(3)], 0);
+    let mut hh = handheld(key(3), 100);
+    hh.connect(0).unwrap();
     let mut mcu = McuSession::new(mcu_config(), 0);
     let mut now = 0u64;
     for c in data.chunks(chunk.max(1)) {
         now += u64::from(c[0]) * 1_000;
         onboard.receive(now, c);
-        handheld.receive(now, c);
+        hh.receive(now, c);
         mcu.receive(now, c);
         onboard.poll(now);
-        handheld.poll(now);
+        hh.poll(now);
         mcu.poll(now);
         onboard.transmit(now);
-        handheld.transmit(now);
+        hh.transmit(now);
         mcu.transmit(now);
     }
     onboard.receive(now, &[0]);
-    // After the junk (and past the duplicate memory) a genuine start still gets through.
-    let mut sender = HandheldRadio::new(HandheldConfig::default(), key(3), 40_000);
-    sender.start(params(), u64::MAX - 1).unwrap();
+    // After the junk a genuine handheld still connects and its start gets through.
+    let mut sender = handheld(key(3), 40_000);
     let later = now + 120_000_000;
-    let bytes = sender.transmit(later);
-    assert_eq!(starts(&onboard.receive(later, &bytes)), 1);
+    sender.connect(later).unwrap();
+    sender.poll(later);
+    onboard.receive(later, &sender.transmit(later));
+    onboard.poll(later);
+    sender.receive(later, &onboard.transmit(later + 1_000_000));
+    assert!(sender.is_connected());
+    sender.start(&params()).unwrap();
+    sender.poll(later + 1);
+    assert_eq!(
+        starts(&onboard.receive(later + 2, &sender.transmit(later + 2))),
+        1
+    );
 }
 
 proptest::proptest! {
@@ -463,10 +869,13 @@ proptest::proptest! {
     ) {
         // Real traffic (a start, a result with its preview, status) with bytes overwritten.
         let mut p = Pair::new(PipeConfig::CLEAN, 0, key(3), key(3));
-        p.hh.start(params(), 9).unwrap();
+        p.hh.connect(0).unwrap();
+        let (_, _) = p.run(100_000);
+        p.hh.start(&params()).unwrap();
         p.ob.deliver(result(2), &[[1, 2, 3]; 60]).unwrap();
-        let mut bytes = p.hh.transmit(0);
-        bytes.extend(p.ob.transmit(0));
+        p.hh.poll(p.now);
+        let mut bytes = p.hh.transmit(p.now);
+        bytes.extend(p.ob.transmit(p.now));
         for (i, v) in flips {
             if !bytes.is_empty() {
                 let n = bytes.len();
