@@ -5,6 +5,7 @@
 //! Module map, from the world outward:
 //! - [`geometry`]: vectors, rotations, rigid transforms, poses.
 //! - [`vehicle`]: the vehicle TOML format and its validation.
+//! - [`mesh`]: triangle meshes (OBJ, STL, PLY loaders), their BVH, ray casting and distance.
 //! - [`truth`]: true approach, departure and breakover angles by brute-force tangent rotation.
 //! - [`world`]: the scene (ground, tyres, body prisms, parts) and its ray caster.
 //! - [`trajectory`]: robot poses over time (a trait, the scenario's analytic motion, sampled paths).
@@ -30,6 +31,7 @@ pub mod esc_model;
 pub mod fil;
 pub mod fil_scenarios;
 pub mod geometry;
+pub mod mesh;
 pub mod pty;
 pub mod robot;
 pub mod scenario;
