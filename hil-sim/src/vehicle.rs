@@ -50,12 +50,26 @@
 //! radius_m = 0.04
 //! length_m = 0.6
 //! rigid = true                 # optional, default true; false for mud flaps, air dams
+//!
+//! [[parts]]
+//! kind = "mesh"                # a triangle mesh read from OBJ, STL or PLY (hil-sim/MESHES.md)
+//! name = "silencer"
+//! file = "meshes/silencer.obj" # relative to this vehicle file's directory
+//! scale = 1.0                  # optional, default 1: file units to metres
+//! offset_m = [-3.3, 0.0, 0.0]  # optional, default 0: added after scaling
+//! rigid = true
 //! ```
-//! Unknown keys are rejected; every validation error names the file and the field.
+//! Unknown keys are rejected; every validation error names the file and the field. Mesh parts are
+//! read by [`Vehicle::load`] (or [`Vehicle::from_toml_str_in_dir`]); [`Vehicle::from_toml_str`]
+//! has no directory to read them from and rejects them.
 
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
 use serde::Deserialize;
+
+use crate::geometry::Vec3;
+use crate::mesh::{Mesh, MeshError};
 
 /// How far the rim disc sits inside the tyre's sidewall plane, metres.
 pub const RIM_INSET_M: f64 = 0.03;
@@ -108,6 +122,26 @@ fn default_arch_clearance() -> f64 {
 
 fn default_true() -> bool {
     true
+}
+
+fn default_one() -> f64 {
+    1.0
+}
+
+/// A mesh part's triangles in the vehicle frame (scaled and offset), shared by clones. Empty until
+/// the vehicle file's loader reads the mesh file.
+#[derive(Clone, Default, PartialEq)]
+pub struct LoadedMesh(pub Arc<Mesh>);
+
+impl std::fmt::Debug for LoadedMesh {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "LoadedMesh({} vertices, {} triangles)",
+            self.0.vertices().len(),
+            self.0.triangles().len()
+        )
+    }
 }
 
 /// Tyre dimensions (static loaded radius).
@@ -188,20 +222,41 @@ pub enum Part {
         #[serde(default = "default_true")]
         rigid: bool,
     },
+    /// A triangle mesh read from an OBJ, STL or PLY file.
+    Mesh {
+        /// Name, used in witness reports.
+        name: String,
+        /// The mesh file, relative to the vehicle file's directory.
+        file: PathBuf,
+        /// Factor from the file's units to metres.
+        #[serde(default = "default_one")]
+        scale: f64,
+        /// Added to every scaled vertex, metres.
+        #[serde(default)]
+        offset_m: [f64; 3],
+        /// Rigid or flexible, as for boxes.
+        #[serde(default = "default_true")]
+        rigid: bool,
+        /// The triangles in the vehicle frame, filled in by the loader.
+        #[serde(skip)]
+        mesh: LoadedMesh,
+    },
 }
 
 impl Part {
     /// The part's name.
     pub fn name(&self) -> &str {
         match self {
-            Part::Box { name, .. } | Part::Cylinder { name, .. } => name,
+            Part::Box { name, .. } | Part::Cylinder { name, .. } | Part::Mesh { name, .. } => name,
         }
     }
 
     /// Whether the part is rigid.
     pub fn rigid(&self) -> bool {
         match self {
-            Part::Box { rigid, .. } | Part::Cylinder { rigid, .. } => *rigid,
+            Part::Box { rigid, .. } | Part::Cylinder { rigid, .. } | Part::Mesh { rigid, .. } => {
+                *rigid
+            }
         }
     }
 }
@@ -249,6 +304,16 @@ pub enum VehicleError {
         /// What is wrong.
         reason: String,
     },
+    /// A mesh part's file could not be read or is malformed.
+    #[error("vehicle file {path}: field `{field}`: {source}")]
+    Mesh {
+        /// The vehicle file.
+        path: PathBuf,
+        /// Dotted field name, e.g. `parts[2].file`.
+        field: String,
+        /// What is wrong with the mesh file (boxed: it is large and rare).
+        source: Box<MeshError>,
+    },
 }
 
 impl Vehicle {
@@ -258,12 +323,24 @@ impl Vehicle {
             path: path.to_owned(),
             source,
         })?;
-        Self::from_toml_str(&text, path)
+        let dir = path.parent().unwrap_or(Path::new("."));
+        Self::parse(&text, path, Some(dir))
     }
 
-    /// Parse and validate vehicle TOML; `path` is only used in error messages.
+    /// Parse and validate vehicle TOML without mesh parts; `path` is only used in error messages.
+    /// A mesh part is an error here (there is no directory to read its file from).
     pub fn from_toml_str(text: &str, path: &Path) -> Result<Self, VehicleError> {
-        let vehicle: Vehicle = toml::from_str(text).map_err(|e| VehicleError::Toml {
+        Self::parse(text, path, None)
+    }
+
+    /// Parse and validate vehicle TOML, reading mesh parts' files relative to `dir`; `path` is only
+    /// used in error messages.
+    pub fn from_toml_str_in_dir(text: &str, path: &Path, dir: &Path) -> Result<Self, VehicleError> {
+        Self::parse(text, path, Some(dir))
+    }
+
+    fn parse(text: &str, path: &Path, dir: Option<&Path>) -> Result<Self, VehicleError> {
+        let mut vehicle: Vehicle = toml::from_str(text).map_err(|e| VehicleError::Toml {
             path: path.to_owned(),
             message: e.to_string(),
         })?;
@@ -274,6 +351,41 @@ impl Vehicle {
                 field,
                 reason,
             })?;
+        for (i, part) in vehicle.parts.iter_mut().enumerate() {
+            let Part::Mesh {
+                file,
+                scale,
+                offset_m,
+                mesh,
+                ..
+            } = part
+            else {
+                continue;
+            };
+            let field = format!("parts[{i}].file");
+            let Some(dir) = dir else {
+                return Err(VehicleError::Invalid {
+                    path: path.to_owned(),
+                    field,
+                    reason: "mesh parts need the vehicle file's directory: load the vehicle \
+                             from its file"
+                        .to_owned(),
+                });
+            };
+            let raw =
+                crate::mesh::load(&dir.join(&*file)).map_err(|source| VehicleError::Mesh {
+                    path: path.to_owned(),
+                    field: field.clone(),
+                    source: Box::new(source),
+                })?;
+            let placed = raw.transformed(*scale, v3(*offset_m));
+            check_mesh_placement(&placed).map_err(|reason| VehicleError::Invalid {
+                path: path.to_owned(),
+                field,
+                reason,
+            })?;
+            *mesh = LoadedMesh(Arc::new(placed));
+        }
         Ok(vehicle)
     }
 
@@ -473,10 +585,24 @@ impl Vehicle {
                 });
             }
         }
+        for part in &self.parts {
+            if let Part::Mesh { mesh, .. } = part {
+                out.extend(
+                    mesh_side_view(&mesh.0, spacing_m)
+                        .into_iter()
+                        .map(|[x_m, z_m]| OutlinePoint {
+                            x_m,
+                            z_m,
+                            rigid: part.rigid(),
+                            source: part.name().to_owned(),
+                        }),
+                );
+            }
+        }
         out
     }
 
-    /// The outline's vertices only (no samples along edges).
+    /// The outline's vertices only (no samples along edges), mesh parts' vertices included.
     pub fn outline_vertices(&self) -> Vec<OutlinePoint> {
         let mut out = Vec::new();
         for edge in self.outline_edges() {
@@ -489,11 +615,22 @@ impl Vehicle {
                 });
             }
         }
+        for part in &self.parts {
+            if let Part::Mesh { mesh, .. } = part {
+                out.extend(mesh.0.vertices().iter().map(|v| OutlinePoint {
+                    x_m: v.x,
+                    z_m: v.z,
+                    rigid: part.rigid(),
+                    source: part.name().to_owned(),
+                }));
+            }
+        }
         out
     }
 
-    /// Side-view edges of everything that can touch a ramp: body prisms and parts. Cylinders whose
-    /// axis is y appear as 64-gons (documented approximation, error below 0.12 % of the radius).
+    /// Side-view edges of everything that can touch a ramp: body prisms and box and cylinder parts
+    /// (mesh parts contribute points, see `mesh_side_view`). Cylinders whose axis is y appear as
+    /// 64-gons (documented approximation, error below 0.12 % of the radius).
     fn outline_edges(&self) -> Vec<OutlineEdge> {
         let mut edges = Vec::new();
         for (name, poly, _) in self.body_prisms() {
@@ -508,7 +645,9 @@ impl Vehicle {
             }
         }
         for part in &self.parts {
-            let poly = part_side_view(part);
+            let Some(poly) = part_side_view(part) else {
+                continue;
+            };
             for i in 0..poly.len() {
                 let (a, b) = (poly[i], poly[(i + 1) % poly.len()]);
                 edges.push(OutlineEdge {
@@ -543,9 +682,10 @@ struct OutlineEdge {
     source: String,
 }
 
-/// A part's side-view (x, z) outline polygon.
-fn part_side_view(part: &Part) -> Vec<[f64; 2]> {
-    match part {
+/// A box's or cylinder's side-view (x, z) outline polygon (`None` for a mesh).
+fn part_side_view(part: &Part) -> Option<Vec<[f64; 2]>> {
+    Some(match part {
+        Part::Mesh { .. } => return None,
         Part::Box { min_m, max_m, .. } => rectangle(min_m[0], max_m[0], min_m[2], max_m[2]),
         Part::Cylinder {
             axis,
@@ -563,7 +703,7 @@ fn part_side_view(part: &Part) -> Vec<[f64; 2]> {
                 })
                 .collect(),
         },
-    }
+    })
 }
 
 fn rectangle(x0: f64, x1: f64, z0: f64, z1: f64) -> Vec<[f64; 2]> {
@@ -612,8 +752,82 @@ fn validate_part(field: &str, part: &Part) -> Result<(), (String, String)> {
                 );
             }
         }
+        Part::Mesh {
+            file,
+            scale,
+            offset_m,
+            ..
+        } => {
+            if file.as_os_str().is_empty() {
+                return fail(&format!("{field}.file"), "must name a mesh file");
+            }
+            positive(&format!("{field}.scale"), *scale)?;
+            coordinates(&format!("{field}.offset_m"), offset_m)?;
+        }
     }
     Ok(())
+}
+
+/// A placed mesh must stay within +-[`MAX_DIMENSION_M`] and above the ground.
+fn check_mesh_placement(mesh: &Mesh) -> Result<(), String> {
+    let b = mesh.bounds();
+    let coords = [b.min.x, b.min.y, b.min.z, b.max.x, b.max.y, b.max.z];
+    if !coords.iter().all(|c| c.abs() <= MAX_DIMENSION_M) {
+        return Err(format!(
+            "the scaled and offset mesh reaches beyond +-{MAX_DIMENSION_M} m"
+        ));
+    }
+    // The BVH pads its boxes by about a nanometre; a mesh resting on the ground is accepted.
+    if b.min.z < -1e-6 {
+        return Err(format!(
+            "the scaled and offset mesh reaches below the ground (lowest z = {} m)",
+            b.min.z
+        ));
+    }
+    Ok(())
+}
+
+fn v3(a: [f64; 3]) -> Vec3 {
+    Vec3::new(a[0], a[1], a[2])
+}
+
+/// The side-view points of a mesh part that can first touch a ramp line or crest.
+///
+/// Every vertex, projected to (x, z): a tangent line in the side view first touches a polyhedron
+/// at a vertex (the extreme point of a polytope in any direction is a vertex), so vertices suffice
+/// for approach and departure. A breakover crest can instead touch the outline on an edge between
+/// vertices, so edges are also sampled every `spacing_m`, keeping per x-bin of that width only the
+/// lowest sample: a lower point at the same x is below every ramp line and crest the higher one is.
+fn mesh_side_view(mesh: &Mesh, spacing_m: f64) -> Vec<[f64; 2]> {
+    let mut out: Vec<[f64; 2]> = mesh.vertices().iter().map(|v| [v.x, v.z]).collect();
+    out.sort_by(|a, b| a[0].total_cmp(&b[0]).then(a[1].total_cmp(&b[1])));
+    out.dedup();
+    let Some(x_min) = out.first().map(|p| p[0]) else {
+        return out;
+    };
+    let x_max = out.last().map_or(x_min, |p| p[0]);
+    let bins = ((x_max - x_min) / spacing_m).ceil() as usize + 1;
+    let mut lowest: Vec<Option<[f64; 2]>> = vec![None; bins];
+    let vertices = mesh.vertices();
+    for tri in mesh.triangles() {
+        for k in 0..3 {
+            let (a, b) = (
+                vertices[tri[k] as usize],
+                vertices[tri[(k + 1) % 3] as usize],
+            );
+            let n = (((b.x - a.x).hypot(b.z - a.z) / spacing_m).ceil() as usize).max(1);
+            for s in 1..n {
+                let t = s as f64 / n as f64;
+                let p = [a.x + t * (b.x - a.x), a.z + t * (b.z - a.z)];
+                let bin = (((p[0] - x_min) / spacing_m) as usize).min(bins - 1);
+                if lowest[bin].is_none_or(|q| p[1] < q[1]) {
+                    lowest[bin] = Some(p);
+                }
+            }
+        }
+    }
+    out.extend(lowest.into_iter().flatten());
+    out
 }
 
 fn positive(field: &str, v: f64) -> Result<(), (String, String)> {
