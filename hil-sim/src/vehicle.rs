@@ -56,7 +56,7 @@
 //! name = "silencer"
 //! file = "meshes/silencer.obj" # relative to this vehicle file's directory
 //! scale = 1.0                  # optional, default 1: file units to metres
-//! offset_m = [-3.3, 0.0, 0.0]  # optional, default 0: added after scaling
+//! offset_m = [-3.1, 0.0, 0.24] # optional, default 0: added after scaling
 //! rigid = true
 //! ```
 //! Unknown keys are rejected; every validation error names the file and the field. Mesh parts are

@@ -56,10 +56,10 @@ fn mesh_parts_limit_the_departure_angle_in_order() {
     let v = hatchback();
     let r = v.tyre.radius_m;
     let full = angles(&v);
-    // The spare wheel's rear lower vertex: x = -3.25 - 0.18, z = 0.28, 0.83 m behind the axle.
+    // The spare wheel's rear lower vertex: x = -3.27 - 0.18, z = 0.30, 0.85 m behind the axle.
     assert_eq!(witness(&full.departure), "spare wheel");
     assert!(
-        (full.departure.angle_rad - closed_form_rad(0.83, 0.28, r)).abs() < TOL,
+        (full.departure.angle_rad - closed_form_rad(0.85, 0.30, r)).abs() < TOL,
         "{}",
         full.departure.angle_rad.to_degrees()
     );
@@ -75,12 +75,12 @@ fn mesh_parts_limit_the_departure_angle_in_order() {
         .map(|p| closed_form_rad(rear_x - p.x_m, p.z_m, r))
         .fold(f64::INFINITY, f64::min);
     assert!((t.departure.angle_rad - silencer_min).abs() < TOL);
-    assert!(t.departure.angle_rad > full.departure.angle_rad + 1f64.to_radians());
-    // Without both the body's rear overhang vertex (-3.35, 0.32) limits it.
+    assert!(t.departure.angle_rad > full.departure.angle_rad + 0.5f64.to_radians());
+    // Without both the body's rear overhang vertex (-3.35, 0.34) limits it.
     let body = angles(&without(&no_spare, "transverse silencer"));
     assert_eq!(witness(&body.departure), "rear overhang");
-    assert!((body.departure.angle_rad - closed_form_rad(0.75, 0.32, r)).abs() < TOL);
-    assert!(body.departure.angle_rad > t.departure.angle_rad + 1f64.to_radians());
+    assert!((body.departure.angle_rad - closed_form_rad(0.75, 0.34, r)).abs() < TOL);
+    assert!(body.departure.angle_rad > t.departure.angle_rad + 0.5f64.to_radians());
     // The meshes sit behind the rear axle: approach and breakover do not change.
     assert_eq!(full.approach, body.approach);
     assert_eq!(full.breakover, body.breakover);
@@ -232,7 +232,7 @@ fn hits_on_mesh_parts_lie_on_them_and_wedge_culling_keeps_them() {
     let mut mesh_hits = 0usize;
     for _ in 0..30_000 {
         let o = Vec3::new(
-            rng.random_range(-3.4..-1.0),
+            rng.random_range(-3.4..-2.2),
             rng.random_range(-0.6..0.6),
             rng.random_range(0.02..0.13),
         );
@@ -256,6 +256,7 @@ fn hits_on_mesh_parts_lie_on_them_and_wedge_culling_keeps_them() {
         }
     }
     assert!(mesh_hits > 1000, "only {mesh_hits} hits on the mesh parts");
+    println!("{mesh_hits} hits on the mesh parts");
 }
 
 #[test]
@@ -295,8 +296,8 @@ fn bad_mesh_parts_are_rejected_naming_file_field_and_place() {
         "{e}"
     );
     let low = text.replace(
-        "offset_m = [-3.05, 0.0, 0.22]",
-        "offset_m = [-3.05, 0.0, 0.05]",
+        "offset_m = [-3.10, 0.0, 0.24]",
+        "offset_m = [-3.10, 0.0, 0.05]",
     );
     let e = Vehicle::from_toml_str_in_dir(&low, Path::new("v.toml"), &vehicles_dir())
         .expect_err("below ground")
