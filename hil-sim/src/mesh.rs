@@ -165,7 +165,16 @@ impl Mesh {
         &self.triangles
     }
 
-    /// The box around every triangle.
+    /// The exact box around the vertices (`None` for a mesh without vertices).
+    pub fn vertex_bounds(&self) -> Option<Bounds> {
+        let mut b = Bounds::EMPTY;
+        for &v in &self.vertices {
+            b.grow(v);
+        }
+        (!self.vertices.is_empty()).then_some(b)
+    }
+
+    /// The box around every triangle, padded by about a nanometre (see the BVH).
     pub fn bounds(&self) -> Bounds {
         self.nodes.first().map_or(Bounds::EMPTY, |n| n.bounds)
     }

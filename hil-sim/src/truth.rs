@@ -284,7 +284,7 @@ mod tests {
     #[test]
     fn flat_floor_breakover_is_limited_at_mid_wheelbase() {
         let mut v = test_sedan();
-        v.underside.between.points = vec![[-0.45, 0.2], [-2.35, 0.2]];
+        v.underside.as_mut().expect("prism body").between.points = vec![[-0.45, 0.2], [-2.35, 0.2]];
         let t = true_angles(
             &v,
             &TruthOptions {

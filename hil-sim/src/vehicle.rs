@@ -62,6 +62,17 @@
 //! Unknown keys are rejected; every validation error names the file and the field. Mesh parts are
 //! read by [`Vehicle::load`] (or [`Vehicle::from_toml_str_in_dir`]); [`Vehicle::from_toml_str`]
 //! has no directory to read them from and rejects them.
+//!
+//! # Mesh body
+//! Instead of `[underside]`, a vehicle may give its whole body as one triangle mesh:
+//! ```toml
+//! [body_mesh]
+//! file = "meshes/body.obj"     # relative to this vehicle file's directory
+//! scale = 1.0                  # optional
+//! offset_m = [0.0, 0.0, 0.0]   # optional
+//! ```
+//! It replaces the prisms and the wheel arches (so it must leave room for the tyres itself; the
+//! prisms' tyre-gap check does not apply), and its points appear in witness reports as `body`.
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -73,6 +84,9 @@ use crate::mesh::{Mesh, MeshError};
 
 /// How far the rim disc sits inside the tyre's sidewall plane, metres.
 pub const RIM_INSET_M: f64 = 0.03;
+
+/// The outline source name of a mesh body's points.
+pub const BODY_MESH_SOURCE: &str = "body";
 
 /// Default gap between the top of the tyre and the wheel arch, metres.
 pub const DEFAULT_ARCH_CLEARANCE_M: f64 = 0.05;
@@ -106,8 +120,12 @@ pub struct Vehicle {
     pub arch_clearance_m: f64,
     /// The tyres (all four alike).
     pub tyre: Tyre,
-    /// The underside profile.
-    pub underside: Underside,
+    /// The underside profile of a prism body (exactly one of `underside` and `body_mesh`).
+    #[serde(default)]
+    pub underside: Option<Underside>,
+    /// The whole body as a triangle mesh instead of prisms.
+    #[serde(default)]
+    pub body_mesh: Option<BodyMesh>,
     /// Optional parts.
     #[serde(default)]
     pub parts: Vec<Part>,
@@ -154,6 +172,24 @@ pub struct Tyre {
     pub width_m: f64,
     /// Rim radius, metres (inside the sidewall annulus).
     pub rim_radius_m: f64,
+}
+
+/// A body given as a triangle mesh (see hil-sim/MESHES.md): it replaces the prisms and the wheel
+/// arches, so the mesh must leave room for the tyres itself.
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct BodyMesh {
+    /// The mesh file, relative to the vehicle file's directory.
+    pub file: PathBuf,
+    /// Factor from the file's units to metres.
+    #[serde(default = "default_one")]
+    pub scale: f64,
+    /// Added to every scaled vertex, metres.
+    #[serde(default)]
+    pub offset_m: [f64; 3],
+    /// The triangles in the vehicle frame, filled in by the loader.
+    #[serde(skip)]
+    pub mesh: LoadedMesh,
 }
 
 /// The three underside sections.
@@ -351,40 +387,36 @@ impl Vehicle {
                 field,
                 reason,
             })?;
+        if let Some(body) = &mut vehicle.body_mesh {
+            let placed = load_mesh_file(
+                path,
+                dir,
+                "body_mesh.file",
+                &body.file,
+                body.scale,
+                body.offset_m,
+            )?;
+            body.mesh = LoadedMesh(Arc::new(placed));
+        }
         for (i, part) in vehicle.parts.iter_mut().enumerate() {
-            let Part::Mesh {
+            if let Part::Mesh {
                 file,
                 scale,
                 offset_m,
                 mesh,
                 ..
             } = part
-            else {
-                continue;
-            };
-            let field = format!("parts[{i}].file");
-            let Some(dir) = dir else {
-                return Err(VehicleError::Invalid {
-                    path: path.to_owned(),
-                    field,
-                    reason: "mesh parts need the vehicle file's directory: load the vehicle \
-                             from its file"
-                        .to_owned(),
-                });
-            };
-            let raw =
-                crate::mesh::load(&dir.join(&*file)).map_err(|source| VehicleError::Mesh {
-                    path: path.to_owned(),
-                    field: field.clone(),
-                    source: Box::new(source),
-                })?;
-            let placed = raw.transformed(*scale, v3(*offset_m));
-            check_mesh_placement(&placed).map_err(|reason| VehicleError::Invalid {
-                path: path.to_owned(),
-                field,
-                reason,
-            })?;
-            *mesh = LoadedMesh(Arc::new(placed));
+            {
+                let placed = load_mesh_file(
+                    path,
+                    dir,
+                    &format!("parts[{i}].file"),
+                    file,
+                    *scale,
+                    *offset_m,
+                )?;
+                *mesh = LoadedMesh(Arc::new(placed));
+            }
         }
         Ok(vehicle)
     }
@@ -427,22 +459,40 @@ impl Vehicle {
                 "must exceed the tyre diameter plus arch_clearance_m",
             );
         }
-        let wb = self.wheelbase_m;
-        let sections = [
-            ("underside.front", &self.underside.front, 0.0, f64::INFINITY),
-            ("underside.between", &self.underside.between, -wb, 0.0),
-            (
-                "underside.rear",
-                &self.underside.rear,
-                f64::NEG_INFINITY,
-                -wb,
-            ),
-        ];
-        for (name, section, x_min, x_max) in sections {
-            self.validate_section(name, section, x_min, x_max)?;
+        match (&self.underside, &self.body_mesh) {
+            (Some(u), None) => self.validate_underside(u)?,
+            (None, Some(b)) => {
+                if b.file.as_os_str().is_empty() {
+                    return fail("body_mesh.file", "must name a mesh file");
+                }
+                positive("body_mesh.scale", b.scale)?;
+                coordinates("body_mesh.offset_m", &b.offset_m)?;
+            }
+            (Some(_), Some(_)) => {
+                return fail(
+                    "body_mesh",
+                    "give either [underside] or [body_mesh], not both",
+                );
+            }
+            (None, None) => {
+                return fail("underside", "missing: give [underside] or [body_mesh]");
+            }
         }
         for (i, part) in self.parts.iter().enumerate() {
             validate_part(&format!("parts[{i}]"), part)?;
+        }
+        Ok(())
+    }
+
+    fn validate_underside(&self, u: &Underside) -> Result<(), (String, String)> {
+        let wb = self.wheelbase_m;
+        let sections = [
+            ("underside.front", &u.front, 0.0, f64::INFINITY),
+            ("underside.between", &u.between, -wb, 0.0),
+            ("underside.rear", &u.rear, f64::NEG_INFINITY, -wb),
+        ];
+        for (name, section, x_min, x_max) in sections {
+            self.validate_section(name, section, x_min, x_max)?;
         }
         Ok(())
     }
@@ -506,25 +556,36 @@ impl Vehicle {
         [[0.0, h, r], [0.0, -h, r], [-wb, h, r], [-wb, -h, r]]
     }
 
-    /// The x of the front bumper's lower edge (the vehicle's front end).
+    /// The x of the front bumper's lower edge (the vehicle's front end; a mesh body's largest x).
     pub fn front_x_m(&self) -> f64 {
-        self.underside.front.points[0][0]
+        match (&self.underside, &self.body_mesh) {
+            (Some(u), _) => u.front.points.first().map_or(0.0, |p| p[0]),
+            (None, Some(b)) => b.mesh.0.vertex_bounds().map_or(0.0, |e| e.max.x),
+            (None, None) => 0.0,
+        }
     }
 
-    /// The x of the rear bumper's lower edge (the vehicle's rear end).
+    /// The x of the rear bumper's lower edge (the vehicle's rear end; a mesh body's smallest x).
     pub fn rear_x_m(&self) -> f64 {
-        self.underside
-            .rear
-            .points
-            .last()
-            .map_or(-self.wheelbase_m, |p| p[0])
+        match (&self.underside, &self.body_mesh) {
+            (Some(u), _) => u.rear.points.last().map_or(-self.wheelbase_m, |p| p[0]),
+            (None, Some(b)) => b
+                .mesh
+                .0
+                .vertex_bounds()
+                .map_or(-self.wheelbase_m, |e| e.min.x),
+            (None, None) => -self.wheelbase_m,
+        }
     }
 
     /// The body's side-view polygons, one per prism, each with its lateral width: the three sections
     /// and the two wheel arches. Polygons are closed implicitly (last vertex joins the first).
+    /// Empty for a mesh body.
     pub fn body_prisms(&self) -> Vec<(String, Vec<[f64; 2]>, f64)> {
         let top = self.body_height_m;
-        let u = &self.underside;
+        let Some(u) = &self.underside else {
+            return Vec::new();
+        };
         let mut out = Vec::new();
         for (name, s) in [
             ("front overhang", &u.front),
@@ -585,6 +646,18 @@ impl Vehicle {
                 });
             }
         }
+        if let Some(body) = &self.body_mesh {
+            out.extend(
+                mesh_side_view(&body.mesh.0, spacing_m)
+                    .into_iter()
+                    .map(|[x_m, z_m]| OutlinePoint {
+                        x_m,
+                        z_m,
+                        rigid: true,
+                        source: BODY_MESH_SOURCE.to_owned(),
+                    }),
+            );
+        }
         for part in &self.parts {
             if let Part::Mesh { mesh, .. } = part {
                 out.extend(
@@ -614,6 +687,14 @@ impl Vehicle {
                     source: edge.source.clone(),
                 });
             }
+        }
+        if let Some(body) = &self.body_mesh {
+            out.extend(body.mesh.0.vertices().iter().map(|v| OutlinePoint {
+                x_m: v.x,
+                z_m: v.z,
+                rigid: true,
+                source: BODY_MESH_SOURCE.to_owned(),
+            }));
         }
         for part in &self.parts {
             if let Part::Mesh { mesh, .. } = part {
@@ -768,17 +849,51 @@ fn validate_part(field: &str, part: &Part) -> Result<(), (String, String)> {
     Ok(())
 }
 
+/// Read a mesh file named in vehicle file `path` (field `field`) relative to `dir`, scale and
+/// offset it, and check where it lies.
+fn load_mesh_file(
+    path: &Path,
+    dir: Option<&Path>,
+    field: &str,
+    file: &Path,
+    scale: f64,
+    offset_m: [f64; 3],
+) -> Result<Mesh, VehicleError> {
+    let Some(dir) = dir else {
+        return Err(VehicleError::Invalid {
+            path: path.to_owned(),
+            field: field.to_owned(),
+            reason: "meshes need the vehicle file's directory: load the vehicle from its file"
+                .to_owned(),
+        });
+    };
+    let raw = crate::mesh::load(&dir.join(file)).map_err(|source| VehicleError::Mesh {
+        path: path.to_owned(),
+        field: field.to_owned(),
+        source: Box::new(source),
+    })?;
+    let placed = raw.transformed(scale, v3(offset_m));
+    check_mesh_placement(&placed).map_err(|reason| VehicleError::Invalid {
+        path: path.to_owned(),
+        field: field.to_owned(),
+        reason,
+    })?;
+    Ok(placed)
+}
+
 /// A placed mesh must stay within +-[`MAX_DIMENSION_M`] and above the ground.
 fn check_mesh_placement(mesh: &Mesh) -> Result<(), String> {
-    let b = mesh.bounds();
+    let Some(b) = mesh.vertex_bounds() else {
+        return Err("the mesh has no vertices".to_owned());
+    };
     let coords = [b.min.x, b.min.y, b.min.z, b.max.x, b.max.y, b.max.z];
     if !coords.iter().all(|c| c.abs() <= MAX_DIMENSION_M) {
         return Err(format!(
             "the scaled and offset mesh reaches beyond +-{MAX_DIMENSION_M} m"
         ));
     }
-    // The BVH pads its boxes by about a nanometre; a mesh resting on the ground is accepted.
-    if b.min.z < -1e-6 {
+    // Scaling and offsetting round: a mesh resting on the ground may end a nanometre below it.
+    if b.min.z < -1e-9 {
         return Err(format!(
             "the scaled and offset mesh reaches below the ground (lowest z = {} m)",
             b.min.z

@@ -31,7 +31,8 @@ pub enum SurfaceKind {
     Ground,
     /// A tyre (index: front-left, front-right, rear-left, rear-right).
     Tyre,
-    /// A body prism (index into [`Vehicle::body_prisms`]).
+    /// A body prism (index into [`Vehicle::body_prisms`]); a mesh body has the index after the
+    /// last prism (0, as a mesh body has no prisms).
     Body,
     /// An optional part (index into `Vehicle::parts`).
     Part,
@@ -135,6 +136,8 @@ impl PartPrim {
 pub struct Scene {
     tyres: Vec<TyrePrim>,
     prisms: Vec<Prism>,
+    /// A mesh body with its bounds, cast as the body surface after the prisms.
+    body_mesh: Option<(Arc<Mesh>, Aabb)>,
     parts: Vec<PartPrim>,
 }
 
@@ -193,9 +196,20 @@ impl Scene {
             })
             .collect();
         let parts = vehicle.parts.iter().map(part_prim).collect();
+        let body_mesh = vehicle.body_mesh.as_ref().map(|b| {
+            let bounds = b.mesh.0.bounds();
+            (
+                Arc::clone(&b.mesh.0),
+                Aabb {
+                    min: bounds.min,
+                    max: bounds.max,
+                },
+            )
+        });
         Self {
             tyres,
             prisms,
+            body_mesh,
             parts,
         }
     }
@@ -259,6 +273,14 @@ impl Scene {
             {
                 keep(t, n, SurfaceKind::Body, i, &mut t_max);
             }
+        }
+        let body_index = self.prisms.len();
+        if let Some((mesh, bounds)) = &self.body_mesh
+            && candidates.has_prism(body_index)
+            && bounds.hit(origin, inv, t_max)
+            && let Some((t, n)) = mesh.cast(origin, dir, t_max)
+        {
+            keep(t, n, SurfaceKind::Body, body_index, &mut t_max);
         }
         for (i, part) in self.parts.iter().enumerate() {
             if !candidates.has_part(i) {
@@ -327,6 +349,12 @@ impl Scene {
         for (i, p) in self.prisms.iter().enumerate().take(64) {
             c.prisms |= u64::from(visible(&p.bounds)) << i;
         }
+        let body_index = self.prisms.len();
+        if let Some((_, bounds)) = &self.body_mesh
+            && body_index < 64
+        {
+            c.prisms |= u64::from(visible(bounds)) << body_index;
+        }
         for (i, part) in self.parts.iter().enumerate().take(64) {
             c.parts |= u64::from(visible(&part.bounds())) << i;
         }
@@ -342,10 +370,11 @@ impl Scene {
                 .tyres
                 .get(i)
                 .map_or(f64::INFINITY, |t| tyre_distance(t, p)),
-            SurfaceKind::Body => self
-                .prisms
-                .get(i)
-                .map_or(f64::INFINITY, |pr| prism_distance(pr, p)),
+            SurfaceKind::Body => match (self.prisms.get(i), &self.body_mesh) {
+                (Some(pr), _) => prism_distance(pr, p),
+                (None, Some((mesh, _))) if i == self.prisms.len() => mesh.distance(p),
+                (None, _) => f64::INFINITY,
+            },
             SurfaceKind::Part => self
                 .parts
                 .get(i)

@@ -313,3 +313,128 @@ fn bad_mesh_parts_are_rejected_naming_file_field_and_place() {
     assert!(e.contains("parts[1].scale"), "{e}");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// The sedan's body prisms written as one OBJ mesh (each prism a closed extruded polygon: the
+/// underside polyline with a top vertex above each of its points, so every cap is a strip of quads).
+fn prisms_as_obj(v: &Vehicle) -> String {
+    let top = v.body_height_m;
+    let mut obj = String::new();
+    let mut base = 0;
+    for (_, poly, width) in v.body_prisms() {
+        let bottom = &poly[..poly.len() - 2];
+        let n = bottom.len();
+        let hw = width / 2.0;
+        // Vertex layout per side y: bottom 0..n, then top n..2n; side -hw first, then +hw.
+        for y in [-hw, hw] {
+            for &[x, z] in bottom {
+                writeln!(obj, "v {x} {y} {z}").expect("write");
+            }
+            for &[x, _] in bottom {
+                writeln!(obj, "v {x} {y} {top}").expect("write");
+            }
+        }
+        let id = |side: usize, k: usize| base + side * 2 * n + k + 1;
+        for side in 0..2 {
+            for i in 0..n - 1 {
+                let (b0, b1, t1, t0) = (i, i + 1, n + i + 1, n + i);
+                writeln!(
+                    obj,
+                    "f {} {} {} {}",
+                    id(side, b0),
+                    id(side, b1),
+                    id(side, t1),
+                    id(side, t0)
+                )
+                .expect("write");
+            }
+        }
+        // The boundary loop: bottom front to rear, rear face, top rear to front, front face.
+        let mut ring: Vec<usize> = (0..n).collect();
+        ring.extend((n..2 * n).rev());
+        for k in 0..ring.len() {
+            let (a, b) = (ring[k], ring[(k + 1) % ring.len()]);
+            writeln!(obj, "f {} {} {} {}", id(0, a), id(0, b), id(1, b), id(1, a)).expect("write");
+        }
+        base += 4 * n;
+    }
+    obj
+}
+
+#[test]
+fn a_mesh_body_matches_the_prism_body_in_truth_and_casting() {
+    let sedan_path = vehicles_dir().join("sedan.toml");
+    let prisms = Vehicle::load(&sedan_path).expect("sedan");
+    let dir = temp_dir("body");
+    std::fs::write(dir.join("body.obj"), prisms_as_obj(&prisms)).expect("write body");
+    let text = std::fs::read_to_string(&sedan_path).expect("sedan text");
+    let (head, rest) = text.split_once("[underside.front]").expect("underside");
+    let (_, parts) = rest.split_once("[[parts]]").expect("parts");
+    let mesh_text = format!("{head}[body_mesh]\nfile = \"body.obj\"\n\n[[parts]]{parts}");
+    let mesh = Vehicle::from_toml_str_in_dir(&mesh_text, Path::new("m.toml"), &dir)
+        .expect("mesh body is valid");
+    assert!(mesh.body_prisms().is_empty());
+    assert!((mesh.front_x_m() - prisms.front_x_m()).abs() < 1e-12);
+    assert!((mesh.rear_x_m() - prisms.rear_x_m()).abs() < 1e-12);
+    let (a, b) = (angles(&prisms), angles(&mesh));
+    let worst_breakover = (a.breakover.angle_rad - b.breakover.angle_rad).abs();
+    println!(
+        "prism vs mesh body: approach {:.4} / {:.4}, breakover {:.4} / {:.4}, departure {:.4} / {:.4} deg",
+        a.approach.angle_rad.to_degrees(),
+        b.approach.angle_rad.to_degrees(),
+        a.breakover.angle_rad.to_degrees(),
+        b.breakover.angle_rad.to_degrees(),
+        a.departure.angle_rad.to_degrees(),
+        b.departure.angle_rad.to_degrees()
+    );
+    assert!((a.approach.angle_rad - b.approach.angle_rad).abs() < TOL);
+    assert!((a.departure.angle_rad - b.departure.angle_rad).abs() < TOL);
+    // Both sample the breakover crest's edges every 5 mm, at different places.
+    assert!(worst_breakover < 1e-4, "{worst_breakover}");
+    assert_eq!(witness(&b.approach), "body");
+
+    let (sp, sm) = (Scene::from_vehicle(&prisms), Scene::from_vehicle(&mesh));
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(32);
+    let (mut body_hits, mut worst) = (0usize, 0.0f64);
+    for _ in 0..30_000 {
+        let o = Vec3::new(
+            rng.random_range(-4.5..1.5),
+            rng.random_range(-0.6..0.6),
+            rng.random_range(0.02..0.15),
+        );
+        let d = Vec3::new(
+            rng.random_range(-1.0..1.0),
+            rng.random_range(-1.0..1.0),
+            rng.random_range(-0.3..1.0),
+        )
+        .normalized();
+        match (sp.cast(o, d, 100.0), sm.cast(o, d, 100.0)) {
+            (None, None) => {}
+            (Some(hp), Some(hm)) => {
+                assert_eq!(hp.surface.kind, hm.surface.kind, "ray {o:?} {d:?}");
+                let diff = (hp.range_m - hm.range_m).abs();
+                assert!(diff < 1e-9, "ray {o:?} {d:?}: {diff}");
+                worst = worst.max(diff);
+                if hm.surface.kind == SurfaceKind::Body {
+                    body_hits += 1;
+                    let p = o + d * hm.range_m;
+                    assert!(sm.distance_to_surface(hm.surface, p) < 1e-9);
+                }
+            }
+            (hp, hm) => panic!("ray {o:?} {d:?}: prisms {hp:?}, mesh {hm:?}"),
+        }
+    }
+    assert!(body_hits > 5000, "only {body_hits} body hits");
+    println!("{body_hits} body hits, largest range difference {worst:e} m");
+
+    let both = format!("{text}\n[body_mesh]\nfile = \"body.obj\"\n");
+    let e = Vehicle::from_toml_str_in_dir(&both, Path::new("m.toml"), &dir)
+        .expect_err("both")
+        .to_string();
+    assert!(e.contains("body_mesh") && e.contains("not both"), "{e}");
+    let neither = mesh_text.replace("[body_mesh]\nfile = \"body.obj\"\n", "");
+    let e = Vehicle::from_toml_str_in_dir(&neither, Path::new("m.toml"), &dir)
+        .expect_err("neither")
+        .to_string();
+    assert!(e.contains("underside") && e.contains("body_mesh"), "{e}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
