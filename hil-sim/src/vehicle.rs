@@ -85,6 +85,9 @@ use crate::mesh::{Mesh, MeshError};
 /// How far the rim disc sits inside the tyre's sidewall plane, metres.
 pub const RIM_INSET_M: f64 = 0.03;
 
+/// Most edge samples one mesh adds to the outline (bounds the true-angle work on huge meshes).
+pub const MAX_MESH_EDGE_SAMPLES: f64 = 4.0e6;
+
 /// The outline source name of a mesh body's points.
 pub const BODY_MESH_SOURCE: &str = "body";
 
@@ -921,15 +924,30 @@ fn mesh_side_view(mesh: &Mesh, spacing_m: f64) -> Vec<[f64; 2]> {
         return out;
     };
     let x_max = out.last().map_or(x_min, |p| p[0]);
+    let vertices = mesh.vertices();
+    let edge = |tri: &[u32; 3], k: usize| {
+        (
+            vertices[tri[k] as usize],
+            vertices[tri[(k + 1) % 3] as usize],
+        )
+    };
+    // A huge mesh is sampled more coarsely rather than without bound (only its breakover samples
+    // are affected; its vertices stay exact).
+    let total_m: f64 = mesh
+        .triangles()
+        .iter()
+        .flat_map(|tri| (0..3).map(move |k| (tri, k)))
+        .map(|(tri, k)| {
+            let (a, b) = edge(tri, k);
+            (b.x - a.x).hypot(b.z - a.z)
+        })
+        .sum();
+    let spacing_m = spacing_m.max(total_m / MAX_MESH_EDGE_SAMPLES);
     let bins = ((x_max - x_min) / spacing_m).ceil() as usize + 1;
     let mut lowest: Vec<Option<[f64; 2]>> = vec![None; bins];
-    let vertices = mesh.vertices();
     for tri in mesh.triangles() {
         for k in 0..3 {
-            let (a, b) = (
-                vertices[tri[k] as usize],
-                vertices[tri[(k + 1) % 3] as usize],
-            );
+            let (a, b) = edge(tri, k);
             let n = (((b.x - a.x).hypot(b.z - a.z) / spacing_m).ceil() as usize).max(1);
             for s in 1..n {
                 let t = s as f64 / n as f64;
