@@ -1,5 +1,6 @@
-//! passangle software-in-the-loop simulator (docs/architecture.md section 7): a parametric vehicle over a flat
-//! ground, true passing angles from its geometry, and simulated VLP-16 and D435 sensors that see it
+//! passangle software-in-the-loop simulator (docs/architecture.md section 7): a parametric vehicle,
+//! with parts or its whole body optionally given as triangle meshes, over a flat ground, true
+//! passing angles from its geometry, and simulated VLP-16 and D435 sensors that see it
 //! from a robot driving underneath.
 //!
 //! Module map, from the world outward:

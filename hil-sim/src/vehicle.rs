@@ -1,5 +1,5 @@
-//! Parametric vehicles: the TOML format, its validation, and the side-view outline used for the true
-//! angles.
+//! Vehicles: the TOML format (parametric prisms, boxes and cylinders, and triangle-mesh parts or
+//! body), its validation, and the side-view outline used for the true angles.
 //!
 //! # Frame
 //! The vehicle frame is right-handed, z up, x toward the vehicle's front, y to its left, metres
