@@ -1,10 +1,12 @@
-//! passangle software-in-the-loop simulator (docs/architecture.md section 7): a parametric vehicle over a flat
-//! ground, true passing angles from its geometry, and simulated VLP-16 and D435 sensors that see it
+//! passangle software-in-the-loop simulator (docs/architecture.md section 7): a parametric vehicle,
+//! with parts or its whole body optionally given as triangle meshes, over a flat ground, true
+//! passing angles from its geometry, and simulated VLP-16 and D435 sensors that see it
 //! from a robot driving underneath.
 //!
 //! Module map, from the world outward:
 //! - [`geometry`]: vectors, rotations, rigid transforms, poses.
 //! - [`vehicle`]: the vehicle TOML format and its validation.
+//! - [`mesh`]: triangle meshes (OBJ, STL, PLY loaders), their BVH, ray casting and distance.
 //! - [`truth`]: true approach, departure and breakover angles by brute-force tangent rotation.
 //! - [`world`]: the scene (ground, tyres, body prisms, parts) and its ray caster.
 //! - [`trajectory`]: robot poses over time (a trait, the scenario's analytic motion, sampled paths).
@@ -30,6 +32,7 @@ pub mod esc_model;
 pub mod fil;
 pub mod fil_scenarios;
 pub mod geometry;
+pub mod mesh;
 pub mod pty;
 pub mod robot;
 pub mod scenario;

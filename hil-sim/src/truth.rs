@@ -18,7 +18,10 @@
 //!   (49 CFR 523.2 / EU ramp angle).
 //!
 //! Outline points come from [`Vehicle::outline_points`]; points inside a tyre circle (hidden in the
-//! wheel) are skipped. The tests cross-check this stepping search against the closed form
+//! wheel) are skipped. Mesh parts contribute every vertex (a tangent line in the side view first
+//! touches a polyhedron at one of its vertices, so vertices suffice for approach and departure) and
+//! the lowest samples along their edges (a breakover crest can touch an edge between vertices); a
+//! mesh part's `rigid` flag applies to all its points. The tests cross-check this stepping search against the closed form
 //! `a = asin(r / hypot(d, r - z)) - atan2(r - z, d)` (docs/architecture.md section 6 step 8).
 
 use crate::vehicle::{OutlinePoint, Vehicle};
@@ -281,7 +284,7 @@ mod tests {
     #[test]
     fn flat_floor_breakover_is_limited_at_mid_wheelbase() {
         let mut v = test_sedan();
-        v.underside.between.points = vec![[-0.45, 0.2], [-2.35, 0.2]];
+        v.underside.as_mut().expect("prism body").between.points = vec![[-0.45, 0.2], [-2.35, 0.2]];
         let t = true_angles(
             &v,
             &TruthOptions {

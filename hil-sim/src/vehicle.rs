@@ -1,5 +1,5 @@
-//! Parametric vehicles: the TOML format, its validation, and the side-view outline used for the true
-//! angles.
+//! Vehicles: the TOML format (parametric prisms, boxes and cylinders, and triangle-mesh parts or
+//! body), its validation, and the side-view outline used for the true angles.
 //!
 //! # Frame
 //! The vehicle frame is right-handed, z up, x toward the vehicle's front, y to its left, metres
@@ -50,15 +50,46 @@
 //! radius_m = 0.04
 //! length_m = 0.6
 //! rigid = true                 # optional, default true; false for mud flaps, air dams
+//!
+//! [[parts]]
+//! kind = "mesh"                # a triangle mesh read from OBJ, STL or PLY (hil-sim/MESHES.md)
+//! name = "silencer"
+//! file = "meshes/silencer.obj" # relative to this vehicle file's directory
+//! scale = 1.0                  # optional, default 1: file units to metres
+//! offset_m = [-3.1, 0.0, 0.24] # optional, default 0: added after scaling
+//! rigid = true
 //! ```
-//! Unknown keys are rejected; every validation error names the file and the field.
+//! Unknown keys are rejected; every validation error names the file and the field. Mesh parts are
+//! read by [`Vehicle::load`] (or [`Vehicle::from_toml_str_in_dir`]); [`Vehicle::from_toml_str`]
+//! has no directory to read them from and rejects them.
+//!
+//! # Mesh body
+//! Instead of `[underside]`, a vehicle may give its whole body as one triangle mesh:
+//! ```toml
+//! [body_mesh]
+//! file = "meshes/body.obj"     # relative to this vehicle file's directory
+//! scale = 1.0                  # optional
+//! offset_m = [0.0, 0.0, 0.0]   # optional
+//! ```
+//! It replaces the prisms and the wheel arches (so it must leave room for the tyres itself; the
+//! prisms' tyre-gap check does not apply), and its points appear in witness reports as `body`.
 
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
 use serde::Deserialize;
 
+use crate::geometry::Vec3;
+use crate::mesh::{Mesh, MeshError};
+
 /// How far the rim disc sits inside the tyre's sidewall plane, metres.
 pub const RIM_INSET_M: f64 = 0.03;
+
+/// Most edge samples one mesh adds to the outline (bounds the true-angle work on huge meshes).
+pub const MAX_MESH_EDGE_SAMPLES: f64 = 4.0e6;
+
+/// The outline source name of a mesh body's points.
+pub const BODY_MESH_SOURCE: &str = "body";
 
 /// Default gap between the top of the tyre and the wheel arch, metres.
 pub const DEFAULT_ARCH_CLEARANCE_M: f64 = 0.05;
@@ -92,8 +123,12 @@ pub struct Vehicle {
     pub arch_clearance_m: f64,
     /// The tyres (all four alike).
     pub tyre: Tyre,
-    /// The underside profile.
-    pub underside: Underside,
+    /// The underside profile of a prism body (exactly one of `underside` and `body_mesh`).
+    #[serde(default)]
+    pub underside: Option<Underside>,
+    /// The whole body as a triangle mesh instead of prisms.
+    #[serde(default)]
+    pub body_mesh: Option<BodyMesh>,
     /// Optional parts.
     #[serde(default)]
     pub parts: Vec<Part>,
@@ -110,6 +145,26 @@ fn default_true() -> bool {
     true
 }
 
+fn default_one() -> f64 {
+    1.0
+}
+
+/// A mesh part's triangles in the vehicle frame (scaled and offset), shared by clones. Empty until
+/// the vehicle file's loader reads the mesh file.
+#[derive(Clone, Default, PartialEq)]
+pub struct LoadedMesh(pub Arc<Mesh>);
+
+impl std::fmt::Debug for LoadedMesh {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "LoadedMesh({} vertices, {} triangles)",
+            self.0.vertices().len(),
+            self.0.triangles().len()
+        )
+    }
+}
+
 /// Tyre dimensions (static loaded radius).
 #[derive(Clone, Copy, Debug, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
@@ -120,6 +175,24 @@ pub struct Tyre {
     pub width_m: f64,
     /// Rim radius, metres (inside the sidewall annulus).
     pub rim_radius_m: f64,
+}
+
+/// A body given as a triangle mesh (see hil-sim/MESHES.md): it replaces the prisms and the wheel
+/// arches, so the mesh must leave room for the tyres itself.
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct BodyMesh {
+    /// The mesh file, relative to the vehicle file's directory.
+    pub file: PathBuf,
+    /// Factor from the file's units to metres.
+    #[serde(default = "default_one")]
+    pub scale: f64,
+    /// Added to every scaled vertex, metres.
+    #[serde(default)]
+    pub offset_m: [f64; 3],
+    /// The triangles in the vehicle frame, filled in by the loader.
+    #[serde(skip)]
+    pub mesh: LoadedMesh,
 }
 
 /// The three underside sections.
@@ -188,20 +261,41 @@ pub enum Part {
         #[serde(default = "default_true")]
         rigid: bool,
     },
+    /// A triangle mesh read from an OBJ, STL or PLY file.
+    Mesh {
+        /// Name, used in witness reports.
+        name: String,
+        /// The mesh file, relative to the vehicle file's directory.
+        file: PathBuf,
+        /// Factor from the file's units to metres.
+        #[serde(default = "default_one")]
+        scale: f64,
+        /// Added to every scaled vertex, metres.
+        #[serde(default)]
+        offset_m: [f64; 3],
+        /// Rigid or flexible, as for boxes.
+        #[serde(default = "default_true")]
+        rigid: bool,
+        /// The triangles in the vehicle frame, filled in by the loader.
+        #[serde(skip)]
+        mesh: LoadedMesh,
+    },
 }
 
 impl Part {
     /// The part's name.
     pub fn name(&self) -> &str {
         match self {
-            Part::Box { name, .. } | Part::Cylinder { name, .. } => name,
+            Part::Box { name, .. } | Part::Cylinder { name, .. } | Part::Mesh { name, .. } => name,
         }
     }
 
     /// Whether the part is rigid.
     pub fn rigid(&self) -> bool {
         match self {
-            Part::Box { rigid, .. } | Part::Cylinder { rigid, .. } => *rigid,
+            Part::Box { rigid, .. } | Part::Cylinder { rigid, .. } | Part::Mesh { rigid, .. } => {
+                *rigid
+            }
         }
     }
 }
@@ -249,6 +343,16 @@ pub enum VehicleError {
         /// What is wrong.
         reason: String,
     },
+    /// A mesh part's file could not be read or is malformed.
+    #[error("vehicle file {path}: field `{field}`: {source}")]
+    Mesh {
+        /// The vehicle file.
+        path: PathBuf,
+        /// Dotted field name, e.g. `parts[2].file`.
+        field: String,
+        /// What is wrong with the mesh file (boxed: it is large and rare).
+        source: Box<MeshError>,
+    },
 }
 
 impl Vehicle {
@@ -258,12 +362,24 @@ impl Vehicle {
             path: path.to_owned(),
             source,
         })?;
-        Self::from_toml_str(&text, path)
+        let dir = path.parent().unwrap_or(Path::new("."));
+        Self::parse(&text, path, Some(dir))
     }
 
-    /// Parse and validate vehicle TOML; `path` is only used in error messages.
+    /// Parse and validate vehicle TOML without mesh parts; `path` is only used in error messages.
+    /// A mesh part is an error here (there is no directory to read its file from).
     pub fn from_toml_str(text: &str, path: &Path) -> Result<Self, VehicleError> {
-        let vehicle: Vehicle = toml::from_str(text).map_err(|e| VehicleError::Toml {
+        Self::parse(text, path, None)
+    }
+
+    /// Parse and validate vehicle TOML, reading mesh parts' files relative to `dir`; `path` is only
+    /// used in error messages.
+    pub fn from_toml_str_in_dir(text: &str, path: &Path, dir: &Path) -> Result<Self, VehicleError> {
+        Self::parse(text, path, Some(dir))
+    }
+
+    fn parse(text: &str, path: &Path, dir: Option<&Path>) -> Result<Self, VehicleError> {
+        let mut vehicle: Vehicle = toml::from_str(text).map_err(|e| VehicleError::Toml {
             path: path.to_owned(),
             message: e.to_string(),
         })?;
@@ -274,6 +390,37 @@ impl Vehicle {
                 field,
                 reason,
             })?;
+        if let Some(body) = &mut vehicle.body_mesh {
+            let placed = load_mesh_file(
+                path,
+                dir,
+                "body_mesh.file",
+                &body.file,
+                body.scale,
+                body.offset_m,
+            )?;
+            body.mesh = LoadedMesh(Arc::new(placed));
+        }
+        for (i, part) in vehicle.parts.iter_mut().enumerate() {
+            if let Part::Mesh {
+                file,
+                scale,
+                offset_m,
+                mesh,
+                ..
+            } = part
+            {
+                let placed = load_mesh_file(
+                    path,
+                    dir,
+                    &format!("parts[{i}].file"),
+                    file,
+                    *scale,
+                    *offset_m,
+                )?;
+                *mesh = LoadedMesh(Arc::new(placed));
+            }
+        }
         Ok(vehicle)
     }
 
@@ -315,22 +462,40 @@ impl Vehicle {
                 "must exceed the tyre diameter plus arch_clearance_m",
             );
         }
-        let wb = self.wheelbase_m;
-        let sections = [
-            ("underside.front", &self.underside.front, 0.0, f64::INFINITY),
-            ("underside.between", &self.underside.between, -wb, 0.0),
-            (
-                "underside.rear",
-                &self.underside.rear,
-                f64::NEG_INFINITY,
-                -wb,
-            ),
-        ];
-        for (name, section, x_min, x_max) in sections {
-            self.validate_section(name, section, x_min, x_max)?;
+        match (&self.underside, &self.body_mesh) {
+            (Some(u), None) => self.validate_underside(u)?,
+            (None, Some(b)) => {
+                if b.file.as_os_str().is_empty() {
+                    return fail("body_mesh.file", "must name a mesh file");
+                }
+                positive("body_mesh.scale", b.scale)?;
+                coordinates("body_mesh.offset_m", &b.offset_m)?;
+            }
+            (Some(_), Some(_)) => {
+                return fail(
+                    "body_mesh",
+                    "give either [underside] or [body_mesh], not both",
+                );
+            }
+            (None, None) => {
+                return fail("underside", "missing: give [underside] or [body_mesh]");
+            }
         }
         for (i, part) in self.parts.iter().enumerate() {
             validate_part(&format!("parts[{i}]"), part)?;
+        }
+        Ok(())
+    }
+
+    fn validate_underside(&self, u: &Underside) -> Result<(), (String, String)> {
+        let wb = self.wheelbase_m;
+        let sections = [
+            ("underside.front", &u.front, 0.0, f64::INFINITY),
+            ("underside.between", &u.between, -wb, 0.0),
+            ("underside.rear", &u.rear, f64::NEG_INFINITY, -wb),
+        ];
+        for (name, section, x_min, x_max) in sections {
+            self.validate_section(name, section, x_min, x_max)?;
         }
         Ok(())
     }
@@ -394,25 +559,36 @@ impl Vehicle {
         [[0.0, h, r], [0.0, -h, r], [-wb, h, r], [-wb, -h, r]]
     }
 
-    /// The x of the front bumper's lower edge (the vehicle's front end).
+    /// The x of the front bumper's lower edge (the vehicle's front end; a mesh body's largest x).
     pub fn front_x_m(&self) -> f64 {
-        self.underside.front.points[0][0]
+        match (&self.underside, &self.body_mesh) {
+            (Some(u), _) => u.front.points.first().map_or(0.0, |p| p[0]),
+            (None, Some(b)) => b.mesh.0.vertex_bounds().map_or(0.0, |e| e.max.x),
+            (None, None) => 0.0,
+        }
     }
 
-    /// The x of the rear bumper's lower edge (the vehicle's rear end).
+    /// The x of the rear bumper's lower edge (the vehicle's rear end; a mesh body's smallest x).
     pub fn rear_x_m(&self) -> f64 {
-        self.underside
-            .rear
-            .points
-            .last()
-            .map_or(-self.wheelbase_m, |p| p[0])
+        match (&self.underside, &self.body_mesh) {
+            (Some(u), _) => u.rear.points.last().map_or(-self.wheelbase_m, |p| p[0]),
+            (None, Some(b)) => b
+                .mesh
+                .0
+                .vertex_bounds()
+                .map_or(-self.wheelbase_m, |e| e.min.x),
+            (None, None) => -self.wheelbase_m,
+        }
     }
 
     /// The body's side-view polygons, one per prism, each with its lateral width: the three sections
     /// and the two wheel arches. Polygons are closed implicitly (last vertex joins the first).
+    /// Empty for a mesh body.
     pub fn body_prisms(&self) -> Vec<(String, Vec<[f64; 2]>, f64)> {
         let top = self.body_height_m;
-        let u = &self.underside;
+        let Some(u) = &self.underside else {
+            return Vec::new();
+        };
         let mut out = Vec::new();
         for (name, s) in [
             ("front overhang", &u.front),
@@ -473,10 +649,36 @@ impl Vehicle {
                 });
             }
         }
+        if let Some(body) = &self.body_mesh {
+            out.extend(
+                mesh_side_view(&body.mesh.0, spacing_m)
+                    .into_iter()
+                    .map(|[x_m, z_m]| OutlinePoint {
+                        x_m,
+                        z_m,
+                        rigid: true,
+                        source: BODY_MESH_SOURCE.to_owned(),
+                    }),
+            );
+        }
+        for part in &self.parts {
+            if let Part::Mesh { mesh, .. } = part {
+                out.extend(
+                    mesh_side_view(&mesh.0, spacing_m)
+                        .into_iter()
+                        .map(|[x_m, z_m]| OutlinePoint {
+                            x_m,
+                            z_m,
+                            rigid: part.rigid(),
+                            source: part.name().to_owned(),
+                        }),
+                );
+            }
+        }
         out
     }
 
-    /// The outline's vertices only (no samples along edges).
+    /// The outline's vertices only (no samples along edges), mesh parts' vertices included.
     pub fn outline_vertices(&self) -> Vec<OutlinePoint> {
         let mut out = Vec::new();
         for edge in self.outline_edges() {
@@ -489,11 +691,30 @@ impl Vehicle {
                 });
             }
         }
+        if let Some(body) = &self.body_mesh {
+            out.extend(body.mesh.0.vertices().iter().map(|v| OutlinePoint {
+                x_m: v.x,
+                z_m: v.z,
+                rigid: true,
+                source: BODY_MESH_SOURCE.to_owned(),
+            }));
+        }
+        for part in &self.parts {
+            if let Part::Mesh { mesh, .. } = part {
+                out.extend(mesh.0.vertices().iter().map(|v| OutlinePoint {
+                    x_m: v.x,
+                    z_m: v.z,
+                    rigid: part.rigid(),
+                    source: part.name().to_owned(),
+                }));
+            }
+        }
         out
     }
 
-    /// Side-view edges of everything that can touch a ramp: body prisms and parts. Cylinders whose
-    /// axis is y appear as 64-gons (documented approximation, error below 0.12 % of the radius).
+    /// Side-view edges of everything that can touch a ramp: body prisms and box and cylinder parts
+    /// (mesh parts contribute points, see `mesh_side_view`). Cylinders whose axis is y appear as
+    /// 64-gons (documented approximation, error below 0.12 % of the radius).
     fn outline_edges(&self) -> Vec<OutlineEdge> {
         let mut edges = Vec::new();
         for (name, poly, _) in self.body_prisms() {
@@ -508,7 +729,9 @@ impl Vehicle {
             }
         }
         for part in &self.parts {
-            let poly = part_side_view(part);
+            let Some(poly) = part_side_view(part) else {
+                continue;
+            };
             for i in 0..poly.len() {
                 let (a, b) = (poly[i], poly[(i + 1) % poly.len()]);
                 edges.push(OutlineEdge {
@@ -543,9 +766,10 @@ struct OutlineEdge {
     source: String,
 }
 
-/// A part's side-view (x, z) outline polygon.
-fn part_side_view(part: &Part) -> Vec<[f64; 2]> {
-    match part {
+/// A box's or cylinder's side-view (x, z) outline polygon (`None` for a mesh).
+fn part_side_view(part: &Part) -> Option<Vec<[f64; 2]>> {
+    Some(match part {
+        Part::Mesh { .. } => return None,
         Part::Box { min_m, max_m, .. } => rectangle(min_m[0], max_m[0], min_m[2], max_m[2]),
         Part::Cylinder {
             axis,
@@ -563,7 +787,7 @@ fn part_side_view(part: &Part) -> Vec<[f64; 2]> {
                 })
                 .collect(),
         },
-    }
+    })
 }
 
 fn rectangle(x0: f64, x1: f64, z0: f64, z1: f64) -> Vec<[f64; 2]> {
@@ -612,8 +836,131 @@ fn validate_part(field: &str, part: &Part) -> Result<(), (String, String)> {
                 );
             }
         }
+        Part::Mesh {
+            file,
+            scale,
+            offset_m,
+            ..
+        } => {
+            if file.as_os_str().is_empty() {
+                return fail(&format!("{field}.file"), "must name a mesh file");
+            }
+            positive(&format!("{field}.scale"), *scale)?;
+            coordinates(&format!("{field}.offset_m"), offset_m)?;
+        }
     }
     Ok(())
+}
+
+/// Read a mesh file named in vehicle file `path` (field `field`) relative to `dir`, scale and
+/// offset it, and check where it lies.
+fn load_mesh_file(
+    path: &Path,
+    dir: Option<&Path>,
+    field: &str,
+    file: &Path,
+    scale: f64,
+    offset_m: [f64; 3],
+) -> Result<Mesh, VehicleError> {
+    let Some(dir) = dir else {
+        return Err(VehicleError::Invalid {
+            path: path.to_owned(),
+            field: field.to_owned(),
+            reason: "meshes need the vehicle file's directory: load the vehicle from its file"
+                .to_owned(),
+        });
+    };
+    let raw = crate::mesh::load(&dir.join(file)).map_err(|source| VehicleError::Mesh {
+        path: path.to_owned(),
+        field: field.to_owned(),
+        source: Box::new(source),
+    })?;
+    let placed = raw.transformed(scale, v3(offset_m));
+    check_mesh_placement(&placed).map_err(|reason| VehicleError::Invalid {
+        path: path.to_owned(),
+        field: field.to_owned(),
+        reason,
+    })?;
+    Ok(placed)
+}
+
+/// A placed mesh must stay within +-[`MAX_DIMENSION_M`] and above the ground.
+fn check_mesh_placement(mesh: &Mesh) -> Result<(), String> {
+    let Some(b) = mesh.vertex_bounds() else {
+        return Err("the mesh has no vertices".to_owned());
+    };
+    let coords = [b.min.x, b.min.y, b.min.z, b.max.x, b.max.y, b.max.z];
+    if !coords.iter().all(|c| c.abs() <= MAX_DIMENSION_M) {
+        return Err(format!(
+            "the scaled and offset mesh reaches beyond +-{MAX_DIMENSION_M} m"
+        ));
+    }
+    // Scaling and offsetting round: a mesh resting on the ground may end a nanometre below it.
+    if b.min.z < -1e-9 {
+        return Err(format!(
+            "the scaled and offset mesh reaches below the ground (lowest z = {} m)",
+            b.min.z
+        ));
+    }
+    Ok(())
+}
+
+fn v3(a: [f64; 3]) -> Vec3 {
+    Vec3::new(a[0], a[1], a[2])
+}
+
+/// The side-view points of a mesh part that can first touch a ramp line or crest.
+///
+/// Every vertex, projected to (x, z): a tangent line in the side view first touches a polyhedron
+/// at a vertex (the extreme point of a polytope in any direction is a vertex), so vertices suffice
+/// for approach and departure. A breakover crest can instead touch the outline on an edge between
+/// vertices, so edges are also sampled every `spacing_m`, keeping per x-bin of that width only the
+/// lowest sample: a lower point at the same x is below every ramp line and crest the higher one is.
+fn mesh_side_view(mesh: &Mesh, spacing_m: f64) -> Vec<[f64; 2]> {
+    let mut out: Vec<[f64; 2]> = mesh.vertices().iter().map(|v| [v.x, v.z]).collect();
+    out.sort_by(|a, b| a[0].total_cmp(&b[0]).then(a[1].total_cmp(&b[1])));
+    out.dedup();
+    let Some(x_min) = out.first().map(|p| p[0]) else {
+        return out;
+    };
+    let x_max = out.last().map_or(x_min, |p| p[0]);
+    let vertices = mesh.vertices();
+    let edge = |tri: &[u32; 3], k: usize| {
+        (
+            vertices[tri[k] as usize],
+            vertices[tri[(k + 1) % 3] as usize],
+        )
+    };
+    // A huge mesh is sampled more coarsely rather than without bound (only its breakover samples
+    // are affected; its vertices stay exact).
+    let total_m: f64 = mesh
+        .triangles()
+        .iter()
+        .flat_map(|tri| (0..3).map(move |k| (tri, k)))
+        .map(|(tri, k)| {
+            let (a, b) = edge(tri, k);
+            (b.x - a.x).hypot(b.z - a.z)
+        })
+        .sum();
+    let spacing_m = spacing_m.max(total_m / MAX_MESH_EDGE_SAMPLES);
+    let bins = ((x_max - x_min) / spacing_m).ceil() as usize + 1;
+    let mut lowest: Vec<Option<[f64; 2]>> = vec![None; bins];
+    for tri in mesh.triangles() {
+        for k in 0..3 {
+            let (a, b) = edge(tri, k);
+            let n = (((b.x - a.x).hypot(b.z - a.z) / spacing_m).ceil() as usize).max(1);
+            for s in 1..n {
+                let t = s as f64 / n as f64;
+                let p = [a.x + t * (b.x - a.x), a.z + t * (b.z - a.z)];
+                let bin = (((p[0] - x_min) / spacing_m) as usize).min(bins - 1);
+                if lowest[bin].is_none_or(|q| p[1] < q[1]) {
+                    lowest[bin] = Some(p);
+                }
+            }
+        }
+    }
+    out.extend(lowest.into_iter().flatten());
+    out
 }
 
 fn positive(field: &str, v: f64) -> Result<(), (String, String)> {

@@ -1,12 +1,13 @@
 //! The simulated world and its ray caster: a flat ground, four tyres, the body prisms and the parts of
 //! one [`Vehicle`], all in the vehicle frame (see [`crate::vehicle`]).
 //!
-//! Every primitive is intersected analytically (no triangle meshes): the ground is the plane z = 0, a
-//! tyre is a y-axis cylinder with flat sidewall annuli and a recessed rim disc, a body prism is a
-//! side-view polygon extruded along y (the ray is clipped to the y slab, then crossed with the
-//! polygon's edges in the x-z plane), parts are axis-aligned boxes and finite cylinders. Each
-//! primitive carries a bounding box that rejects most rays cheaply; a scene has ~10 primitives, so no
-//! hierarchy is needed. Sensors that fire many rays in a narrow horizontal wedge (a VLP-16 packet
+//! Parametric primitives are intersected analytically: the ground is the plane z = 0, a tyre is a
+//! y-axis cylinder with flat sidewall annuli and a recessed rim disc, a body prism is a side-view
+//! polygon extruded along y (the ray is clipped to the y slab, then crossed with the polygon's edges
+//! in the x-z plane), box and cylinder parts are axis-aligned boxes and finite cylinders. Mesh parts
+//! are triangle meshes cast through their own BVH ([`crate::mesh`]). Each primitive carries a
+//! bounding box that rejects most rays cheaply; a scene has ~10 primitives, so no hierarchy over
+//! them is needed. Sensors that fire many rays in a narrow horizontal wedge (a VLP-16 packet
 //! sweeps under 10 degrees) first ask [`Scene::candidates_in_wedge`] which primitives the wedge can
 //! reach and cast with [`Scene::cast_among`]; tests check that this never changes a hit.
 //! [`Scene::cast`] returns the nearest hit with its surface normal and which surface it was;
@@ -17,7 +18,10 @@
 //! having an inner lip, so a ray entering the rim opening obliquely stops on the disc slightly
 //! outside the rim radius.
 
+use std::sync::Arc;
+
 use crate::geometry::Vec3;
+use crate::mesh::Mesh;
 use crate::vehicle::{Axis, Part, RIM_INSET_M, Vehicle};
 
 /// What kind of surface a ray hit.
@@ -27,7 +31,8 @@ pub enum SurfaceKind {
     Ground,
     /// A tyre (index: front-left, front-right, rear-left, rear-right).
     Tyre,
-    /// A body prism (index into [`Vehicle::body_prisms`]).
+    /// A body prism (index into [`Vehicle::body_prisms`]); a mesh body has the index after the
+    /// last prism (0, as a mesh body has no prisms).
     Body,
     /// An optional part (index into `Vehicle::parts`).
     Part,
@@ -108,6 +113,22 @@ enum PartPrim {
         half_length: f64,
         bounds: Aabb,
     },
+    Mesh {
+        mesh: Arc<Mesh>,
+        bounds: Aabb,
+    },
+}
+
+impl PartPrim {
+    fn bounds(&self) -> Aabb {
+        match self {
+            PartPrim::Box { min, max } => Aabb {
+                min: *min,
+                max: *max,
+            },
+            PartPrim::Cylinder { bounds, .. } | PartPrim::Mesh { bounds, .. } => *bounds,
+        }
+    }
 }
 
 /// A scene ready for ray casting. Build it once per vehicle with [`Scene::from_vehicle`].
@@ -115,6 +136,8 @@ enum PartPrim {
 pub struct Scene {
     tyres: Vec<TyrePrim>,
     prisms: Vec<Prism>,
+    /// A mesh body with its bounds, cast as the body surface after the prisms.
+    body_mesh: Option<(Arc<Mesh>, Aabb)>,
     parts: Vec<PartPrim>,
 }
 
@@ -173,9 +196,20 @@ impl Scene {
             })
             .collect();
         let parts = vehicle.parts.iter().map(part_prim).collect();
+        let body_mesh = vehicle.body_mesh.as_ref().map(|b| {
+            let bounds = b.mesh.0.bounds();
+            (
+                Arc::clone(&b.mesh.0),
+                Aabb {
+                    min: bounds.min,
+                    max: bounds.max,
+                },
+            )
+        });
         Self {
             tyres,
             prisms,
+            body_mesh,
             parts,
         }
     }
@@ -240,6 +274,14 @@ impl Scene {
                 keep(t, n, SurfaceKind::Body, i, &mut t_max);
             }
         }
+        let body_index = self.prisms.len();
+        if let Some((mesh, bounds)) = &self.body_mesh
+            && candidates.has_prism(body_index)
+            && bounds.hit(origin, inv, t_max)
+            && let Some((t, n)) = mesh.cast(origin, dir, t_max)
+        {
+            keep(t, n, SurfaceKind::Body, body_index, &mut t_max);
+        }
         for (i, part) in self.parts.iter().enumerate() {
             if !candidates.has_part(i) {
                 continue;
@@ -266,6 +308,13 @@ impl Scene {
                 } => {
                     if bounds.hit(origin, inv, t_max) {
                         hit_cylinder(*axis, *centre, *radius, *half_length, origin, dir)
+                    } else {
+                        None
+                    }
+                }
+                PartPrim::Mesh { mesh, bounds } => {
+                    if bounds.hit(origin, inv, t_max) {
+                        mesh.cast(origin, dir, t_max)
                     } else {
                         None
                     }
@@ -300,15 +349,14 @@ impl Scene {
         for (i, p) in self.prisms.iter().enumerate().take(64) {
             c.prisms |= u64::from(visible(&p.bounds)) << i;
         }
+        let body_index = self.prisms.len();
+        if let Some((_, bounds)) = &self.body_mesh
+            && body_index < 64
+        {
+            c.prisms |= u64::from(visible(bounds)) << body_index;
+        }
         for (i, part) in self.parts.iter().enumerate().take(64) {
-            let b = match part {
-                PartPrim::Box { min, max } => Aabb {
-                    min: *min,
-                    max: *max,
-                },
-                PartPrim::Cylinder { bounds, .. } => *bounds,
-            };
-            c.parts |= u64::from(visible(&b)) << i;
+            c.parts |= u64::from(visible(&part.bounds())) << i;
         }
         c
     }
@@ -322,10 +370,11 @@ impl Scene {
                 .tyres
                 .get(i)
                 .map_or(f64::INFINITY, |t| tyre_distance(t, p)),
-            SurfaceKind::Body => self
-                .prisms
-                .get(i)
-                .map_or(f64::INFINITY, |pr| prism_distance(pr, p)),
+            SurfaceKind::Body => match (self.prisms.get(i), &self.body_mesh) {
+                (Some(pr), _) => prism_distance(pr, p),
+                (None, Some((mesh, _))) if i == self.prisms.len() => mesh.distance(p),
+                (None, _) => f64::INFINITY,
+            },
             SurfaceKind::Part => self
                 .parts
                 .get(i)
@@ -404,6 +453,16 @@ fn aabb_in_wedge(b: &Aabb, o: Vec3, mid_rad: f64, half_rad: f64) -> bool {
 
 fn part_prim(part: &Part) -> PartPrim {
     match part {
+        Part::Mesh { mesh, .. } => {
+            let b = mesh.0.bounds();
+            PartPrim::Mesh {
+                mesh: Arc::clone(&mesh.0),
+                bounds: Aabb {
+                    min: b.min,
+                    max: b.max,
+                },
+            }
+        }
         Part::Box { min_m, max_m, .. } => PartPrim::Box {
             min: v3(*min_m),
             max: v3(*max_m),
@@ -671,6 +730,7 @@ fn part_distance(part: &PartPrim, p: Vec3) -> f64 {
             let (a, u, v) = axis_split(*axis, p - *centre);
             two_way_distance(a.abs() - half_length, u.hypot(v) - radius)
         }
+        PartPrim::Mesh { mesh, .. } => mesh.distance(p),
     }
 }
 

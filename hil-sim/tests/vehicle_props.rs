@@ -93,11 +93,12 @@ fn vehicle() -> impl Strategy<Value = Vehicle> {
                         width_m: tw,
                         rim_radius_m: rim,
                     },
-                    underside: Underside {
+                    underside: Some(Underside {
                         front: place(front, 1.6, 0.6),
                         between: place(between, -0.6, -wb + 0.6),
                         rear: place(rear, -wb - 0.6, -wb - 2.0),
-                    },
+                    }),
+                    body_mesh: None,
                     parts,
                     published: None,
                 }
