@@ -249,19 +249,11 @@ fn camera_thread(
 /// odometry, fusion, scan-to-map refinement) without the depth camera, whose frames are tracked
 /// (visual odometry runs) but neither fused nor added to the cloud: the demo's camera is a
 /// quarter-resolution stand-in, and its mount differs from the pipeline's default
-/// (`mounts.camera-*`). Until 2026-11-22 the demo used wheel odometry alone; on the pickup's
-/// real-time recordings that read the approach up to 2.6 degrees high (its front end seen by a
-/// few points from the standstill start), where laser + wheel reads +0.4..+0.5 (README, "Demo").
-/// The output voxel (5 mm) and the bilateral filter (off) are the pipeline's defaults.
-///
-/// The camera's points in the cloud were tried on 2026-11-25 (030c6f5, with the simulated
-/// mounts passed to the pipeline, reverted): they fixed the pickup's approach (the lidar sees its
-/// sloped front end at grazing incidence; README, "Demo") but broke the SUV: its rear tyres were
-/// fitted at 0.72 m radius instead of 0.37, the approach was not found and the breakover read
-/// 1.2 degrees low (replayed offline: the same run without the camera's points reads within 0.4).
-/// The pickup pass runs at 0.2 m/s instead (its scenario). Since 2026-11-25 both switches are
-/// also the pipeline's defaults (README, next step 5); they stay spelled out here so the demo
-/// keeps measuring laser + wheel if the defaults change again.
+/// (`mounts.camera-*`). The output voxel (5 mm) and the bilateral filter (off) are the
+/// pipeline's defaults. Both switches are the pipeline's defaults too (decision record 011: the
+/// camera's points in the cloud moved the angles away from the truth more often than towards
+/// it); they stay spelled out here so the demo keeps measuring laser + wheel if the defaults
+/// change.
 const DEMO_PIPELINE: &str = "[processing.pipeline.fusion]\nuse-visual = false\n[processing.pipeline.visual]\nadd-to-cloud = false\n";
 
 /// Runs the demo; prints progress to stderr unless `quiet`.

@@ -217,7 +217,7 @@ mod tests {
         assert!((closed_form_rad(0.6, 0.3, 0.3).to_degrees() - 30.0).abs() < 1e-9);
         assert!(closed_form_rad(0.8, 0.0, 0.4).abs() < 1e-12);
         assert!((closed_form_rad(0.9, 0.3, 1e-9) - (0.3f64 / 0.9).atan()).abs() < 1e-6);
-        // DESIGN's magnitude check: d = 800 mm, z = 350 mm, r = 400 mm -> 26.4 degrees.
+        // The architecture document's magnitude check: d = 800 mm, z = 350 mm, r = 400 mm -> 26.4 degrees.
         assert!((closed_form_rad(0.8, 0.35, 0.4).to_degrees() - 26.4).abs() < 0.05);
     }
 

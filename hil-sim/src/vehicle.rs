@@ -52,7 +52,7 @@
 //! rigid = true                 # optional, default true; false for mud flaps, air dams
 //!
 //! [[parts]]
-//! kind = "mesh"                # a triangle mesh read from OBJ, STL or PLY (hil-sim/MESHES.md)
+//! kind = "mesh"                # a triangle mesh read from OBJ, STL or PLY (docs/simulator.md, "Triangle-mesh vehicles")
 //! name = "silencer"
 //! file = "meshes/silencer.obj" # relative to this vehicle file's directory
 //! scale = 1.0                  # optional, default 1: file units to metres
@@ -177,7 +177,7 @@ pub struct Tyre {
     pub rim_radius_m: f64,
 }
 
-/// A body given as a triangle mesh (see hil-sim/MESHES.md): it replaces the prisms and the wheel
+/// A body given as a triangle mesh (see docs/simulator.md, "Triangle-mesh vehicles"): it replaces the prisms and the wheel
 /// arches, so the mesh must leave room for the tyres itself.
 #[derive(Clone, Debug, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
