@@ -274,10 +274,9 @@ pub fn run(options: &DemoOptions, quiet: bool) -> anyhow::Result<DemoReport> {
     }
     let key = onboard::config::read_key(&key_file)?;
     let text = format!(
-        "[recording]\nroot = {:?}\n[radio]\nport = \"sim\"\nkey-file = {:?}\ncounter-file = {:?}\n[mcu]\nport = \"sim\"\n[camera]\nsource = \"none\"\n[processing]\nenter-at-front = {}\n{DEMO_PIPELINE}",
+        "[recording]\nroot = {:?}\n[radio]\nport = \"sim\"\nkey-file = {:?}\n[mcu]\nport = \"sim\"\n[camera]\nsource = \"none\"\n[processing]\nenter-at-front = {}\n{DEMO_PIPELINE}",
         options.run_root.join("runs"),
         key_file,
-        etc.join("start-counter"),
         run_spec.heading_deg.rem_euclid(360.0) > 90.0
             && run_spec.heading_deg.rem_euclid(360.0) < 270.0,
     );

@@ -221,10 +221,9 @@ impl Rig {
         let key = Key([0x5a; KEY_LEN]);
         onboard::config::write_key(&dir.join("pairing.key"), &key).unwrap();
         let text = format!(
-            "[recording]\nroot = {:?}\n[radio]\nport = \"mem\"\nkey-file = {:?}\ncounter-file = {:?}\n[mcu]\nport = \"mem\"\n[camera]\nsource = \"none\"\n",
+            "[recording]\nroot = {:?}\n[radio]\nport = \"mem\"\nkey-file = {:?}\n[mcu]\nport = \"mem\"\n[camera]\nsource = \"none\"\n",
             dir.join("runs"),
             dir.join("pairing.key"),
-            dir.join("counter")
         );
         let mut config = OnboardConfig::parse(&text, Path::new("e2e.toml")).unwrap();
         let fw = control::Config::default();
