@@ -82,6 +82,8 @@ pub struct Esc {
     current_a: f32,
     temperature_c: f32,
     faults: Vec<EscFault>,
+    /// Motor power through the robot's contactor ([`Esc::set_powered`]).
+    powered: bool,
     rng: ChaCha8Rng,
 }
 
@@ -95,6 +97,7 @@ impl Esc {
             current_a: 0.0,
             temperature_c: params.ambient_c,
             faults: Vec::new(),
+            powered: true,
             rng: ChaCha8Rng::seed_from_u64(seed ^ u64::from(esc_id).wrapping_mul(0x9E37_79B9)),
         }
     }
@@ -109,14 +112,33 @@ impl Esc {
         self.faults.clear();
     }
 
+    /// Switches the ESC's power (the robot's motor contactor). Without power the ESC drives no
+    /// current (the motor coasts), sends no feedback and ignores commands; when power returns it
+    /// starts as after a reset, commanded zero. Injected faults stay: a stuck output stage is
+    /// stuck again when powered, and a hot motor stays hot and cools at its own rate.
+    pub fn set_powered(&mut self, on: bool) {
+        if on && !self.powered {
+            self.commanded_a = 0.0;
+        }
+        self.powered = on;
+    }
+
+    /// Whether the ESC has power.
+    pub fn is_powered(&self) -> bool {
+        self.powered
+    }
+
     /// Whether the ESC answers on the bus.
     pub fn is_silent(&self) -> bool {
-        self.faults.contains(&EscFault::Silent)
+        !self.powered || self.faults.contains(&EscFault::Silent)
     }
 
     /// Applies a command frame if it addresses this ESC (0x200 for ids 1-4, 0x1FF for 5-8);
     /// returns whether it did. Malformed command frames are ignored, as a C620 ignores them.
     pub fn on_frame(&mut self, frame: &CanFrame) -> bool {
+        if !self.powered {
+            return false;
+        }
         let Ok((id, currents)) = esc::parse_command_frame(frame) else {
             return false;
         };
@@ -159,7 +181,9 @@ impl Esc {
         let target = stuck
             .unwrap_or(self.commanded_a)
             .clamp(-esc::CURRENT_MAX_A, esc::CURRENT_MAX_A);
-        if stuck.is_some() {
+        if !self.powered {
+            self.current_a = 0.0;
+        } else if stuck.is_some() {
             self.current_a = target;
         } else {
             self.current_a += (target - self.current_a) * (dt_s / (p.current_tau_s + dt_s));
@@ -282,5 +306,25 @@ mod tests {
         e.advance(0.001);
         let (_, fb) = esc::parse_feedback_frame(&e.feedback(0.0, 0.0).unwrap()).unwrap();
         assert_eq!(fb.temperature_c, 95);
+    }
+
+    #[test]
+    fn without_power_a_stuck_esc_drives_nothing_and_is_silent() {
+        let mut e = Esc::new(1, quiet(), 1);
+        e.inject(EscFault::StuckCurrent(18.0));
+        e.advance(0.001);
+        assert!((e.current_a() - 18.0).abs() < 1e-6);
+        e.set_powered(false);
+        e.advance(0.001);
+        assert!(e.current_a().abs() < 1e-9);
+        assert!(e.feedback(0.0, 0.0).is_none());
+        let cmd: CanFrame = esc::command_frame(0x200, [1000, 0, 0, 0]).unwrap();
+        assert!(!e.on_frame(&cmd), "an unpowered ESC ignores commands");
+        // Power back: commanded zero, but the stuck output stage is stuck again.
+        e.set_powered(true);
+        assert!(e.commanded_a().abs() < 1e-9);
+        e.advance(0.001);
+        assert!((e.current_a() - 18.0).abs() < 1e-6);
+        assert!(e.feedback(0.0, 0.0).is_some());
     }
 }

@@ -10,7 +10,9 @@
 //! 5. the simulated onboard computer sends its heartbeat (every 20 ms) and scripted messages,
 //! 6. the firmware's CAN receive task collects the feedback frames, its UART task the link bytes,
 //! 7. `Controller::step(now, inputs)` runs; its currents go out as one 0x200 frame, its replies
-//!    (odometry at the configured rate, status, acks, rejections) on the link,
+//!    (odometry at the configured rate, status, acks, rejections) on the link, and its motor
+//!    contactor output switches the ESCs' power from the next period (open at reset; an ESC
+//!    without power drives no current and is silent, [`crate::esc_model::Esc::set_powered`]),
 //! 8. the onboard stand-in reads and decodes the replies into the [`Trace`].
 //!
 //! Time is the simulation's: [`Pacing::Virtual`] runs as fast as the host can (deterministic for a
@@ -190,6 +192,9 @@ pub struct Trace {
     pub heartbeats_sent: Vec<u64>,
     /// Scripted events as applied, for reports.
     pub log: Vec<(u64, String)>,
+    /// Every change of the motor contactor the firmware drives (time, closed), starting open at
+    /// reset: while it is open the ESCs have no power.
+    pub contactor: Vec<(u64, bool)>,
     /// Which bus carried the frames.
     pub bus: String,
 }
@@ -315,6 +320,8 @@ pub struct Fil {
     can_off: bool,
     can_off_until_us: u64,
     can_recover_at_us: Option<u64>,
+    /// The motor contactor as the firmware last drove it (open at reset).
+    contactor_closed: bool,
     pending: Vec<Event>,
     trace: Trace,
     started: Option<Instant>,
@@ -352,11 +359,16 @@ impl Fil {
                 fw_signs: wheels.sign,
             });
         }
+        // The contactor is open at reset: the ESCs have no power until the firmware closes it.
         let escs = config
             .robot
             .esc_ids
             .iter()
-            .map(|&id| Esc::new(id, config.esc, config.seed))
+            .map(|&id| {
+                let mut esc = Esc::new(id, config.esc, config.seed);
+                esc.set_powered(false);
+                esc
+            })
             .collect();
         let mut trace = Trace {
             bus: fw_can.name(),
@@ -364,6 +376,7 @@ impl Fil {
         };
         let robot = Robot::new(config.robot);
         trace.truth.samples.push(robot.sample(0));
+        trace.contactor.push((0, false));
         Ok(Self {
             controller,
             robot,
@@ -384,6 +397,7 @@ impl Fil {
             can_off: false,
             can_off_until_us: 0,
             can_recover_at_us: None,
+            contactor_closed: false,
             pending: Vec::new(),
             trace,
             started: None,
@@ -476,6 +490,24 @@ impl Fil {
                     .measured_mv(self.escs.iter().map(|e| e.current_a().abs()).sum()),
             },
         );
+        if out.contactor_closed != self.contactor_closed {
+            self.contactor_closed = out.contactor_closed;
+            for esc in &mut self.escs {
+                esc.set_powered(out.contactor_closed);
+            }
+            self.trace.contactor.push((now, out.contactor_closed));
+            self.trace.log.push((
+                now,
+                format!(
+                    "motor contactor {}",
+                    if out.contactor_closed {
+                        "closed"
+                    } else {
+                        "opened"
+                    }
+                ),
+            ));
+        }
         if out.recover_bus && self.can_off && self.can_recover_at_us.is_none() {
             self.can_recover_at_us = Some(self.can_off_until_us.max(now) + BUS_OFF_RECOVERY_US);
         }
@@ -507,7 +539,10 @@ impl Fil {
             for esc in &mut self.escs {
                 applied |= esc.on_frame(frame);
             }
-            if applied && let Ok((_, currents)) = protocol::esc::parse_command_frame(frame) {
+            // The commands on the bus, whether or not an ESC has power to take them.
+            if (applied || !self.contactor_closed)
+                && let Ok((_, currents)) = protocol::esc::parse_command_frame(frame)
+            {
                 self.trace.commands.push((now - TICK_US, currents));
             }
         }

@@ -8,9 +8,9 @@
 //! | `cruise` | start, S-curve ramp, 0.2 m/s for 5 s, stop | true velocity ripple (std/mean) < 1 %, odometry error reported |
 //! | `heartbeat-loss` | heartbeats stop at cruise | `HEARTBEAT_LOST` reported, currents zero and robot at rest in bounded time |
 //! | `esc-silent` | ESC 3 stops answering at cruise | fault latched within 10 ms naming ESC 3, zero currents on the bus |
-//! | `over-temperature` | ESC 2 reports 95 degC at cruise | fault named, zero currents, `ClearFaults` and `Drive` refused while hot |
+//! | `over-temperature` | ESC 2 reports 95 degC at cruise | fault named, zero currents, contactor opened; after `ClearFaults` the hot motor latches the fault again on its first report, `Drive` refused, no current |
 //! | `bus-off` | the firmware's CAN controller goes bus-off | reported and counted, zero currents after recovery, cleared and driving again |
-//! | `stuck-current` | ESC 1's current sticks at 18 A at cruise (a C620 fault the firmware cannot override) | over-current named within 5 ms, all-zero commands from then on; how far the stuck wheel still pushes the robot is reported |
+//! | `stuck-current` | ESC 1's current sticks at 18 A at cruise (a C620 fault the firmware cannot override) | over-current named within 5 ms, all-zero commands from then on, the motor contactor opened in the step the fault latches (cutting the stuck ESC's power), robot at rest within 1.5 s |
 //! | `link-flood` | seeded garbage and malformed frames on the MCU link, idle then at cruise | nothing moves at idle, errors counted and rejections sent, cruise unaffected |
 //! | `battery-low` | the pack's open-circuit voltage falls from 24 V to 19.2 V at cruise (a short sag to 16 V before it does not count) | the sag does not stop the run; `BATTERY_LOW` within 2.5 s of the drop, robot ramped to rest, a new drive refused naming it, the reported voltage |
 //!
@@ -751,8 +751,14 @@ fn judge_stuck_current(o: &mut Outcome) {
         5_000,
         false,
     );
-    // The firmware can only command zero; the stuck ESC keeps driving its wheel. Report what that
-    // does to the robot in the 1.5 s after the fault (a motor power cut would be needed to stop it).
+    // Commanding zero cannot stop a stuck ESC; opening the motor contactor cuts its power.
+    judge_contactor_opened(o, 1, EscFaults::OVER_CURRENT);
+    let rest = at_rest_from(&o.trace, FAULT_AT_US);
+    o.check(
+        "robot at rest within 1.5 s of the fault and stays (no stuck wheel pushing)",
+        rest.is_some_and(|t| t - FAULT_AT_US <= 1_500_000),
+        format!("{:?}", rest.map(|t| ms(t - FAULT_AT_US))),
+    );
     let (Some(a), Some(b)) = (
         o.trace.truth.at(FAULT_AT_US),
         o.trace.truth.at(FAULT_AT_US + 1_500_000),
@@ -760,7 +766,7 @@ fn judge_stuck_current(o: &mut Outcome) {
         return;
     };
     o.figure_push(
-        "travel after the fault (stuck wheel pushing)",
+        "travel in the 1.5 s after the fault",
         (b.x_m - a.x_m).hypot(b.y_m - a.y_m),
         "m",
     );
@@ -785,6 +791,18 @@ fn judge_over_temperature(o: &mut Outcome) {
         2_000,
         true,
     );
+    judge_contactor_opened(o, 2, EscFaults::OVER_TEMPERATURE);
+    // With the contactor open the hot ESC has no power and is silent, so ClearFaults restarts it
+    // as never seen; once power returns, its first report (still 95 degC) latches the fault again.
+    let relatched = first_status(&o.trace, 3_500_000, |s| {
+        wheel_of(&o.trace, 2).is_some_and(|w| s.esc[w].faults.contains(EscFaults::OVER_TEMPERATURE))
+            && s.mode == DriveMode::Faulted
+    });
+    o.check(
+        "after ClearFaults the hot motor latches the fault again",
+        relatched.is_some(),
+        format!("{:?}", relatched.map(|(t, _)| ms(t))),
+    );
     let rejections: Vec<(u16, RejectReason)> = o
         .trace
         .rejections()
@@ -792,11 +810,8 @@ fn judge_over_temperature(o: &mut Outcome) {
         .map(|(_, r)| (r.msg_id, r.reason))
         .collect();
     o.check(
-        "ClearFaults and Drive refused while the motor is hot",
-        rejections
-            .iter()
-            .any(|(id, _)| *id == protocol::ids::CLEAR_FAULTS)
-            && rejections.iter().any(|(id, _)| *id == protocol::ids::DRIVE),
+        "Drive refused while the motor is hot",
+        rejections.iter().any(|(id, _)| *id == protocol::ids::DRIVE),
         format!("{rejections:?}"),
     );
     let moved = o
@@ -805,6 +820,38 @@ fn judge_over_temperature(o: &mut Outcome) {
         .iter()
         .any(|(t, c)| *t > 3_600_000 && *c != [0; 4]);
     o.check("no current after the refused drive", !moved, "");
+}
+
+/// The motor contactor opens (cutting the ESCs' power) no later than the step the fault of
+/// `esc_id` is first reported latched.
+fn judge_contactor_opened(o: &mut Outcome, esc_id: u8, fault: EscFaults) {
+    let wheel = wheel_of(&o.trace, esc_id);
+    let latched = first_status(&o.trace, FAULT_AT_US, |s| {
+        wheel.is_some_and(|w| s.esc[w].faults.contains(fault))
+    })
+    .map(|(t, _)| t);
+    let opened = o
+        .trace
+        .contactor
+        .iter()
+        .find(|(t, closed)| *t >= FAULT_AT_US && !closed)
+        .map(|(t, _)| *t);
+    if let Some(t) = opened {
+        o.figure_push(
+            "motor contactor opened after the cause",
+            ms(t - FAULT_AT_US),
+            "ms",
+        );
+    }
+    o.check(
+        "motor contactor opened by the time the fault is reported",
+        opened.zip(latched).is_some_and(|(c, l)| c <= l),
+        format!(
+            "opened {:?} ms, reported {:?} ms",
+            opened.map(ms),
+            latched.map(ms)
+        ),
+    );
 }
 
 fn judge_battery_low(o: &mut Outcome) {

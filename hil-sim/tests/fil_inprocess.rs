@@ -51,11 +51,10 @@ fn bus_off_recovery() {
 #[test]
 fn stuck_over_current() {
     let o = run("stuck-current");
-    // The firmware zeroes its commands, but the stuck ESC keeps pushing: the robot does not stop.
-    assert!(
-        o.figure("travel after the fault (stuck wheel pushing)")
-            .is_some_and(|d| d > 0.05)
-    );
+    // Zero commands cannot stop a stuck ESC; the contactor cuts its power, so the robot only
+    // coasts from cruise (0.2 m/s) instead of being pushed on (0.64 m in 1.5 s without it).
+    let travel = o.figure("travel in the 1.5 s after the fault");
+    assert!(travel.is_some_and(|d| d < 0.1), "{travel:?}");
 }
 
 #[test]
