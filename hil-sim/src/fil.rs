@@ -188,6 +188,9 @@ pub struct Trace {
     pub feedback_frames_lost: u64,
     /// Feedback frames the firmware's controller missed because it was bus-off (by design).
     pub feedback_frames_missed_bus_off: u64,
+    /// Feedback frames each ESC put on the bus, by ESC id (an ESC without power or silenced by
+    /// a fault sends none).
+    pub feedback_frames_sent: std::collections::BTreeMap<u8, u64>,
     /// When the onboard stand-in sent each heartbeat.
     pub heartbeats_sent: Vec<u64>,
     /// Scripted events as applied, for reports.
@@ -569,6 +572,11 @@ impl Fil {
             if let Some(frame) = esc.feedback(angle, speed) {
                 self.esc_can.send(&frame)?;
                 sent += 1;
+                *self
+                    .trace
+                    .feedback_frames_sent
+                    .entry(esc.esc_id)
+                    .or_default() += 1;
             }
         }
         Ok(sent)
