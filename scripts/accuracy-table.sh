@@ -48,5 +48,9 @@ text = re.sub(re.escape(start) + ".*?" + re.escape(end), start + "\n" + table + 
 readme.write_text(text)
 report = pathlib.Path("docs/reports") / f"{date}-{commit.split()[0]}-accuracy.md"
 report.write_text(f"# Accuracy, demo runs at {commit}\n\nWritten by `scripts/accuracy-table.sh` on {date}.\n\n" + table)
+index = pathlib.Path("docs/reports/README.md")
+if report.name not in index.read_text():
+    with index.open("a") as f:
+        f.write(f"- [accuracy, {date}, {commit.split()[0]}]({report.name})\n")
 print(table)
 PY
