@@ -497,10 +497,33 @@ fn malformed_payloads_are_typed_errors() {
     assert_eq!(ToFirmware::decode(&ack), Err(protocol::DecodeError::IsAck));
 }
 
-/// Prints the worst-case frame size of every message (run with --nocapture for the table).
+/// The worst-case frame size table of the interface control document (`docs/protocol.md`,
+/// between its `size-table` markers) is generated from the messages themselves: this test fails
+/// when the committed table differs, and `UPDATE_DOCS=1 cargo test -p protocol --test wire`
+/// rewrites it.
 #[test]
-fn print_worst_case_table() {
-    for (name, id, max, _) in exemplars() {
-        println!("{name:<20} {id:#06x} {max:>4} bytes");
+fn the_icd_size_table_matches_the_messages() {
+    let mut rows = exemplars();
+    rows.sort_by_key(|(_, id, _, _)| *id);
+    let mut table = String::from("| message | id | worst case |\n|---|---|---|\n");
+    for (name, id, max, _) in rows {
+        table.push_str(&format!("| {name} | {id:#06x} | {max} B |\n"));
     }
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../docs/protocol.md");
+    let text = std::fs::read_to_string(&path).expect("docs/protocol.md");
+    let (start, end) = ("<!-- size-table:start -->\n", "<!-- size-table:end -->");
+    let (Some(a), Some(b)) = (text.find(start), text.find(end)) else {
+        panic!("docs/protocol.md lacks the size-table markers");
+    };
+    let committed = &text[a + start.len()..b];
+    if std::env::var_os("UPDATE_DOCS").is_some() {
+        let updated = format!("{}{table}{}", &text[..a + start.len()], &text[b..]);
+        std::fs::write(&path, updated).expect("write docs/protocol.md");
+        return;
+    }
+    assert!(
+        committed == table,
+        "docs/protocol.md's size table is stale; regenerate it with \
+         UPDATE_DOCS=1 cargo test -p protocol --test wire\n{table}"
+    );
 }
