@@ -503,11 +503,12 @@ fn malformed_payloads_are_typed_errors() {
 /// rewrites it.
 #[test]
 fn the_icd_size_table_matches_the_messages() {
+    use std::fmt::Write as _;
     let mut rows = exemplars();
     rows.sort_by_key(|(_, id, _, _)| *id);
     let mut table = String::from("| message | id | worst case |\n|---|---|---|\n");
     for (name, id, max, _) in rows {
-        table.push_str(&format!("| {name} | {id:#06x} | {max} B |\n"));
+        let _ = writeln!(table, "| {name} | {id:#06x} | {max} B |");
     }
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../docs/protocol.md");
     let text = std::fs::read_to_string(&path).expect("docs/protocol.md");
