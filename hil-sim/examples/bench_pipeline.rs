@@ -57,7 +57,7 @@ use onboard::angles::{AnglesConfig, compute_angles};
 use onboard::cloud::{Cloud, PlyEncoding, write_ply};
 use onboard::pipeline::geom::{Pose, rpy_of};
 use onboard::pipeline::{
-    BuiltCloud, DepthFrame, LidarFrame, Pipeline, PipelineConfig, WheelOdometry,
+    BuiltCloud, DepthImage, LidarFrame, Pipeline, PipelineConfig, WheelOdometry,
 };
 
 /// One configuration of the ablation.
@@ -164,7 +164,7 @@ fn mounts_from(scenario: &Scenario, config: &mut PipelineConfig) {
 }
 
 /// Depth frames at 10 Hz (every 3rd of the 30 Hz stream).
-fn depth_frames(scenario: &Scenario, scene: &Scene) -> Vec<DepthFrame> {
+fn depth_frames(scenario: &Scenario, scene: &Scene) -> Vec<DepthImage> {
     let sim = D435Sim::new(
         scene,
         &scenario.run,
@@ -176,7 +176,7 @@ fn depth_frames(scenario: &Scenario, scene: &Scene) -> Vec<DepthFrame> {
         .step_by(3)
         .map(|i| {
             let f = sim.frame(i);
-            DepthFrame {
+            DepthImage {
                 stamp_s: sim.frame_time_s(i),
                 width: f.width as usize,
                 height: f.height as usize,
@@ -207,12 +207,12 @@ struct Timing {
 fn run_pipeline(
     config: PipelineConfig,
     lidar: &[LidarFrame],
-    depth: &[DepthFrame],
+    depth: &[DepthImage],
     wheel: &[WheelOdometry],
 ) -> (BuiltCloud, Timing) {
     enum Ev<'a> {
         L(&'a LidarFrame),
-        D(&'a DepthFrame),
+        D(&'a DepthImage),
         W(&'a WheelOdometry),
     }
     let mut events: Vec<(f64, Ev)> = Vec::new();
@@ -728,7 +728,7 @@ fn main() -> anyhow::Result<()> {
                 if no_refine {
                     config.map.refine = false;
                 }
-                let d: &[DepthFrame] = if v.depth { &depth } else { &[] };
+                let d: &[DepthImage] = if v.depth { &depth } else { &[] };
                 let (built, time) = run_pipeline(config, &lidar, d, &wheel);
                 let f = evaluate(&scenario, &scene, &built, &time);
                 if let Some(dir) = &export_dir {

@@ -185,7 +185,7 @@ impl D435Config {
 
 /// One Z16 depth frame.
 #[derive(Clone, Debug, PartialEq, Eq)]
-pub struct DepthFrame {
+pub struct Z16Frame {
     /// Frame number from 0.
     pub index: u64,
     /// Camera clock at exposure, microseconds.
@@ -198,7 +198,7 @@ pub struct DepthFrame {
     pub depth_mm: Vec<u16>,
 }
 
-impl DepthFrame {
+impl Z16Frame {
     /// The frame as raw Z16 bytes (little-endian u16, row-major), as a camera delivers it.
     pub fn to_z16_bytes(&self) -> Vec<u8> {
         self.depth_mm.iter().flat_map(|d| d.to_le_bytes()).collect()
@@ -247,7 +247,7 @@ impl<'a, T: Trajectory> D435Sim<'a, T> {
     }
 
     /// Render frame `index`.
-    pub fn frame(&self, index: u64) -> DepthFrame {
+    pub fn frame(&self, index: u64) -> Z16Frame {
         let mut rng = ChaCha8Rng::seed_from_u64(self.seed);
         rng.set_stream(index);
         let world_from_camera = self.world_from_camera(index);
@@ -285,7 +285,7 @@ impl<'a, T: Trajectory> D435Sim<'a, T> {
                 depth_mm.push(value);
             }
         }
-        DepthFrame {
+        Z16Frame {
             index,
             stamp_us: c.clock_offset_us + (self.frame_time_s(index) * 1e6).round() as u64,
             width: k.width,

@@ -119,11 +119,7 @@ pub fn truth(args: &TruthArgs) -> anyhow::Result<()> {
         bail!("--spacing-mm must lie in (0, 100], got {}", args.spacing_mm);
     }
     let options = TruthOptions {
-        zone: if args.eu_zone {
-            Zone::AheadOfAxle
-        } else {
-            Zone::AheadOfTyre
-        },
+        zone: if args.eu_zone { Zone::Axle } else { Zone::Tyre },
         include_flexible: !args.rigid_only,
         spacing_m: args.spacing_mm / 1000.0,
     };

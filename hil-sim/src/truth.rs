@@ -32,15 +32,9 @@ pub const COARSE_STEP_RAD: f64 = 0.1 * std::f64::consts::PI / 180.0;
 /// Bisection tolerance, radians.
 pub const TOLERANCE_RAD: f64 = 1e-9;
 
-/// Which points count for approach and departure.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
-pub enum Zone {
-    /// Points forward of the front tyre (x > r ahead of the axle) / rearward of the rear tyre (CFR, SAE).
-    #[default]
-    AheadOfTyre,
-    /// Points forward of the front axle / rearward of the rear axle (EU).
-    AheadOfAxle,
-}
+/// Which points count for approach and departure: the calculator's own zone type (one name per
+/// concept), though the truth computes its angles independently of the calculator.
+pub use onboard::angles::Zone;
 
 /// Options of the true-angle computation.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -56,7 +50,7 @@ pub struct TruthOptions {
 impl Default for TruthOptions {
     fn default() -> Self {
         Self {
-            zone: Zone::AheadOfTyre,
+            zone: Zone::Tyre,
             include_flexible: true,
             spacing_m: 0.002,
         }
@@ -94,8 +88,8 @@ pub fn true_angles(vehicle: &Vehicle, options: &TruthOptions) -> TrueAngles {
     let front_x = 0.0;
     let rear_x = -vehicle.wheelbase_m;
     let zone_margin = match options.zone {
-        Zone::AheadOfTyre => r,
-        Zone::AheadOfAxle => 0.0,
+        Zone::Tyre => r,
+        Zone::Axle => 0.0,
     };
     // Side-view distances measured away from each tyre, outward (approach, departure) or inward.
     let outside = |p: &OutlinePoint, d: f64| d > 0.0 && d.hypot(r - p.z_m) > r;

@@ -30,7 +30,7 @@ use crate::cloud::Cloud;
 use crate::mcu_clock::McuClockMap;
 use crate::pipeline::geom::V3;
 use crate::pipeline::{
-    BuiltCloud, DepthFrame, LidarFrame, Pipeline, PipelineConfig, WheelOdometry,
+    BuiltCloud, DepthImage, LidarFrame, Pipeline, PipelineConfig, WheelOdometry,
 };
 use crate::recorder::{Intrinsics, Recording};
 use crate::service::{LiveRun, ProcessInput, Processed, Processor, SensorItem};
@@ -187,14 +187,14 @@ pub const REORDER_WINDOW_S: f64 = 0.5;
 
 enum Item {
     Wheel(WheelOdometry),
-    Depth(DepthFrame),
+    Depth(DepthImage),
     Lidar(LidarFrame),
 }
 
 /// An item on the host's wall clock, before the run's time origin is known.
 enum Timed {
     Wheel(u64, Odometry),
-    Depth(u64, DepthFrame),
+    Depth(u64, DepthImage),
     Lidar(u64, crate::vlp16::Frame),
 }
 
@@ -374,7 +374,7 @@ impl RunBuilder {
         self.counts.depth_frames += 1;
         self.hold(Timed::Depth(
             wall_us,
-            DepthFrame {
+            DepthImage {
                 stamp_s: 0.0,
                 width: usize::from(width),
                 height: usize::from(height),

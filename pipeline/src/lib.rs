@@ -56,7 +56,7 @@ use std::sync::Arc;
 use thiserror::Error;
 
 pub use config::PipelineConfig;
-pub use visual_odometry::DepthFrame;
+pub use visual_odometry::DepthImage;
 
 use self::deskew::{DeskewModel, Velocity};
 use self::features::RingPoint;
@@ -412,7 +412,7 @@ impl Pipeline {
     }
 
     /// Track a depth frame (visual odometry runs now) and keep its points for the cloud.
-    pub fn push_depth_frame(&mut self, frame: DepthFrame) -> Result<(), PipelineError> {
+    pub fn push_depth_frame(&mut self, frame: DepthImage) -> Result<(), PipelineError> {
         if !self.config.visual.enabled {
             return Ok(());
         }

@@ -18,7 +18,7 @@ use super::geom::{Pose, V3, cross, dot, norm, scale, solve_spd, sub, symmetric_e
 
 /// One D435 depth frame with its intrinsics.
 #[derive(Debug, Clone, PartialEq)]
-pub struct DepthFrame {
+pub struct DepthImage {
     /// Exposure time, seconds on the pipeline's common clock.
     pub stamp_s: f64,
     /// Image width, pixels.
@@ -33,7 +33,7 @@ pub struct DepthFrame {
     pub depth: Vec<u16>,
 }
 
-impl DepthFrame {
+impl DepthImage {
     /// Checks the sizes and intrinsics; the error names the field.
     pub fn check(&self) -> Result<(), String> {
         if self.depth.len() != self.width * self.height {
@@ -126,8 +126,8 @@ pub struct VisualStep {
 /// Register `current` to `previous`: `camera_prev_from_cur`, from `init`. Returns the pose, the
 /// per-residual normal matrix and the residual count.
 pub fn register_depth(
-    previous: &DepthFrame,
-    current: &DepthFrame,
+    previous: &DepthImage,
+    current: &DepthImage,
     init: Pose,
     config: &VisualOdometryConfig,
 ) -> (Pose, [[f64; 6]; 6], usize) {
@@ -206,7 +206,7 @@ pub fn register_depth(
 pub struct VisualOdometry {
     config: VisualOdometryConfig,
     robot_from_camera: Pose,
-    previous: Option<DepthFrame>,
+    previous: Option<DepthImage>,
     degeneracy_eigen_min: f64,
 }
 
@@ -228,7 +228,7 @@ impl VisualOdometry {
     /// Track `frame` against the previous one; `prior` is the predicted
     /// `robot_prev_from_robot_cur` (identity if nothing better is known). `None` for the first
     /// frame or when too few pixels matched.
-    pub fn push(&mut self, frame: DepthFrame, prior: Pose) -> Option<VisualStep> {
+    pub fn push(&mut self, frame: DepthImage, prior: Pose) -> Option<VisualStep> {
         let previous = self.previous.replace(frame);
         let previous = previous?;
         let current = self.previous.as_ref()?;
@@ -288,7 +288,7 @@ pub(crate) mod tests {
 
     /// Render a depth image of a ceiling at height `h` above a camera looking up, with a box of
     /// `bump` metres hanging down so the motion along the ceiling is observable.
-    pub(crate) fn render(camera_in_world: &Pose, stamp_s: f64) -> DepthFrame {
+    pub(crate) fn render(camera_in_world: &Pose, stamp_s: f64) -> DepthImage {
         let (width, height) = (160, 120);
         let intrinsics_px = [120.0, 120.0, 80.0, 60.0];
         let mut depth = vec![0u16; width * height];
@@ -327,7 +327,7 @@ pub(crate) mod tests {
                 }
             }
         }
-        DepthFrame {
+        DepthImage {
             stamp_s,
             width,
             height,
