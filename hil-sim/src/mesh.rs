@@ -73,6 +73,11 @@ impl Bounds {
         );
     }
 
+    /// Whether the ray enters the box before `t_max` ([`Bounds::entry`]).
+    pub(crate) fn hit(&self, o: Vec3, inv: Vec3, t_max: f64) -> bool {
+        self.entry(o, inv, t_max).is_some()
+    }
+
     /// Entry distance of the ray into the box if it enters before `t_max` (slab test, `inv` is the
     /// component-wise inverse direction).
     fn entry(&self, o: Vec3, inv: Vec3, t_max: f64) -> Option<f64> {

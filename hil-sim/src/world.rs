@@ -21,7 +21,8 @@
 use std::sync::Arc;
 
 use crate::geometry::Vec3;
-use crate::mesh::Mesh;
+// The primitives' bounding boxes are the meshes' (one slab test for both).
+use crate::mesh::{Bounds as Aabb, Mesh};
 use crate::vehicle::{Axis, Part, RIM_INSET_M, Vehicle};
 
 /// What kind of surface a ray hit.
@@ -56,31 +57,6 @@ pub struct Hit {
     pub normal: Vec3,
     /// The surface.
     pub surface: SurfaceId,
-}
-
-#[derive(Clone, Copy, Debug)]
-struct Aabb {
-    min: Vec3,
-    max: Vec3,
-}
-
-impl Aabb {
-    /// Whether the ray enters the box before `t_max` (slab test with precomputed inverse direction).
-    fn hit(&self, o: Vec3, inv: Vec3, t_max: f64) -> bool {
-        let (mut t0, mut t1) = (0.0f64, t_max);
-        for (o, inv, lo, hi) in [
-            (o.x, inv.x, self.min.x, self.max.x),
-            (o.y, inv.y, self.min.y, self.max.y),
-            (o.z, inv.z, self.min.z, self.max.z),
-        ] {
-            let (a, b) = ((lo - o) * inv, (hi - o) * inv);
-            let (a, b) = if a < b { (a, b) } else { (b, a) };
-            // NaN (0 * inf when the origin lies on a slab plane) keeps the previous bound.
-            t0 = if a > t0 { a } else { t0 };
-            t1 = if b < t1 { b } else { t1 };
-        }
-        t0 <= t1
-    }
 }
 
 #[derive(Clone, Debug)]
