@@ -278,8 +278,13 @@ pub struct ServiceStats {
     /// (the MCU heartbeat leaves once per iteration; the firmware stops after 100 ms without).
     pub max_loop_gap_us: u64,
     /// Longest time one loop iteration spent working (the gap less the sleep and the
-    /// scheduler's lateness), us: what the loop itself waited for.
+    /// scheduler's lateness), us: what the loop itself waited for, including any time the
+    /// scheduler gave its core to other work.
     pub max_loop_work_us: u64,
+    /// Most CPU time the loop's thread used in one iteration, us. Unlike the two wall-clock
+    /// figures above it does not grow when the machine is busy, so it says whether the loop
+    /// itself does long work (a fetch read on the loop would cost hundreds of ms here).
+    pub max_loop_cpu_us: u64,
     /// Fetches refused because the IO worker's queue was full.
     pub fetches_busy: u64,
     /// Lidar data packets that passed the checked view.
@@ -301,6 +306,15 @@ fn wall_us() -> u64 {
     SystemTime::now()
         .duration_since(UNIX_EPOCH)
         .map_or(0, |d| u64::try_from(d.as_micros()).unwrap_or(u64::MAX))
+}
+
+/// CPU time used by the calling thread, us (0 where the clock is unavailable).
+fn thread_cpu_us() -> u64 {
+    use nix::time::{ClockId, clock_gettime};
+    clock_gettime(ClockId::CLOCK_THREAD_CPUTIME_ID).map_or(0, |t| {
+        u64::try_from(t.tv_sec()).unwrap_or(0) * 1_000_000
+            + u64::try_from(t.tv_nsec()).unwrap_or(0) / 1_000
+    })
 }
 
 fn is_quiet(e: &io::Error) -> bool {
@@ -806,6 +820,7 @@ impl Service {
             && !io.crash.as_ref().is_some_and(|c| c.load(Ordering::Relaxed))
         {
             let loop_start = Instant::now();
+            let cpu_start = thread_cpu_us();
             let now = self.now_us();
             if let Some(t) = last_start {
                 self.stats.max_loop_gap_us = self.stats.max_loop_gap_us.max(now - t);
@@ -876,6 +891,8 @@ impl Service {
             }
             let work = u64::try_from(loop_start.elapsed().as_micros()).unwrap_or(u64::MAX);
             self.stats.max_loop_work_us = self.stats.max_loop_work_us.max(work);
+            let cpu = thread_cpu_us().saturating_sub(cpu_start);
+            self.stats.max_loop_cpu_us = self.stats.max_loop_cpu_us.max(cpu);
             if let Some(rest) = LOOP_PERIOD.checked_sub(loop_start.elapsed()) {
                 thread::sleep(rest);
             }
