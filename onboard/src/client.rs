@@ -106,19 +106,57 @@ pub struct Measured {
     pub preview_time: Option<Duration>,
 }
 
-/// The blocking client.
-pub struct Client {
-    radio: HandheldRadio,
-    port: Box<dyn Port>,
-    epoch: Instant,
-    buf: Vec<u8>,
-    recent_log: Vec<String>,
+/// The client's time: what its loop reads, and how it waits for the radio.
+pub trait ClientClock {
+    /// Microseconds since the client started; never decreasing.
+    fn now_us(&mut self) -> u64;
+    /// Wall clock at the client's start, us since the Unix epoch (link sequence numbers start
+    /// from it).
+    fn wall_epoch_us(&mut self) -> u64;
+    /// Waits a moment for bytes from the robot. On the wall clock this sleeps; the simulator's
+    /// lockstep clock advances the whole simulated robot by one step instead.
+    fn idle(&mut self);
 }
 
-fn wall_us() -> u64 {
-    SystemTime::now()
-        .duration_since(UNIX_EPOCH)
-        .map_or(0, |d| u64::try_from(d.as_micros()).unwrap_or(u64::MAX))
+/// The monotonic clock: [`ClientClock::idle`] sleeps 2 ms.
+#[derive(Debug, Clone, Copy)]
+pub struct WallClock {
+    epoch: Instant,
+}
+
+impl WallClock {
+    /// Time 0 is now.
+    pub fn start() -> Self {
+        Self {
+            epoch: Instant::now(),
+        }
+    }
+}
+
+impl ClientClock for WallClock {
+    fn now_us(&mut self) -> u64 {
+        u64::try_from(self.epoch.elapsed().as_micros()).unwrap_or(u64::MAX)
+    }
+
+    fn wall_epoch_us(&mut self) -> u64 {
+        SystemTime::now()
+            .duration_since(UNIX_EPOCH)
+            .map_or(0, |d| u64::try_from(d.as_micros()).unwrap_or(u64::MAX))
+            .saturating_sub(self.now_us())
+    }
+
+    fn idle(&mut self) {
+        std::thread::sleep(Duration::from_millis(2));
+    }
+}
+
+/// The blocking client, on the wall clock unless another [`ClientClock`] is given.
+pub struct Client<C: ClientClock = WallClock> {
+    radio: HandheldRadio,
+    port: Box<dyn Port>,
+    clock: C,
+    buf: Vec<u8>,
+    recent_log: Vec<String>,
 }
 
 impl Client {
@@ -127,24 +165,37 @@ impl Client {
         Ok(Self::with_entropy(port, key, Entropy::from_os()?))
     }
 
-    /// A client with the given randomness (reproducible simulations and tests).
+    /// A client with the given randomness (reproducible tests).
     pub fn with_entropy(port: Box<dyn Port>, key: Key, entropy: Entropy) -> Self {
+        Self::with_clock(port, key, entropy, WallClock::start())
+    }
+}
+
+impl<C: ClientClock> Client<C> {
+    /// A client with the given randomness and clock (the simulator's lockstep mode).
+    pub fn with_clock(port: Box<dyn Port>, key: Key, entropy: Entropy, mut clock: C) -> Self {
+        let seq_seed = (clock.wall_epoch_us() / 1000) as u16;
         Self {
-            radio: HandheldRadio::new(
-                HandheldConfig::default(),
-                key,
-                entropy,
-                (wall_us() / 1000) as u16,
-            ),
+            radio: HandheldRadio::new(HandheldConfig::default(), key, entropy, seq_seed),
             port,
-            epoch: Instant::now(),
+            clock,
             buf: vec![0; 4096],
             recent_log: Vec::new(),
         }
     }
 
-    fn now_us(&self) -> u64 {
-        u64::try_from(self.epoch.elapsed().as_micros()).unwrap_or(u64::MAX)
+    /// The clock.
+    pub fn clock_mut(&mut self) -> &mut C {
+        &mut self.clock
+    }
+
+    /// Ends the client, handing its clock back.
+    pub fn into_clock(self) -> C {
+        self.clock
+    }
+
+    fn now_us(&mut self) -> u64 {
+        self.clock.now_us()
     }
 
     /// Moves bytes for up to `timeout`, handing every event to `on_event` until it returns
@@ -152,9 +203,15 @@ impl Client {
     pub fn pump<T>(
         &mut self,
         timeout: Duration,
-        mut on_event: impl FnMut(&mut HandheldRadio, &HandheldEvent) -> Option<Result<T, ClientError>>,
+        mut on_event: impl FnMut(
+            &mut HandheldRadio,
+            &HandheldEvent,
+            u64,
+        ) -> Option<Result<T, ClientError>>,
     ) -> Result<T, ClientError> {
-        let end = Instant::now() + timeout;
+        let end = self
+            .now_us()
+            .saturating_add(u64::try_from(timeout.as_micros()).unwrap_or(u64::MAX));
         loop {
             let now = self.now_us();
             let n = match self.port.read(&mut self.buf) {
@@ -180,17 +237,17 @@ impl Client {
                         self.recent_log.remove(0);
                     }
                 }
-                if let Some(done) = on_event(&mut self.radio, e) {
+                if let Some(done) = on_event(&mut self.radio, e, now) {
                     self.flush_out(now)?;
                     return done;
                 }
             }
             self.flush_out(now)?;
-            if Instant::now() >= end {
+            if self.now_us() >= end {
                 return Err(ClientError::Timeout(timeout));
             }
             if n == 0 {
-                std::thread::sleep(Duration::from_millis(2));
+                self.clock.idle();
             }
         }
     }
@@ -206,7 +263,7 @@ impl Client {
 
     /// Keeps the link running for `duration` (lets acks and the result ack leave).
     pub fn linger(&mut self, duration: Duration) -> Result<(), ClientError> {
-        match self.pump::<()>(duration, |_, _| None) {
+        match self.pump::<()>(duration, |_, _, _| None) {
             Err(ClientError::Timeout(_)) | Ok(()) => Ok(()),
             Err(e) => Err(e),
         }
@@ -216,7 +273,7 @@ impl Client {
     pub fn connect(&mut self, timeout: Duration) -> Result<(), ClientError> {
         let now = self.now_us();
         self.radio.connect(now)?;
-        self.pump(timeout, |_, e| match e {
+        self.pump(timeout, |_, e, _| match e {
             HandheldEvent::Connected { .. } => Some(Ok(())),
             HandheldEvent::Version(h) if h.version != protocol::PROTOCOL_VERSION => {
                 Some(Err(ClientError::Version {
@@ -245,7 +302,7 @@ impl Client {
     pub fn status(&mut self, timeout: Duration) -> Result<RobotStatus, ClientError> {
         self.ensure_connected(timeout)?;
         self.radio.request_status()?;
-        self.pump(timeout, |_, e| match e {
+        self.pump(timeout, |_, e, _| match e {
             HandheldEvent::Status(s) => Some(Ok(*s)),
             _ => None,
         })
@@ -255,7 +312,7 @@ impl Client {
     pub fn abort(&mut self, run_id: u32, timeout: Duration) -> Result<(), ClientError> {
         self.ensure_connected(timeout)?;
         let seq = self.radio.abort(run_id)?;
-        self.pump(timeout, |_, e| match e {
+        self.pump(timeout, |_, e, _| match e {
             HandheldEvent::Acked { msg_id, seq: s } if *msg_id == ids::ABORT && *s == seq => {
                 Some(Ok(()))
             }
@@ -273,12 +330,12 @@ impl Client {
         self.ensure_connected(timeout)?;
         let seq = self.radio.fetch(run_id)?;
         let mut result_at = None;
-        let out = self.pump(timeout, |radio, e| match e {
+        let out = self.pump(timeout, |radio, e, now| match e {
             HandheldEvent::Refused(r) if r.msg_id == ids::FETCH_RUN && r.seq == seq => {
                 Some(Err(refused("fetch", r)))
             }
             HandheldEvent::Result(r) if r.run_id == run_id => {
-                result_at.get_or_insert_with(Instant::now);
+                result_at.get_or_insert(now);
                 observer.preview(0, usize::from(r.preview_chunks));
                 None
             }
@@ -287,7 +344,7 @@ impl Client {
                     result: result.clone(),
                     preview_mm: preview_mm.clone(),
                     stop_to_result: None,
-                    preview_time: result_at.map(|t| t.elapsed()),
+                    preview_time: result_at.map(|t| micros(now.saturating_sub(t))),
                 }))
             }
             _ => {
@@ -312,9 +369,9 @@ impl Client {
         let seq = self.radio.start(params)?;
         let mut run_id = None;
         let mut at_rest = None;
-        let mut result_at: Option<Instant> = None;
+        let mut result_at: Option<u64> = None;
         let mut stop_to_result = None;
-        let out = self.pump(timeout, |radio, e| {
+        let out = self.pump(timeout, |radio, e, now| {
             match e {
                 HandheldEvent::Refused(r) if r.msg_id == ids::START_MEASUREMENT && r.seq == seq => {
                     return Some(Err(refused("the start", r)));
@@ -340,7 +397,7 @@ impl Client {
                     if Some(p.run_id) == run_id {
                         observer.progress(p);
                         if p.phase == Phase::Processing {
-                            at_rest.get_or_insert_with(Instant::now);
+                            at_rest.get_or_insert(now);
                         }
                         if matches!(p.phase, Phase::Aborted | Phase::Failed) {
                             return Some(Err(ClientError::RunEnded {
@@ -355,8 +412,8 @@ impl Client {
                 HandheldEvent::Result(r) if Some(r.run_id) == run_id || run_id.is_none() => {
                     run_id = Some(r.run_id);
                     if result_at.is_none() {
-                        result_at = Some(Instant::now());
-                        stop_to_result = at_rest.map(|t: Instant| t.elapsed());
+                        result_at = Some(now);
+                        stop_to_result = at_rest.map(|t: u64| micros(now.saturating_sub(t)));
                     }
                     observer.preview(0, usize::from(r.preview_chunks));
                 }
@@ -365,7 +422,7 @@ impl Client {
                         result: result.clone(),
                         preview_mm: preview_mm.clone(),
                         stop_to_result,
-                        preview_time: result_at.map(|t| t.elapsed()),
+                        preview_time: result_at.map(|t| micros(now.saturating_sub(t))),
                     }));
                 }
                 _ => {}
@@ -389,6 +446,10 @@ impl Client {
         self.linger(Duration::from_secs(2))?;
         Ok(out)
     }
+}
+
+fn micros(us: u64) -> Duration {
+    Duration::from_micros(us)
 }
 
 fn refused(what: &'static str, r: &Refused) -> ClientError {

@@ -33,6 +33,7 @@ use crate::link::mcu::{McuEvent, McuSession, McuSessionConfig, MotionIntent};
 use crate::link::preview;
 use crate::link::radio::{OnboardRadio, RadioRequest, START_ID};
 use crate::link::reliable::LinkConfig;
+use crate::link::session::Entropy;
 use crate::recorder::{self, RecordedOutcome, Recording, ResultRecord, RunRecorder};
 use crate::run::{Action, Observations, Outcome, RunMachine};
 use crate::vlp16::Vlp16Packet;
@@ -156,20 +157,48 @@ pub trait LiveRun: Send {
 /// fallen behind for good and the run is processed from its recording instead.
 const LIVE_QUEUE: usize = 4_096;
 
-/// The live processing of the current run, on its own thread.
-struct LiveWorker {
-    data: SyncSender<SensorItem>,
-    finish: SyncSender<ProcessInput>,
-    result: Receiver<WorkerMsg>,
+/// The live processing of the current run.
+enum LiveWorker {
+    /// On its own thread, fed through a bounded queue.
+    Thread {
+        data: SyncSender<SensorItem>,
+        finish: SyncSender<ProcessInput>,
+        result: Receiver<WorkerMsg>,
+    },
+    /// On the loop's thread ([`Execution::Inline`]): each item is processed as it arrives.
+    Inline(Box<dyn LiveRun>),
+}
+
+/// Finishes a live run and reports its result and files (on whichever thread runs it).
+fn finish_live(
+    run_id: u32,
+    live: Box<dyn LiveRun>,
+    input: &ProcessInput,
+    preview: config::PreviewConfig,
+    tx: &SyncSender<WorkerMsg>,
+) {
+    let started = Instant::now();
+    let outcome = live.finish(input);
+    tracing::info!(
+        run_id,
+        seconds = started.elapsed().as_secs_f64(),
+        "live processing finished"
+    );
+    complete(outcome, &input.run_dir, preview, tx);
 }
 
 impl LiveWorker {
-    /// Starts `live` on a thread; `None` (logged) if the thread cannot start.
+    /// Starts `live` (on a thread for [`Execution::Threads`]); `None` (logged) if the thread
+    /// cannot start.
     fn spawn(
         run_id: u32,
         mut live: Box<dyn LiveRun>,
         preview: config::PreviewConfig,
+        execution: Execution,
     ) -> Option<Self> {
+        if execution == Execution::Inline {
+            return Some(Self::Inline(live));
+        }
         let (data, data_rx) = sync_channel::<SensorItem>(LIVE_QUEUE);
         let (finish, finish_rx) = sync_channel::<ProcessInput>(1);
         let (result_tx, result) = sync_channel(2);
@@ -182,18 +211,11 @@ impl LiveWorker {
                     live.push(item);
                 }
                 if let Ok(input) = finish_rx.recv() {
-                    let started = Instant::now();
-                    let outcome = live.finish(&input);
-                    tracing::info!(
-                        run_id,
-                        seconds = started.elapsed().as_secs_f64(),
-                        "live processing finished"
-                    );
-                    complete(outcome, &input.run_dir, preview, &result_tx);
+                    finish_live(run_id, live, &input, preview, &result_tx);
                 }
             });
         match spawned {
-            Ok(_) => Some(Self {
+            Ok(_) => Some(Self::Thread {
                 data,
                 finish,
                 result,
@@ -439,60 +461,109 @@ enum IoDone {
     },
 }
 
-/// The IO worker thread (see the module docs): bounded job and result queues.
-struct IoWorker {
-    jobs: SyncSender<IoJob>,
-    done: Receiver<IoDone>,
-    handle: Option<thread::JoinHandle<()>>,
+/// Does one IO job (on the IO worker's thread, or inline).
+fn run_io_job(root: &std::path::Path, preview: config::PreviewConfig, job: IoJob) -> IoDone {
+    match job {
+        IoJob::Fetch { run_id, seq } => IoDone::Fetched {
+            run_id,
+            seq,
+            ready: Recording::open_run(root, run_id)
+                .ok()
+                .and_then(|rec| recorded_ready(&rec, preview)),
+        },
+        IoJob::MarkDelivered { run_id } => IoDone::Marked {
+            run_id,
+            error: recorder::mark_delivered(root, run_id)
+                .err()
+                .map(|e| e.to_string()),
+        },
+        IoJob::Finish {
+            run_id,
+            mut recorder,
+            result,
+            outcome,
+        } => {
+            if let Some(r) = &result {
+                recorder.save_result(r);
+            }
+            IoDone::Finished {
+                run_id,
+                errors: recorder.finish(outcome),
+            }
+        }
+    }
+}
+
+/// The IO worker (see the module docs).
+enum IoWorker {
+    /// Its own thread with bounded job and result queues.
+    Thread {
+        jobs: SyncSender<IoJob>,
+        done: Receiver<IoDone>,
+        handle: Option<thread::JoinHandle<()>>,
+    },
+    /// [`Execution::Inline`]: each job runs when it is handed over; its report waits for the
+    /// loop's next look.
+    Inline {
+        root: PathBuf,
+        preview: config::PreviewConfig,
+        done: std::collections::VecDeque<IoDone>,
+    },
 }
 
 impl IoWorker {
-    fn spawn(root: PathBuf, preview: config::PreviewConfig) -> io::Result<Self> {
+    fn spawn(
+        root: PathBuf,
+        preview: config::PreviewConfig,
+        execution: Execution,
+    ) -> io::Result<Self> {
+        if execution == Execution::Inline {
+            return Ok(Self::Inline {
+                root,
+                preview,
+                done: std::collections::VecDeque::new(),
+            });
+        }
         let (jobs, job_rx) = sync_channel::<IoJob>(IO_QUEUE);
         let (done_tx, done) = sync_channel::<IoDone>(IO_QUEUE);
         let handle = thread::Builder::new()
             .name("radio-io".into())
             .spawn(move || {
                 while let Ok(job) = job_rx.recv() {
-                    let out = match job {
-                        IoJob::Fetch { run_id, seq } => IoDone::Fetched {
-                            run_id,
-                            seq,
-                            ready: Recording::open_run(&root, run_id)
-                                .ok()
-                                .and_then(|rec| recorded_ready(&rec, preview)),
-                        },
-                        IoJob::MarkDelivered { run_id } => IoDone::Marked {
-                            run_id,
-                            error: recorder::mark_delivered(&root, run_id)
-                                .err()
-                                .map(|e| e.to_string()),
-                        },
-                        IoJob::Finish {
-                            run_id,
-                            mut recorder,
-                            result,
-                            outcome,
-                        } => {
-                            if let Some(r) = &result {
-                                recorder.save_result(r);
-                            }
-                            IoDone::Finished {
-                                run_id,
-                                errors: recorder.finish(outcome),
-                            }
-                        }
-                    };
-                    if done_tx.send(out).is_err() {
+                    if done_tx.send(run_io_job(&root, preview, job)).is_err() {
                         return;
                     }
                 }
             })?;
-        Ok(Self {
+        Ok(Self::Thread {
             jobs,
             done,
             handle: Some(handle),
         })
+    }
+
+    /// Hands a job over; a full queue gives it back (by value, as `SyncSender::try_send` does).
+    #[allow(clippy::result_large_err)]
+    fn submit(&mut self, job: IoJob) -> Result<(), TrySendError<IoJob>> {
+        match self {
+            Self::Thread { jobs, .. } => jobs.try_send(job),
+            Self::Inline {
+                root,
+                preview,
+                done,
+            } => {
+                done.push_back(run_io_job(root, *preview, job));
+                Ok(())
+            }
+        }
+    }
+
+    /// The next report, if one is there.
+    fn try_done(&mut self) -> Option<IoDone> {
+        match self {
+            Self::Thread { done, .. } => done.try_recv().ok(),
+            Self::Inline { done, .. } => done.pop_front(),
+        }
     }
 
     /// Runs `waiting` and everything queued to the end (closing recordings), then stops the
@@ -501,23 +572,28 @@ impl IoWorker {
         for job in waiting {
             let mut job = job;
             loop {
-                match self.jobs.try_send(job) {
+                match self.submit(job) {
                     Ok(()) => break,
                     Err(TrySendError::Full(j)) => {
                         job = j;
-                        while self.done.try_recv().is_ok() {}
+                        while self.try_done().is_some() {}
                         thread::sleep(Duration::from_millis(1));
                     }
                     Err(TrySendError::Disconnected(_)) => return,
                 }
             }
         }
-        let Some(handle) = self.handle.take() else {
+        let Self::Thread {
+            jobs,
+            done,
+            handle: Some(handle),
+        } = self
+        else {
             return;
         };
-        drop(self.jobs);
+        drop(jobs);
         while !handle.is_finished() {
-            while self.done.try_recv().is_ok() {}
+            while done.try_recv().is_ok() {}
             thread::sleep(Duration::from_millis(1));
         }
         let _ = handle.join();
@@ -536,10 +612,37 @@ fn recorded_ready(rec: &Recording, preview: config::PreviewConfig) -> Option<Rea
     })
 }
 
-/// The service state between loop iterations.
-struct Service {
+/// Where the service's background work (live processing, processing a recording, the IO
+/// worker's disk jobs) runs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Execution {
+    /// On threads, so the loop never waits for it: the robot.
+    Threads,
+    /// On the loop's own thread, when it is handed over: one thread and one order of events, so
+    /// the same inputs give the same recording and result (the simulator's lockstep mode). The
+    /// loop then does the processing's CPU work itself, which on a wall clock would delay the
+    /// MCU heartbeat; on a simulated clock it costs no simulated time.
+    Inline,
+}
+
+/// What the service takes from its surroundings besides its configuration.
+pub struct Startup {
+    /// Randomness for the radio sessions (the OS's on the robot, seeded in the simulator).
+    pub entropy: Entropy,
+    /// Wall clock at loop time 0, us since the Unix epoch: recordings stamp everything with
+    /// this plus the loop time, and link sequence numbers start from it.
+    pub wall_epoch_us: u64,
+    /// Threads or inline.
+    pub execution: Execution,
+}
+
+/// The onboard service between loop iterations: [`Service::step`] is one iteration at a time
+/// given by the caller. [`run`] steps it on the monotonic clock; the simulator's lockstep mode
+/// steps it on its simulated clock.
+pub struct Service {
     config: OnboardConfig,
     config_text: String,
+    execution: Execution,
     radio: OnboardRadio,
     io_worker: IoWorker,
     /// Jobs (delivered marks, closing recordings) waiting for room in the IO worker's queue, in
@@ -564,17 +667,20 @@ struct Service {
     last_azimuth: Option<u16>,
     depth_seen: u64,
     odometry_xy_m: Option<[f32; 2]>,
-    epoch: Instant,
-    /// Wall clock at `epoch`, us since the Unix epoch: recordings stamp everything on the wall
-    /// clock (the pcap's clock), advanced by the monotonic clock so stamps never go backwards.
+    /// Wall clock at loop time 0, us since the Unix epoch ([`Startup::wall_epoch_us`]).
     wall_epoch_us: u64,
+    next_watchdog_us: u64,
+    next_flush_us: u64,
+    last_phase: Phase,
 }
 
 fn millis(ms: u64) -> u64 {
     ms.saturating_mul(1_000)
 }
 
-/// Runs the service until `shutdown` is set. `config_text` is recorded with every run.
+/// Runs the service on the monotonic clock until `shutdown` is set, one [`Service::step`] every
+/// [`LOOP_PERIOD`], with its background work on threads. `config_text` is recorded with every
+/// run.
 pub fn run(
     config: OnboardConfig,
     config_text: String,
@@ -584,99 +690,158 @@ pub fn run(
     notifier: &mut dyn Notifier,
     shared: SharedStats,
 ) -> Result<(), ServiceError> {
-    let keys: Vec<_> = crate::link::keys::read(&config.radio.key_file)?
-        .into_iter()
-        .map(|e| {
-            tracing::info!(key_id = %format_args!("{:08x}", e.id), label = %e.label, "paired handheld");
-            e.key
-        })
-        .collect();
-    let entropy = crate::link::session::Entropy::from_os()?;
-    std::fs::create_dir_all(&config.recording.root).map_err(|e| recorder::RecorderError::Io {
-        path: config.recording.root.clone(),
-        source: e,
-    })?;
-    let next_run_id = recorder::next_run_id(&config.recording.root)?;
-    let epoch = Instant::now();
-    // Seqs start from the clock so a restarted service does not reuse the seqs the peer remembers.
-    let seed_seq = (wall_us() / 1_000) as u16;
-    let mcu = McuSession::new(
-        McuSessionConfig {
-            link: LinkConfig::MCU,
-            heartbeat_period_us: millis(config.mcu.heartbeat_period_ms),
-            resend_us: 200_000,
-            firmware: config.mcu.firmware.to_wire(),
-            accel_mps2: config.mcu.accel_mps2,
-            jerk_mps3: config.mcu.jerk_mps3,
-            status_timeout_us: 500_000,
-        },
-        seed_seq,
-    );
-    let mut s = Service {
-        radio: OnboardRadio::new(
-            LinkConfig::RADIO,
-            keys,
-            entropy,
-            seed_seq.wrapping_add(0x8000),
-        ),
-        io_worker: IoWorker::spawn(config.recording.root.clone(), config.preview).map_err(
-            |source| ServiceError::Io {
-                what: "starting the radio IO thread",
-                source,
-            },
-        )?,
-        io_waiting: std::collections::VecDeque::new(),
-        result_record: None,
-        logged_radio: crate::link::radio::RadioStats::default(),
-        next_drop_log_us: DROP_LOG_PERIOD_US,
-        mcu,
-        run: RunMachine::new(config.run, next_run_id),
-        recorder: None,
-        params: None,
-        worker: None,
-        live: None,
-        processor,
-        stats: ServiceStats::default(),
-        shared,
-        last_lidar_us: None,
-        last_depth_us: None,
-        last_azimuth: None,
-        depth_seen: 0,
-        odometry_xy_m: None,
-        epoch,
+    let startup = Startup {
+        entropy: Entropy::from_os()?,
         wall_epoch_us: wall_us(),
-        config,
-        config_text,
+        execution: Execution::Threads,
     };
-    s.recover_runs();
+    let epoch = Instant::now();
+    let mut s = Service::start(config, config_text, processor, shared, startup)?;
     notifier.ready();
     notifier.status("idle");
-    let result = s.main_loop(&mut io, shutdown, notifier);
-    if io.crash.as_ref().is_some_and(|c| c.load(Ordering::Relaxed)) {
-        // Simulated kill: leave everything as a dead process would.
-        std::mem::forget(s.recorder.take());
+    let now_us = || u64::try_from(epoch.elapsed().as_micros()).unwrap_or(u64::MAX);
+    let crashed = |io: &Io| io.crash.as_ref().is_some_and(|c| c.load(Ordering::Relaxed));
+    let mut last_start: Option<u64> = None;
+    let mut result = Ok(());
+    while !shutdown.load(Ordering::Relaxed) && !crashed(&io) {
+        let loop_start = Instant::now();
+        let cpu_start = thread_cpu_us();
+        let now = now_us();
+        if let Some(t) = last_start {
+            s.stats.max_loop_gap_us = s.stats.max_loop_gap_us.max(now - t);
+        }
+        last_start = Some(now);
+        if let Err(e) = s.step(now, &mut io, notifier) {
+            result = Err(e);
+            break;
+        }
+        let work = u64::try_from(loop_start.elapsed().as_micros()).unwrap_or(u64::MAX);
+        s.stats.max_loop_work_us = s.stats.max_loop_work_us.max(work);
+        let cpu = thread_cpu_us().saturating_sub(cpu_start);
+        s.stats.max_loop_cpu_us = s.stats.max_loop_cpu_us.max(cpu);
+        if let Some(rest) = LOOP_PERIOD.checked_sub(loop_start.elapsed()) {
+            thread::sleep(rest);
+        }
+    }
+    if crashed(&io) {
+        s.kill();
         return result;
     }
-    // Whatever ended the loop: stop the robot now.
-    s.mcu.set_intent(MotionIntent::StopNow);
-    let now = s.now_us();
-    s.mcu.poll(now);
-    let bytes = s.mcu.transmit(now);
-    let _ = io.mcu.write_all(&bytes);
-    let _ = io.mcu.flush();
-    if let Some(r) = s.recorder.take() {
-        r.finish(RecordedOutcome::Aborted("service stopped".into()));
-    }
-    // Recordings the IO worker still has to close are closed before the service ends.
-    let waiting: Vec<IoJob> = s.io_waiting.drain(..).collect();
-    s.io_worker.drain(waiting);
-    notifier.stopping();
+    s.stop(now_us(), &mut io, notifier);
     result
 }
 
 impl Service {
-    fn now_us(&self) -> u64 {
-        u64::try_from(self.epoch.elapsed().as_micros()).unwrap_or(u64::MAX)
+    /// Reads the pairing keys, opens the recording root and offers the newest undelivered
+    /// result again; the loop time starts at 0.
+    pub fn start(
+        config: OnboardConfig,
+        config_text: String,
+        processor: Arc<dyn Processor>,
+        shared: SharedStats,
+        startup: Startup,
+    ) -> Result<Self, ServiceError> {
+        let keys: Vec<_> = crate::link::keys::read(&config.radio.key_file)?
+            .into_iter()
+            .map(|e| {
+                tracing::info!(key_id = %format_args!("{:08x}", e.id), label = %e.label, "paired handheld");
+                e.key
+            })
+            .collect();
+        std::fs::create_dir_all(&config.recording.root).map_err(|e| {
+            recorder::RecorderError::Io {
+                path: config.recording.root.clone(),
+                source: e,
+            }
+        })?;
+        let next_run_id = recorder::next_run_id(&config.recording.root)?;
+        // Seqs start from the clock so a restarted service does not reuse the seqs the peer
+        // remembers.
+        let seed_seq = (startup.wall_epoch_us / 1_000) as u16;
+        let mcu = McuSession::new(
+            McuSessionConfig {
+                link: LinkConfig::MCU,
+                heartbeat_period_us: millis(config.mcu.heartbeat_period_ms),
+                resend_us: 200_000,
+                firmware: config.mcu.firmware.to_wire(),
+                accel_mps2: config.mcu.accel_mps2,
+                jerk_mps3: config.mcu.jerk_mps3,
+                status_timeout_us: 500_000,
+            },
+            seed_seq,
+        );
+        let mut s = Self {
+            radio: OnboardRadio::new(
+                LinkConfig::RADIO,
+                keys,
+                startup.entropy,
+                seed_seq.wrapping_add(0x8000),
+            ),
+            io_worker: IoWorker::spawn(
+                config.recording.root.clone(),
+                config.preview,
+                startup.execution,
+            )
+            .map_err(|source| ServiceError::Io {
+                what: "starting the radio IO thread",
+                source,
+            })?,
+            execution: startup.execution,
+            io_waiting: std::collections::VecDeque::new(),
+            result_record: None,
+            logged_radio: crate::link::radio::RadioStats::default(),
+            next_drop_log_us: DROP_LOG_PERIOD_US,
+            mcu,
+            run: RunMachine::new(config.run, next_run_id),
+            recorder: None,
+            params: None,
+            worker: None,
+            live: None,
+            processor,
+            stats: ServiceStats::default(),
+            shared,
+            last_lidar_us: None,
+            last_depth_us: None,
+            last_azimuth: None,
+            depth_seen: 0,
+            odometry_xy_m: None,
+            wall_epoch_us: startup.wall_epoch_us,
+            next_watchdog_us: 0,
+            next_flush_us: 0,
+            last_phase: Phase::Idle,
+            config,
+            config_text,
+        };
+        s.recover_runs();
+        Ok(s)
+    }
+
+    /// The robot stops now, the open recording is closed as aborted, and the recordings the IO
+    /// worker still has to close are closed before this returns. Whatever ended the loop, this
+    /// is how it ends.
+    pub fn stop(mut self, now: u64, io: &mut Io, notifier: &mut dyn Notifier) {
+        self.mcu.set_intent(MotionIntent::StopNow);
+        self.mcu.poll(now);
+        let bytes = self.mcu.transmit(now);
+        let _ = io.mcu.write_all(&bytes);
+        let _ = io.mcu.flush();
+        if let Some(r) = self.recorder.take() {
+            r.finish(RecordedOutcome::Aborted("service stopped".into()));
+        }
+        let waiting: Vec<IoJob> = self.io_waiting.drain(..).collect();
+        self.io_worker.drain(waiting);
+        notifier.stopping();
+    }
+
+    /// The simulator's kill: everything is left as a dead process leaves it (the recording
+    /// open and marked incomplete, no stop sent to the MCU).
+    pub fn kill(mut self) {
+        std::mem::forget(self.recorder.take());
+    }
+
+    /// The counters.
+    pub fn stats(&self) -> ServiceStats {
+        self.stats
     }
 
     /// Sensor streams are recorded from the checks until the robot is at rest: processing needs
@@ -728,7 +893,7 @@ impl Service {
     /// Results of the IO worker; delivered marks that waited for room.
     fn check_io(&mut self) {
         while let Some(job) = self.io_waiting.pop_front() {
-            match self.io_worker.jobs.try_send(job) {
+            match self.io_worker.submit(job) {
                 Ok(()) => {}
                 Err(TrySendError::Full(job)) => {
                     self.io_waiting.push_front(job);
@@ -740,7 +905,7 @@ impl Service {
                 }
             }
         }
-        while let Ok(done) = self.io_worker.done.try_recv() {
+        while let Some(done) = self.io_worker.try_done() {
             match done {
                 IoDone::Fetched {
                     run_id,
@@ -805,97 +970,75 @@ impl Service {
         self.logged_radio = s;
     }
 
-    fn main_loop(
+    /// One loop iteration at loop time `now_us` (us, never decreasing): reads the ports and
+    /// channels, advances the cores, writes what they send.
+    pub fn step(
         &mut self,
+        now: u64,
         io: &mut Io,
-        shutdown: &AtomicBool,
         notifier: &mut dyn Notifier,
     ) -> Result<(), ServiceError> {
         let mut buf = [0u8; 4096];
-        let mut next_watchdog = 0;
-        let mut next_flush = 0;
-        let mut last_phase = Phase::Idle;
-        let mut last_start: Option<u64> = None;
-        while !shutdown.load(Ordering::Relaxed)
-            && !io.crash.as_ref().is_some_and(|c| c.load(Ordering::Relaxed))
-        {
-            let loop_start = Instant::now();
-            let cpu_start = thread_cpu_us();
-            let now = self.now_us();
-            if let Some(t) = last_start {
-                self.stats.max_loop_gap_us = self.stats.max_loop_gap_us.max(now - t);
-            }
-            last_start = Some(now);
-            let n =
-                read_available(io.radio.as_mut(), &mut buf).map_err(|source| ServiceError::Io {
+        let n = read_available(io.radio.as_mut(), &mut buf).map_err(|source| ServiceError::Io {
+            what: "radio port",
+            source,
+        })?;
+        for req in self.radio.receive(now, &buf[..n]) {
+            self.on_request(now, req);
+        }
+        let n = read_available(io.mcu.as_mut(), &mut buf).map_err(|source| ServiceError::Io {
+            what: "MCU port",
+            source,
+        })?;
+        for ev in self.mcu.receive(now, &buf[..n]) {
+            self.on_mcu(now, ev);
+        }
+        self.drain_lidar(now, &io.lidar);
+        if let Some(depth) = &io.depth {
+            self.drain_depth(now, depth);
+        }
+        self.check_worker(now);
+        self.check_io();
+        self.log_radio_drops(now);
+        let obs = self.observations(now);
+        let actions = self.run.tick(now, &obs);
+        self.execute(now, actions);
+        self.radio.poll(now);
+        self.mcu.poll(now);
+        let out = self.mcu.transmit(now);
+        if !out.is_empty() {
+            io.mcu.write_all(&out).map_err(|source| ServiceError::Io {
+                what: "MCU port",
+                source,
+            })?;
+        }
+        let out = self.radio.transmit(now);
+        if !out.is_empty() {
+            io.radio
+                .write_all(&out)
+                .map_err(|source| ServiceError::Io {
                     what: "radio port",
                     source,
                 })?;
-            for req in self.radio.receive(now, &buf[..n]) {
-                self.on_request(now, req);
+        }
+        if now >= self.next_watchdog_us {
+            self.next_watchdog_us = now + 1_000_000;
+            notifier.watchdog();
+        }
+        if now >= self.next_flush_us {
+            self.next_flush_us = now + millis(self.config.recording.flush_period_ms);
+            if let Some(r) = &mut self.recorder {
+                r.flush();
             }
-            let n =
-                read_available(io.mcu.as_mut(), &mut buf).map_err(|source| ServiceError::Io {
-                    what: "MCU port",
-                    source,
-                })?;
-            for ev in self.mcu.receive(now, &buf[..n]) {
-                self.on_mcu(now, ev);
-            }
-            self.drain_lidar(now, &io.lidar);
-            if let Some(depth) = &io.depth {
-                self.drain_depth(now, depth);
-            }
-            self.check_worker(now);
-            self.check_io();
-            self.log_radio_drops(now);
-            let obs = self.observations(now);
-            let actions = self.run.tick(now, &obs);
-            self.execute(now, actions);
-            self.radio.poll(now);
-            self.mcu.poll(now);
-            let out = self.mcu.transmit(now);
-            if !out.is_empty() {
-                io.mcu.write_all(&out).map_err(|source| ServiceError::Io {
-                    what: "MCU port",
-                    source,
-                })?;
-            }
-            let out = self.radio.transmit(now);
-            if !out.is_empty() {
-                io.radio
-                    .write_all(&out)
-                    .map_err(|source| ServiceError::Io {
-                        what: "radio port",
-                        source,
-                    })?;
-            }
-            if now >= next_watchdog {
-                next_watchdog = now + 1_000_000;
-                notifier.watchdog();
-            }
-            if now >= next_flush {
-                next_flush = now + millis(self.config.recording.flush_period_ms);
-                if let Some(r) = &mut self.recorder {
-                    r.flush();
-                }
-                self.report_recorder_errors();
-            }
-            if self.run.phase() != last_phase {
-                last_phase = self.run.phase();
-                notifier.status(&format!("run {}: {}", self.run.run_id(), last_phase));
-            }
-            self.stats.radio = self.radio.stats();
-            if let Ok(mut shared) = self.shared.lock() {
-                *shared = self.stats;
-            }
-            let work = u64::try_from(loop_start.elapsed().as_micros()).unwrap_or(u64::MAX);
-            self.stats.max_loop_work_us = self.stats.max_loop_work_us.max(work);
-            let cpu = thread_cpu_us().saturating_sub(cpu_start);
-            self.stats.max_loop_cpu_us = self.stats.max_loop_cpu_us.max(cpu);
-            if let Some(rest) = LOOP_PERIOD.checked_sub(loop_start.elapsed()) {
-                thread::sleep(rest);
-            }
+            self.report_recorder_errors();
+        }
+        if self.run.phase() != self.last_phase {
+            self.last_phase = self.run.phase();
+            notifier.status(&format!("run {}: {}", self.run.run_id(), self.last_phase));
+        }
+        self.stats.radio = self.radio.stats();
+        if let Ok(mut shared) = self.shared.lock() {
+            *shared = self.stats;
         }
         Ok(())
     }
@@ -946,12 +1089,7 @@ impl Service {
                 }
             }
             RadioRequest::Fetch { run_id, seq } => {
-                if self
-                    .io_worker
-                    .jobs
-                    .try_send(IoJob::Fetch { run_id, seq })
-                    .is_err()
-                {
+                if self.io_worker.submit(IoJob::Fetch { run_id, seq }).is_err() {
                     self.stats.fetches_busy += 1;
                     self.radio.refuse(
                         protocol::ids::FETCH_RUN,
@@ -1079,11 +1217,17 @@ impl Service {
     /// Hands an item to the live processing, if it runs; a full queue or a dead worker ends it
     /// (the run is then processed from its recording after the stop).
     fn feed_live(&mut self, item: SensorItem) {
-        let Some(live) = &self.live else { return };
-        let why = match live.data.try_send(item) {
-            Ok(()) => return,
-            Err(TrySendError::Full(_)) => "it fell behind the sensors",
-            Err(TrySendError::Disconnected(_)) => "its thread ended",
+        let why = match &mut self.live {
+            None => return,
+            Some(LiveWorker::Inline(live)) => {
+                live.push(item);
+                return;
+            }
+            Some(LiveWorker::Thread { data, .. }) => match data.try_send(item) {
+                Ok(()) => return,
+                Err(TrySendError::Full(_)) => "it fell behind the sensors",
+                Err(TrySendError::Disconnected(_)) => "its thread ended",
+            },
         };
         let text = format!(
             "run {}: live processing stopped ({why}); the run is processed from its recording after the stop",
@@ -1189,15 +1333,15 @@ impl Service {
                 }
                 Action::BeginRecording { run_id, params } => {
                     self.stats.lidar_frames = 0;
-                    self.live = self
-                        .processor
-                        .start_live()
-                        .and_then(|live| LiveWorker::spawn(run_id, live, self.config.preview));
+                    let execution = self.execution;
+                    self.live = self.processor.start_live().and_then(|live| {
+                        LiveWorker::spawn(run_id, live, self.config.preview, execution)
+                    });
                     match RunRecorder::begin(
                         &self.config.recording.root,
                         run_id,
                         &params,
-                        wall_us(),
+                        self.wall_of(now),
                         &self.config_text,
                     ) {
                         Ok(r) => {
@@ -1218,7 +1362,7 @@ impl Service {
                     travelled_m,
                     short_run,
                 } => {
-                    self.start_worker(run_id, travelled_m, short_run);
+                    self.start_worker(now, run_id, travelled_m, short_run);
                 }
                 Action::CancelProcessing { .. } => {
                     self.worker = None;
@@ -1257,10 +1401,9 @@ impl Service {
                 }
             }
         }
-        let _ = now;
     }
 
-    fn start_worker(&mut self, run_id: u32, travelled_m: f32, short_run: bool) {
+    fn start_worker(&mut self, now: u64, run_id: u32, travelled_m: f32, short_run: bool) {
         let Some(params) = self.params.clone() else {
             return;
         };
@@ -1279,21 +1422,43 @@ impl Service {
             travelled_m,
             short_run,
         };
-        if let Some(live) = self.live.take() {
+        let preview = self.config.preview;
+        match self.live.take() {
             // The worker has everything up to the stop: it finishes as soon as its queue is empty.
-            if live.finish.try_send(input.clone()).is_ok() {
+            Some(LiveWorker::Thread { finish, result, .. })
+                if finish.try_send(input.clone()).is_ok() =>
+            {
                 tracing::info!(run_id, "finishing the live processing");
                 self.worker = Some(Worker {
                     run_id,
-                    rx: live.result,
+                    rx: result,
                     delivered: false,
                 });
                 return;
             }
+            Some(LiveWorker::Inline(live)) => {
+                let (tx, rx) = sync_channel(2);
+                finish_live(run_id, live, &input, preview, &tx);
+                self.worker = Some(Worker {
+                    run_id,
+                    rx,
+                    delivered: false,
+                });
+                return;
+            }
+            Some(LiveWorker::Thread { .. }) | None => {}
         }
         let (tx, rx) = sync_channel(2);
+        if self.execution == Execution::Inline {
+            complete(self.processor.process(&input), &input.run_dir, preview, &tx);
+            self.worker = Some(Worker {
+                run_id,
+                rx,
+                delivered: false,
+            });
+            return;
+        }
         let processor = Arc::clone(&self.processor);
-        let preview = self.config.preview;
         let spawned = thread::Builder::new()
             .name(format!("process-run-{run_id}"))
             .spawn(move || {
@@ -1308,7 +1473,6 @@ impl Service {
                 });
             }
             Err(e) => {
-                let now = self.now_us();
                 let actions = self.run.processing_finished(
                     now,
                     run_id,

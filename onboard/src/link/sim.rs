@@ -223,9 +223,11 @@ mod tests {
     }
 }
 
-/// Two connected [`crate::service::Port`]s through a pair of [`LossyPipe`]s on the wall clock:
-/// the radio between a handheld and the onboard service when both run in one process (tests,
-/// `passangle-sim demo`). Cutting the line ([`LossyPortPair::set_cut`]) makes a peer vanish.
+/// Two connected [`crate::service::Port`]s through a pair of [`LossyPipe`]s: the radio between a
+/// handheld and the onboard service when both run in one process (tests, `passangle-sim demo`),
+/// on the monotonic clock ([`LossyPortPair::new`]) or on a simulated one
+/// ([`LossyPortPair::on_clock`]). Cutting the line ([`LossyPortPair::set_cut`]) makes a peer
+/// vanish.
 #[derive(Debug, Clone)]
 pub struct LossyPortPair {
     inner: std::sync::Arc<std::sync::Mutex<PairInner>>,
@@ -233,9 +235,29 @@ pub struct LossyPortPair {
 
 #[derive(Debug)]
 struct PairInner {
-    epoch: std::time::Instant,
+    clock: PairClock,
     a_to_b: LossyPipe,
     b_to_a: LossyPipe,
+}
+
+/// The time a [`LossyPortPair`] moves bytes by.
+#[derive(Debug)]
+enum PairClock {
+    /// Microseconds since this instant.
+    Monotonic(std::time::Instant),
+    /// A simulated clock in microseconds that its owner advances.
+    Shared(std::sync::Arc<std::sync::atomic::AtomicU64>),
+}
+
+impl PairInner {
+    fn now_us(&self) -> u64 {
+        match &self.clock {
+            PairClock::Monotonic(epoch) => {
+                u64::try_from(epoch.elapsed().as_micros()).unwrap_or(u64::MAX)
+            }
+            PairClock::Shared(t) => t.load(std::sync::atomic::Ordering::Acquire),
+        }
+    }
 }
 
 /// One end of a [`LossyPortPair`].
@@ -247,10 +269,29 @@ pub struct LossyPort {
 }
 
 impl LossyPortPair {
-    /// A pair with the same impairments both ways (seeds `seed` and `seed + 1`).
+    /// A pair with the same impairments both ways (seeds `seed` and `seed + 1`) on the
+    /// monotonic clock.
     pub fn new(config: PipeConfig, seed: u64) -> (Self, LossyPort, LossyPort) {
+        Self::with_clock(
+            config,
+            seed,
+            PairClock::Monotonic(std::time::Instant::now()),
+        )
+    }
+
+    /// The same on a simulated clock: `now_us` holds the time in microseconds, and bytes
+    /// arrive when it has advanced past their arrival time.
+    pub fn on_clock(
+        config: PipeConfig,
+        seed: u64,
+        now_us: std::sync::Arc<std::sync::atomic::AtomicU64>,
+    ) -> (Self, LossyPort, LossyPort) {
+        Self::with_clock(config, seed, PairClock::Shared(now_us))
+    }
+
+    fn with_clock(config: PipeConfig, seed: u64, clock: PairClock) -> (Self, LossyPort, LossyPort) {
         let inner = std::sync::Arc::new(std::sync::Mutex::new(PairInner {
-            epoch: std::time::Instant::now(),
+            clock,
             a_to_b: LossyPipe::new(config, seed),
             b_to_a: LossyPipe::new(config, seed.wrapping_add(1)),
         }));
@@ -293,7 +334,7 @@ impl std::io::Read for LossyPort {
                 .inner
                 .lock()
                 .map_err(|_| std::io::Error::other("lossy pipe poisoned"))?;
-            let now = u64::try_from(g.epoch.elapsed().as_micros()).unwrap_or(u64::MAX);
+            let now = g.now_us();
             let pipe = if self.is_a {
                 &mut g.b_to_a
             } else {
@@ -315,7 +356,7 @@ impl std::io::Write for LossyPort {
             .inner
             .lock()
             .map_err(|_| std::io::Error::other("lossy pipe poisoned"))?;
-        let now = u64::try_from(g.epoch.elapsed().as_micros()).unwrap_or(u64::MAX);
+        let now = g.now_us();
         let pipe = if self.is_a {
             &mut g.a_to_b
         } else {
