@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Writes the README's accuracy table: runs the end-to-end demo of each built-in simulated vehicle
-# (laser + wheel odometry, clean radio) and compares the angles the handheld received with the ones
+# (lockstep, so the table is the same on any machine; laser + wheel odometry, clean radio) and compares the angles the handheld received with the ones
 # computed from the vehicle model. The table goes between the README's accuracy-table markers, with
 # the date and commit in its caption; a copy goes to docs/reports/.
 #
@@ -36,7 +36,7 @@ for v in vehicles:
         else:
             cells.append(f"{m[k]:.2f} ({t[k]:.2f}) {m[k] - t[k]:+.2f}")
     rows.append(f"| {v} | " + " | ".join(cells) + f" | {r['cloud_points']:,} |")
-table = (f"Demo runs at {commit}, {date}: measured (true) error, degrees.\n\n"
+table = (f"Lockstep demo runs at {commit}, {date}: measured (true) error, degrees.\n\n"
          "| vehicle | approach | departure | breakover | cloud points |\n|---|---|---|---|---|\n"
          + "\n".join(rows) + "\n")
 readme = pathlib.Path("README.md")

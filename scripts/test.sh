@@ -9,7 +9,8 @@
 # control logic, onboard pipeline, simulator, end-to-end scenarios on the in-process CAN bus);
 # (3) the book in docs/ (mdbook); (4) no_std checks for the thumbv7em-none-eabihf target and the
 # STM32 release build with its size report and the release ELF on an emulated STM32F407; (5) the
-# end-to-end demo per example vehicle (release, real time); (6) the firmware-in-the-loop tests
+# end-to-end demo per example vehicle (release, lockstep, golden results), faults in lockstep and
+# one real-time demo; (6) the firmware-in-the-loop tests
 # over real SocketCAN vcan0 inside a qemu guest.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -85,9 +86,11 @@ else
     echo "NOTE: libclang is missing (apt-get install libclang-dev): the v4l2 build is SKIPPED." >&2
 fi
 
-step "end-to-end demo per example vehicle (real time, release build, one at a time)"
-# Each runs the whole measurement in real time (~35 s) and needs the optimised build to keep up.
-cargo test --release -p passangle-tests --test demo -- --nocapture
+step "end-to-end demo per example vehicle in lockstep, against golden results (release build)"
+# Each runs the whole measurement on one simulated clock (5-20 s of CPU each): the same result on
+# any machine at any load. Then faults in lockstep, then the real-time demo's own test.
+cargo test --release -p passangle-tests --test demo --test lockstep_faults -- --nocapture
+cargo test --release -p passangle-tests --test realtime_demo -- --nocapture
 
 if [[ -f firmware/ci.sh ]]; then
     step "STM32 firmware release build and size report"

@@ -40,7 +40,7 @@ use crate::geometry::{Pose, Vec3};
 use crate::pty::MemPipe;
 use crate::scenario::Scenario;
 use crate::trajectory::Trajectory;
-use crate::truth::{TruthOptions, true_angles};
+use crate::truth::{TrueAngles, TruthOptions, true_angles};
 use crate::vlp16::{PACKET_S, Vlp16Sim};
 
 /// Demo settings.
@@ -54,8 +54,22 @@ pub struct DemoOptions {
     pub radio_loss: f64,
     /// Radio frame corruption probability (0..1).
     pub radio_corrupt: f64,
-    /// Seed of the radio impairments.
+    /// Seed of the radio impairments (and of the faults in lockstep).
     pub seed: u64,
+    /// Run on the wall clock with threads, loopback UDP and real sleeps instead of lockstep.
+    pub realtime: bool,
+    /// Faults to inject (lockstep only).
+    pub faults: crate::lockstep::Faults,
+}
+
+/// How a demo ran.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Mode {
+    /// Every part on one simulated clock, one thread ([`crate::lockstep`]).
+    Lockstep,
+    /// Threads on the wall clock.
+    RealTime,
 }
 
 /// Angles in degrees.
@@ -80,25 +94,38 @@ pub struct DemoReport {
     pub truth: AnglesDeg,
     /// The run directory on the (simulated) robot.
     pub run_dir: PathBuf,
-    /// From the robot at rest (first `Processing` progress seen) to the result on the handheld, s.
+    /// From the robot at rest (first `Processing` progress seen) to the result on the handheld,
+    /// s on the robot's clock (in lockstep the processing itself takes no simulated time).
     pub stop_to_result_s: Option<f64>,
-    /// Whole run, wall clock, s.
+    /// From the connection to the result, s on the robot's clock (simulated in lockstep).
     pub run_s: f64,
+    /// The whole demo on the wall clock, s. Not in the JSON, which is the same for the same
+    /// inputs in lockstep.
+    #[serde(skip)]
+    pub wall_s: f64,
+    /// Lockstep or real time.
+    pub mode: Mode,
     /// Points in the robot's cloud.
     pub cloud_points: u32,
+    /// Ground clearance, m.
+    pub ground_clearance_m: f64,
+    /// Wheelbase, m.
+    pub wheelbase_m: f64,
+    /// Cloud points supporting the approach, departure and breakover witnesses.
+    pub support: [u16; 3],
     /// Warnings the robot attached.
     pub warnings: String,
 }
 
 /// (simulation time s, x m, y m, yaw rad) samples of the simulated robot, shared between threads.
-type PoseLog = Arc<Mutex<Vec<(f64, f64, f64, f64)>>>;
+pub(crate) type PoseLog = Arc<Mutex<Vec<(f64, f64, f64, f64)>>>;
 
 /// Robot poses from the firmware-in-the-loop runner, as a [`Trajectory`] in the vehicle frame.
 #[derive(Clone)]
-struct LiveTrajectory {
-    start: Pose,
+pub(crate) struct LiveTrajectory {
+    pub(crate) start: Pose,
     /// (simulation time s, x, y, yaw) in the robot's odometry frame (starts at 0).
-    samples: PoseLog,
+    pub(crate) samples: PoseLog,
 }
 
 impl LiveTrajectory {
@@ -146,8 +173,8 @@ impl Trajectory for LiveTrajectory {
 }
 
 /// Prints progress lines to stderr.
-struct StderrObserver {
-    quiet: bool,
+pub(crate) struct StderrObserver {
+    pub(crate) quiet: bool,
 }
 
 impl Observer for StderrObserver {
@@ -202,7 +229,7 @@ fn lidar_thread(
 /// frames per second, so that rendering it in real time beside everything else fits two cores.
 /// It exercises the service's whole depth path (camera channel, liveness check, recording,
 /// live processing with visual odometry); its points stay out of the cloud (`DEMO_PIPELINE`).
-fn demo_camera(scenario: &Scenario) -> crate::d435::D435Config {
+pub(crate) fn demo_camera(scenario: &Scenario) -> crate::d435::D435Config {
     let full = scenario.file.depth.clone();
     let k = full.intrinsics();
     let q = 0.25;
@@ -256,10 +283,27 @@ fn camera_thread(
 /// change.
 const DEMO_PIPELINE: &str = "[processing.pipeline.fusion]\nuse-visual = false\n[processing.pipeline.visual]\nadd-to-cloud = false\n";
 
-/// Runs the demo; prints progress to stderr unless `quiet`.
-// The wiring reads top to bottom as the diagram in the module docs; `{:?}` quotes paths for TOML.
-#[allow(clippy::too_many_lines, clippy::unnecessary_debug_formatting)]
-pub fn run(options: &DemoOptions, quiet: bool) -> anyhow::Result<DemoReport> {
+/// Everything both modes set up the same way: the scenario, its truth, the robot's config and
+/// pairing key, where the robot starts and what the handheld asks for.
+pub(crate) struct Prepared {
+    pub(crate) scenario: Scenario,
+    pub(crate) truth: TrueAngles,
+    pub(crate) config: OnboardConfig,
+    /// The config file's text (recorded with every run).
+    pub(crate) text: String,
+    pub(crate) key: Key,
+    /// The robot's start pose in the vehicle frame.
+    pub(crate) start: Pose,
+    pub(crate) params: StartMeasurement,
+    /// How long the handheld waits for the result.
+    pub(crate) time_limit: Duration,
+}
+
+/// Loads the scenario, computes its truth and writes the robot's config and key under
+/// `options.run_root`.
+// `{:?}` quotes paths for TOML.
+#[allow(clippy::unnecessary_debug_formatting)]
+pub(crate) fn prepare(options: &DemoOptions) -> anyhow::Result<Prepared> {
     let scenario = Scenario::load(&options.scenario)
         .with_context(|| format!("loading {}", options.scenario.display()))?;
     let truth = true_angles(&scenario.vehicle, &TruthOptions::default());
@@ -310,21 +354,111 @@ pub fn run(options: &DemoOptions, quiet: bool) -> anyhow::Result<DemoReport> {
         cy: camera.cy_px as f32,
         depth_scale_m: 0.001,
     };
-
-    let stop = Arc::new(AtomicBool::new(false));
-    let samples = Arc::new(Mutex::new(Vec::new()));
     let start = Pose {
         position_m: Vec3::new(run_spec.start_x_m, run_spec.lateral_offset_m, 0.0),
         roll_rad: 0.0,
         pitch_rad: 0.0,
         yaw_rad: run_spec.heading_deg.to_radians(),
     };
-    let live = LiveTrajectory {
+    let params = StartMeasurement {
+        vehicle_id: Text::truncated(&scenario.vehicle.name),
+        speed_mps: run_spec.speed_mps as f32,
+        distance_m: run_spec.distance_m as f32,
+        zone: Zone::Tyre,
+    };
+    let time_limit = Duration::from_secs_f64(run_spec.distance_m / run_spec.speed_mps + 300.0);
+    Ok(Prepared {
+        scenario,
+        truth,
+        config,
+        text,
+        key,
         start,
+        params,
+        time_limit,
+    })
+}
+
+impl Prepared {
+    /// The report of a measurement the handheld received.
+    pub(crate) fn report(&self, options: &DemoOptions, m: &Measured, timing: Timing) -> DemoReport {
+        let r = &m.result;
+        let deg = |x: f32| f64::from(x).to_degrees();
+        let truth = &self.truth;
+        DemoReport {
+            vehicle: self.scenario.vehicle.name.clone(),
+            measured: AnglesDeg {
+                approach_deg: deg(r.approach_rad),
+                departure_deg: deg(r.departure_rad),
+                breakover_deg: deg(r.breakover_rad),
+            },
+            truth: AnglesDeg {
+                approach_deg: truth.approach.angle_rad.to_degrees(),
+                departure_deg: truth.departure.angle_rad.to_degrees(),
+                breakover_deg: truth.breakover.angle_rad.to_degrees(),
+            },
+            run_dir: options
+                .run_root
+                .join("runs")
+                .join(onboard::recorder::run_dir_name(r.run_id)),
+            stop_to_result_s: m.stop_to_result.map(|d| d.as_secs_f64()),
+            run_s: timing.run_s,
+            wall_s: timing.wall_s,
+            mode: timing.mode,
+            cloud_points: r.cloud_points,
+            ground_clearance_m: f64::from(r.ground_clearance_m),
+            wheelbase_m: f64::from(r.wheelbase_m),
+            support: [r.approach_support, r.departure_support, r.breakover_support],
+            warnings: r.warnings.to_string(),
+        }
+    }
+}
+
+/// How long a demo took.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Timing {
+    /// The run on the robot's clock, s (simulated in lockstep).
+    pub(crate) run_s: f64,
+    /// The demo on the wall clock, s.
+    pub(crate) wall_s: f64,
+    pub(crate) mode: Mode,
+}
+
+/// Runs the demo (lockstep unless `options.realtime`); prints progress to stderr unless `quiet`.
+pub fn run(options: &DemoOptions, quiet: bool) -> anyhow::Result<DemoReport> {
+    if options.realtime {
+        anyhow::ensure!(
+            options.faults == crate::lockstep::Faults::default(),
+            "faults are injected in lockstep only (drop --realtime)"
+        );
+        run_realtime(options, quiet)
+    } else {
+        crate::lockstep::run(options, quiet)
+    }
+}
+
+/// The real-time demo: threads, loopback UDP for the lidar, the wall clock.
+// The wiring reads top to bottom as the diagram in the module docs.
+#[allow(clippy::too_many_lines)]
+fn run_realtime(options: &DemoOptions, quiet: bool) -> anyhow::Result<DemoReport> {
+    let prepared = prepare(options)?;
+    let Prepared {
+        scenario,
+        config,
+        text,
+        key,
+        start,
+        ..
+    } = &prepared;
+    let (config, text, key) = (config.clone(), text.clone(), key.clone());
+
+    let stop = Arc::new(AtomicBool::new(false));
+    let samples = Arc::new(Mutex::new(Vec::new()));
+    let live = LiveTrajectory {
+        start: *start,
         samples: Arc::clone(&samples),
     };
     let mut threads = Vec::new();
-
     let (fw_uart, onboard_uart) = MemPipe::pair();
     let (stand_in, _unused) = MemPipe::pair();
     {
@@ -405,14 +539,11 @@ pub fn run(options: &DemoOptions, quiet: bool) -> anyhow::Result<DemoReport> {
         client.connect(Duration::from_secs(30))?;
         // Let the service see the firmware and the lidar before the checks.
         thread::sleep(Duration::from_millis(500));
-        let params = StartMeasurement {
-            vehicle_id: Text::truncated(&scenario.vehicle.name),
-            speed_mps: run_spec.speed_mps as f32,
-            distance_m: run_spec.distance_m as f32,
-            zone: Zone::Tyre,
-        };
-        let time_limit = Duration::from_secs_f64(run_spec.distance_m / run_spec.speed_mps + 300.0);
-        Ok(client.measure(&params, time_limit, &mut StderrObserver { quiet })?)
+        Ok(client.measure(
+            &prepared.params,
+            prepared.time_limit,
+            &mut StderrObserver { quiet },
+        )?)
     })();
     stop.store(true, Ordering::Relaxed);
     for t in threads {
@@ -422,29 +553,16 @@ pub fn run(options: &DemoOptions, quiet: bool) -> anyhow::Result<DemoReport> {
         }
     }
     let m = outcome?;
-    let r = &m.result;
-    let deg = |x: f32| f64::from(x).to_degrees();
-    Ok(DemoReport {
-        vehicle: scenario.vehicle.name.clone(),
-        measured: AnglesDeg {
-            approach_deg: deg(r.approach_rad),
-            departure_deg: deg(r.departure_rad),
-            breakover_deg: deg(r.breakover_rad),
+    let wall_s = t0.elapsed().as_secs_f64();
+    Ok(prepared.report(
+        options,
+        &m,
+        Timing {
+            run_s: wall_s,
+            wall_s,
+            mode: Mode::RealTime,
         },
-        truth: AnglesDeg {
-            approach_deg: truth.approach.angle_rad.to_degrees(),
-            departure_deg: truth.departure.angle_rad.to_degrees(),
-            breakover_deg: truth.breakover.angle_rad.to_degrees(),
-        },
-        run_dir: options
-            .run_root
-            .join("runs")
-            .join(onboard::recorder::run_dir_name(r.run_id)),
-        stop_to_result_s: m.stop_to_result.map(|d| d.as_secs_f64()),
-        run_s: t0.elapsed().as_secs_f64(),
-        cloud_points: r.cloud_points,
-        warnings: r.warnings.to_string(),
-    })
+    ))
 }
 
 /// The scenario file of a built-in vehicle name: `scenarios/NAME-pass.toml`, else the first

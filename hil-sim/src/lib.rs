@@ -32,6 +32,7 @@ pub mod esc_model;
 pub mod fil;
 pub mod fil_scenarios;
 pub mod geometry;
+pub mod lockstep;
 pub mod mesh;
 pub mod pty;
 pub mod robot;
