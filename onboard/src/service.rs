@@ -667,6 +667,11 @@ pub struct Service {
     last_azimuth: Option<u16>,
     depth_seen: u64,
     odometry_xy_m: Option<[f32; 2]>,
+    /// The ESC faults of the last firmware status, per ESC slot.
+    esc_faults_seen: [protocol::mcu::EscFaults; 4],
+    /// The first ESC fault latched since the firmware's faults were last clear: the cause, which
+    /// a refused drive does not name (it names the lowest interlock bit set).
+    first_esc_fault: Option<String>,
     /// Wall clock at loop time 0, us since the Unix epoch ([`Startup::wall_epoch_us`]).
     wall_epoch_us: u64,
     next_watchdog_us: u64,
@@ -805,6 +810,8 @@ impl Service {
             last_azimuth: None,
             depth_seen: 0,
             odometry_xy_m: None,
+            esc_faults_seen: [protocol::mcu::EscFaults::EMPTY; 4],
+            first_esc_fault: None,
             wall_epoch_us: startup.wall_epoch_us,
             next_watchdog_us: 0,
             next_flush_us: 0,
@@ -1143,9 +1150,12 @@ impl Service {
                     });
                 }
             }
-            McuEvent::Status(_) => {}
+            McuEvent::Status(status) => self.report_esc_faults(&status),
             McuEvent::Rejected(r) => {
-                let why = format!("{} {}", r.reason, r.field.as_str());
+                let mut why = format!("{} {}", r.reason, r.field.as_str());
+                if let Some(first) = &self.first_esc_fault {
+                    why = format!("{} (first fault: {first})", why.trim_end());
+                }
                 let text = format!("firmware rejected {:#06x}: {why}", r.msg_id);
                 tracing::warn!("{text}");
                 self.radio.send_log(LogLevel::Warn, &text);
@@ -1165,6 +1175,37 @@ impl Service {
             }
             McuEvent::Log(l) => tracing::info!(target: "firmware", "{}", l.text.as_str()),
             McuEvent::Undecodable(e) => tracing::debug!("MCU frame: {e}"),
+        }
+    }
+
+    /// Names each ESC fault when it appears, in the order the firmware latched them, on the log
+    /// and to the handheld: the first is the cause (an ESC stuck at its current latches
+    /// `NOT_FOLLOWING`; the contactor then opens and all four ESCs go `MISSING` a few ms later,
+    /// which is what a refused drive names).
+    fn report_esc_faults(&mut self, status: &protocol::mcu::Status) {
+        let was_clean = self.esc_faults_seen.iter().all(|f| f.is_empty());
+        if status.esc.iter().all(|e| e.faults.is_empty()) {
+            self.first_esc_fault = None;
+        }
+        for (esc, seen) in status.esc.iter().zip(self.esc_faults_seen.iter_mut()) {
+            let new = protocol::mcu::EscFaults(esc.faults.0 & !seen.0);
+            *seen = esc.faults;
+            if new.is_empty() {
+                continue;
+            }
+            let names: Vec<&str> = new.names().collect();
+            if was_clean && self.first_esc_fault.is_none() {
+                self.first_esc_fault = Some(format!("ESC {} {}", esc.esc_id, names.join(", ")));
+            }
+            let text = format!(
+                "firmware: ESC {} latched {} ({:.1} A measured, {:.1} A commanded)",
+                esc.esc_id,
+                names.join(", "),
+                esc.current_a,
+                esc.command_a
+            );
+            tracing::warn!("{text}");
+            self.radio.send_log(LogLevel::Warn, &text);
         }
     }
 

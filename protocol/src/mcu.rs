@@ -139,6 +139,9 @@ bit_set! {
         /// The battery is below the firmware's cutoff (low-pass filtered, so the sag of an
         /// acceleration does not trip it): ramped to zero, drives refused until it recovers.
         const BATTERY_LOW = 9;
+        /// An ESC's torque current does not follow its command (see the per-ESC faults for
+        /// which).
+        const ESC_NOT_FOLLOWING = 10;
     }
 }
 
@@ -153,6 +156,8 @@ bit_set! {
         const OVER_CURRENT = 2;
         /// Stalled.
         const STALLED = 3;
+        /// Its torque current does not follow the commanded current.
+        const NOT_FOLLOWING = 4;
     }
 }
 

@@ -143,6 +143,10 @@ fn an_esc_stuck_above_the_current_limit_fails_the_run_and_the_robot_stops() {
     );
     assert!(rest - FAULT_S < 2.0, "{rest}");
     assert!(e.contains("Failed") || e.contains("Aborted"), "{e}");
+    assert!(
+        e.contains("first fault: ESC 2 OVER_CURRENT"),
+        "the cause named: {e}"
+    );
     let rec = recording(&root);
     assert!(
         matches!(
@@ -182,5 +186,38 @@ fn malformed_lidar_packets_are_counted_exactly_and_the_run_still_measures() {
     ] {
         assert!((m - t).abs() < 1.0, "{m} vs {t}");
     }
+    let _ = std::fs::remove_dir_all(&root);
+}
+
+/// An ESC stuck at 6 A: below the over-current (15 A) and stall (7 A) limits, so only the
+/// firmware's not-following monitor catches it; without it the stopped robot turned in a slow
+/// circle for as long as it was watched.
+#[test]
+#[cfg_attr(debug_assertions, ignore = "slow in debug: run with --release")]
+fn an_esc_stuck_below_the_limits_is_caught_as_not_following_and_the_robot_stops() {
+    let (o, root) = observe(
+        "esc-6a",
+        Faults {
+            esc_fault: Some((FAULT_S, 2, EscFault::StuckCurrent(6.0))),
+            ..Faults::default()
+        },
+    );
+    let e = o.report.as_ref().unwrap_err();
+    let rest = at_rest_from(&o, FAULT_S).expect("the robot comes to rest and stays there");
+    println!(
+        "ESC 2 stuck at 6 A at {FAULT_S} s: robot at rest {:.3} s later; the handheld: {e}",
+        rest - FAULT_S
+    );
+    assert!(rest - FAULT_S < 2.0, "{rest}");
+    assert!(
+        e.contains("first fault: ESC 2 NOT_FOLLOWING"),
+        "the cause named: {e}"
+    );
+    let end = o.path.last().unwrap();
+    let at_fault = o.path.iter().find(|p| p.0 >= FAULT_S).unwrap();
+    assert!(
+        (end.1 - at_fault.1).hypot(end.2 - at_fault.2) < 0.5,
+        "pushed from {at_fault:?} to {end:?}"
+    );
     let _ = std::fs::remove_dir_all(&root);
 }

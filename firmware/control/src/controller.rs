@@ -114,7 +114,8 @@ impl LedPattern {
         let esc_faults = Interlocks::ESC_FEEDBACK_MISSING
             .union(Interlocks::ESC_OVER_TEMPERATURE)
             .union(Interlocks::ESC_OVER_CURRENT)
-            .union(Interlocks::ESC_STALLED);
+            .union(Interlocks::ESC_STALLED)
+            .union(Interlocks::ESC_NOT_FOLLOWING);
         if interlocks.contains(Interlocks::CAN_BUS_OFF) {
             Self::BusOff
         } else if mode == DriveMode::Faulted

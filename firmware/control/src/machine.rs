@@ -509,6 +509,7 @@ impl Machine {
             return;
         };
         let sign = self.config.wheels.sign_f(wheel);
+        let command_a = self.command_a[wheel];
         let fb = &sample.feedback;
         let (Some(encoder), Some(monitor)) =
             (self.encoders.get_mut(wheel), self.escs.get_mut(wheel))
@@ -523,6 +524,7 @@ impl Machine {
             wheel_radps,
         );
         monitor.on_feedback(&self.config, fb, wheel_radps, sample.stamp_us);
+        monitor.check_following(command_a, sample.stamp_us);
     }
 
     /// Updates latches and mode from the monitors; returns whether the bus needs recovery.

@@ -7,6 +7,7 @@
 //! | over-temperature | `temperature_c >= over_temperature_c` | zero currents at once, latch | `ESC_OVER_TEMPERATURE` | `ClearFaults` once 10 C below |
 //! | over-current | `abs(measured current) > over_current_a` for `over_current_time_us` | zero currents at once, latch | `ESC_OVER_CURRENT` | `ClearFaults` |
 //! | stall | `abs(current) >= stall_current_a`, `abs(wheel) < stall_speed_radps` for `stall_time_us` | zero currents at once, latch | `ESC_STALLED` | `ClearFaults` |
+//! | not following | `abs(measured current - commanded current) > NOT_FOLLOWING_A` for `NOT_FOLLOWING_TIME_US` | zero currents at once, latch | `ESC_NOT_FOLLOWING` | `ClearFaults` |
 //! | CAN bus-off | the shell reports bus-off | zero currents, ask the shell to recover the bus, latch | `CAN_BUS_OFF` | `ClearFaults` with the bus back |
 //! | heartbeat lost | no heartbeat for `heartbeat_timeout_us` (100 ms) | ramp to zero, drop the drive command, latch | `HEARTBEAT_LOST` | heartbeats again, then a new drive command |
 //! | no host | no `Hello` since boot | block starts | `NO_HOST` | `Hello` |
@@ -31,6 +32,7 @@ pub const HARD_INTERLOCKS: Interlocks = Interlocks(
         | Interlocks::ESC_OVER_TEMPERATURE.0
         | Interlocks::ESC_OVER_CURRENT.0
         | Interlocks::ESC_STALLED.0
+        | Interlocks::ESC_NOT_FOLLOWING.0
         | Interlocks::CAN_BUS_OFF.0,
 );
 
@@ -45,6 +47,7 @@ pub fn interlocks_of(faults: EscFaults) -> Interlocks {
         ),
         (EscFaults::OVER_CURRENT, Interlocks::ESC_OVER_CURRENT),
         (EscFaults::STALLED, Interlocks::ESC_STALLED),
+        (EscFaults::NOT_FOLLOWING, Interlocks::ESC_NOT_FOLLOWING),
     ] {
         if faults.contains(fault) {
             i.insert(interlock);
@@ -65,6 +68,20 @@ pub enum BusState {
     BusOff,
 }
 
+/// An ESC whose torque current stays further than this from the commanded current, for
+/// [`NOT_FOLLOWING_TIME_US`], does not obey its command, A: a stuck current loop or a shorted
+/// output stage can push the robot with a current below the over-current and stall limits, and
+/// the speed loops of the other wheels cannot hold it (in the simulator, an ESC stuck at 6 A
+/// turned the stopped robot in a slow circle). The C620's current loop settles within a few
+/// milliseconds (the simulator's model: 1 ms time constant), so a healthy ESC is never 3 A off
+/// for 100 ms at the robot's speeds, where the back EMF leaves ample voltage headroom. An
+/// assumption about the real C620, to confirm on the bench with `control_step_max_us`-style
+/// logging of command and feedback.
+pub const NOT_FOLLOWING_A: f32 = 3.0;
+
+/// How long the current must stay off its command, us ([`NOT_FOLLOWING_A`]).
+pub const NOT_FOLLOWING_TIME_US: u64 = 100_000;
+
 /// Hysteresis for clearing an over-temperature fault, degrees Celsius.
 const TEMPERATURE_HYSTERESIS_C: u8 = 10;
 
@@ -76,6 +93,7 @@ pub struct EscMonitor {
     faults: EscFaults,
     over_current_since_us: Option<u64>,
     stall_since_us: Option<u64>,
+    not_following_since_us: Option<u64>,
     /// Restarted with an over-temperature latched: its first report must be below the clearing
     /// temperature (limit minus the hysteresis), or the fault latches again.
     recheck_cool: bool,
@@ -95,6 +113,7 @@ impl EscMonitor {
             faults: EscFaults::EMPTY,
             over_current_since_us: None,
             stall_since_us: None,
+            not_following_since_us: None,
             recheck_cool: false,
         }
     }
@@ -166,6 +185,18 @@ impl EscMonitor {
         }
     }
 
+    /// Checks that the last feedback's torque current follows `command_a`, the current commanded
+    /// in the step before that frame ([`NOT_FOLLOWING_A`]).
+    pub fn check_following(&mut self, command_a: f32, now_us: u64) {
+        let current_a = protocol::esc::raw_to_amps(self.last.current_raw);
+        let off = libm::fabsf(current_a - command_a) > NOT_FOLLOWING_A;
+        if held(&mut self.not_following_since_us, off, now_us)
+            .is_some_and(|since| now_us - since >= NOT_FOLLOWING_TIME_US)
+        {
+            self.faults.insert(EscFaults::NOT_FOLLOWING);
+        }
+    }
+
     /// Whether this ESC reported within the feedback timeout before `now_us`.
     pub fn fresh(&self, config: &Config, now_us: u64) -> bool {
         self.last_seen_us
@@ -200,6 +231,7 @@ impl EscMonitor {
         self.faults = keep;
         self.over_current_since_us = None;
         self.stall_since_us = None;
+        self.not_following_since_us = None;
         keep
     }
 }
@@ -309,6 +341,31 @@ mod tests {
         assert_eq!(m.clear(&c, 2000), EscFaults::OVER_TEMPERATURE);
         m.on_feedback(&c, &fb(0, 0, 69), 0.0, 3000);
         assert!(m.clear(&c, 3000).is_empty());
+    }
+
+    #[test]
+    fn a_current_off_its_command_latches_after_100_ms() {
+        let c = Config::default();
+        let six = protocol::esc::amps_to_raw(6.0);
+        let mut m = EscMonitor::new();
+        // Following: 6 A measured for 6 A commanded, and a 2 A lag, for a second.
+        for t in (0..1_000_000).step_by(1_000) {
+            m.on_feedback(&c, &fb(six, 3000, 30), 20.0, t);
+            m.check_following(if t % 2_000 == 0 { 6.0 } else { 4.0 }, t);
+        }
+        assert!(m.faults().is_empty());
+        // Stuck at 6 A with zero commanded: latched at 100 ms, not before.
+        let t0 = 1_000_000;
+        for t in (t0..t0 + 100_000).step_by(1_000) {
+            m.on_feedback(&c, &fb(six, 0, 30), 0.0, t);
+            m.check_following(0.0, t);
+        }
+        assert!(m.faults().is_empty(), "99 ms off");
+        m.on_feedback(&c, &fb(six, 0, 30), 0.0, t0 + 100_000);
+        m.check_following(0.0, t0 + 100_000);
+        assert_eq!(m.faults(), EscFaults::NOT_FOLLOWING);
+        assert_eq!(interlocks_of(m.faults()), Interlocks::ESC_NOT_FOLLOWING);
+        assert!(HARD_INTERLOCKS.contains(Interlocks::ESC_NOT_FOLLOWING));
     }
 
     #[test]
