@@ -4,6 +4,10 @@
 //! with simulated ESCs and robot physics) on the MCU link. The robot's true motion comes from the
 //! simulated physics, so "the robot does not move" and "the robot stops" are checked on it.
 //!
+//! The rigs run in real time, so they take turns ([`ONE_RIG_AT_A_TIME`]): eight real-time rigs
+//! at once on a two-core machine starved each other and made wall-clock figures fail. What needs
+//! no wall clock is also checked in lockstep (`lockstep_faults.rs`).
+//!
 //! Not covered here: the point-cloud pipeline. Processing is a test double that derives its
 //! result from the recorded files (so the recording is exercised) and keeps a copy, so the test
 //! can check the handheld received exactly what was produced.
@@ -185,7 +189,12 @@ impl std::io::Write for SharedPort {
     }
 }
 
+/// Held by each [`Rig`] for its whole life (module docs).
+static ONE_RIG_AT_A_TIME: Mutex<()> = Mutex::new(());
+
 struct Rig {
+    /// This rig's turn (module docs); a failed test poisons the lock, the next still runs.
+    _turn: std::sync::MutexGuard<'static, ()>,
     dir: PathBuf,
     attacker: Option<SharedPort>,
     radio: LossyPortPair,
@@ -217,6 +226,9 @@ impl Rig {
         malformed_every: Option<u64>,
         radio_seed: u64,
     ) -> Self {
+        let turn = ONE_RIG_AT_A_TIME
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
         let dir = temp_dir(name);
         let key = Key([0x5a; KEY_LEN]);
         onboard::config::write_key(&dir.join("pairing.key"), &key).unwrap();
@@ -299,6 +311,7 @@ impl Rig {
             }));
         }
         Self {
+            _turn: turn,
             dir,
             attacker: None,
             radio: pair,
@@ -362,6 +375,17 @@ impl Rig {
             t.join().unwrap();
         }
         let _ = std::fs::remove_dir_all(&self.dir);
+    }
+}
+
+impl Drop for Rig {
+    /// A test that fails before `finish` still stops its rig's threads before the next rig's
+    /// turn.
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::Relaxed);
+        for t in self.threads.drain(..) {
+            let _ = t.join();
+        }
     }
 }
 
