@@ -25,11 +25,15 @@ use std::thread;
 use std::time::{Duration, Instant};
 
 use anyhow::Context;
+use onboard::angles::{self, AnglesResult};
 use onboard::client::{Client, Measured, Observer};
 use onboard::config::{CameraSource, FirmwareConfig, OnboardConfig};
 use onboard::link::sim::{LossyPortPair, PipeConfig};
 use onboard::process::PipelineProcessor;
-use onboard::service::{self, Io, NoNotify, ServiceStats, SharedStats};
+use onboard::service::{
+    self, Io, LiveRun, NoNotify, ProcessInput, Processed, Processor, SensorItem, ServiceStats,
+    SharedStats,
+};
 use protocol::auth::{KEY_LEN, Key};
 use protocol::bounded::Text;
 use protocol::radio::{StartMeasurement, Zone};
@@ -83,6 +87,26 @@ pub struct AnglesDeg {
     pub breakover_deg: f64,
 }
 
+/// Which part of the vehicle decided an angle: the measured witness and the true one.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct WitnessReport {
+    /// The part nearest the measured witness (a vehicle section or part name from the vehicle
+    /// file), or `none` when no part is within [`WITNESS_PART_M`].
+    pub part: String,
+    /// The measured witness in the simulator's vehicle frame (x forward from the front axle,
+    /// height above the ground), m.
+    pub x_m: f64,
+    /// Height, m.
+    pub z_m: f64,
+    /// How far the measured witness is from that part's outline, m.
+    pub off_part_m: f64,
+    /// The part the truth's witness belongs to.
+    pub true_part: String,
+}
+
+/// A measured witness further than this from every part's side-view outline belongs to none.
+pub const WITNESS_PART_M: f64 = 0.03;
+
 /// What the demo measured.
 #[derive(Debug, Clone, serde::Serialize)]
 pub struct DemoReport {
@@ -113,6 +137,9 @@ pub struct DemoReport {
     pub wheelbase_m: f64,
     /// Cloud points supporting the approach, departure and breakover witnesses.
     pub support: [u16; 3],
+    /// The approach, departure and breakover witnesses' parts (`None` where the calculator
+    /// found no witness).
+    pub witnesses: [Option<WitnessReport>; 3],
     /// Warnings the robot attached.
     pub warnings: String,
 }
@@ -381,7 +408,13 @@ pub(crate) fn prepare(options: &DemoOptions) -> anyhow::Result<Prepared> {
 
 impl Prepared {
     /// The report of a measurement the handheld received.
-    pub(crate) fn report(&self, options: &DemoOptions, m: &Measured, timing: Timing) -> DemoReport {
+    pub(crate) fn report(
+        &self,
+        options: &DemoOptions,
+        m: &Measured,
+        timing: Timing,
+        angles: Option<&AnglesResult>,
+    ) -> DemoReport {
         let r = &m.result;
         let deg = |x: f32| f64::from(x).to_degrees();
         let truth = &self.truth;
@@ -410,7 +443,109 @@ impl Prepared {
             wheelbase_m: f64::from(r.wheelbase_m),
             support: [r.approach_support, r.departure_support, r.breakover_support],
             warnings: r.warnings.to_string(),
+            witnesses: self.witnesses(angles),
         }
+    }
+
+    /// Names the part behind each measured witness: the nearest point of the vehicle's
+    /// side-view outline (the truth's own outline, 5 mm spacing, flexible parts included).
+    fn witnesses(&self, angles: Option<&AnglesResult>) -> [Option<WitnessReport>; 3] {
+        let Some(a) = angles else {
+            return [None, None, None];
+        };
+        let outline = self.scenario.vehicle.outline_points(0.005);
+        let truth = &self.truth;
+        let name = |w: &Option<crate::vehicle::OutlinePoint>| {
+            w.as_ref()
+                .map_or_else(|| "none".to_owned(), |p| p.source.clone())
+        };
+        let report = |f: &Option<angles::AngleFinding>, t: &crate::truth::TrueAngle| {
+            let f = f.as_ref()?;
+            // The calculator's vehicle frame has its origin between the axles; the simulator's
+            // is under the front axle.
+            let x = f.witness_in_vehicle[0] - a.front_axle.x_m;
+            let z = f.witness_in_vehicle[2];
+            let nearest = outline
+                .iter()
+                .map(|p| (p, (p.x_m - x).hypot(p.z_m - z)))
+                .min_by(|a, b| a.1.total_cmp(&b.1));
+            let (part, off) = match nearest {
+                Some((p, d)) if d <= WITNESS_PART_M => (p.source.clone(), d),
+                Some((_, d)) => ("none".to_owned(), d),
+                None => ("none".to_owned(), f64::INFINITY),
+            };
+            Some(WitnessReport {
+                part,
+                x_m: x,
+                z_m: z,
+                off_part_m: off,
+                true_part: name(&t.witness),
+            })
+        };
+        [
+            report(&a.approach, &truth.approach),
+            report(&a.departure, &truth.departure),
+            report(&a.breakover, &truth.breakover),
+        ]
+    }
+}
+
+/// The product's processor, keeping the calculator's finding of the last run for the report.
+pub(crate) struct Capturing {
+    inner: PipelineProcessor,
+    last: Arc<Mutex<Option<Box<AnglesResult>>>>,
+}
+
+impl Capturing {
+    pub(crate) fn new(inner: PipelineProcessor) -> Self {
+        Self {
+            inner,
+            last: Arc::new(Mutex::new(None)),
+        }
+    }
+
+    /// The calculator's finding of the last processed run.
+    pub(crate) fn last(&self) -> Option<Box<AnglesResult>> {
+        self.last.lock().ok().and_then(|l| l.clone())
+    }
+}
+
+fn keep(last: &Mutex<Option<Box<AnglesResult>>>, p: &Processed) {
+    if let Ok(mut l) = last.lock() {
+        l.clone_from(&p.angles);
+    }
+}
+
+impl Processor for Capturing {
+    fn process(&self, input: &ProcessInput) -> Result<Processed, String> {
+        let p = self.inner.process(input)?;
+        keep(&self.last, &p);
+        Ok(p)
+    }
+
+    fn start_live(&self) -> Option<Box<dyn LiveRun>> {
+        let inner = self.inner.start_live()?;
+        Some(Box::new(CapturingLive {
+            inner,
+            last: Arc::clone(&self.last),
+        }))
+    }
+}
+
+struct CapturingLive {
+    inner: Box<dyn LiveRun>,
+    last: Arc<Mutex<Option<Box<AnglesResult>>>>,
+}
+
+impl LiveRun for CapturingLive {
+    fn push(&mut self, item: SensorItem) {
+        self.inner.push(item);
+    }
+
+    fn finish(self: Box<Self>, input: &ProcessInput) -> Result<Processed, String> {
+        let p = self.inner.finish(input)?;
+        keep(&self.last, &p);
+        Ok(p)
     }
 }
 
@@ -511,6 +646,9 @@ fn run_realtime(options: &DemoOptions, quiet: bool) -> anyhow::Result<DemoReport
     let radio = PipeConfig::radio_lossy(options.radio_loss, options.radio_corrupt);
     let (_pair, handheld_port, onboard_port) = LossyPortPair::new(radio, options.seed);
     let stats: SharedStats = Arc::new(Mutex::new(ServiceStats::default()));
+    let capturing = Arc::new(Capturing::new(PipelineProcessor {
+        config: config.processing.clone(),
+    }));
     {
         let io = Io {
             radio: Box::new(onboard_port),
@@ -519,9 +657,7 @@ fn run_realtime(options: &DemoOptions, quiet: bool) -> anyhow::Result<DemoReport
             depth: Some(depth_rx),
             crash: None,
         };
-        let processor = Arc::new(PipelineProcessor {
-            config: config.processing.clone(),
-        });
+        let processor = Arc::clone(&capturing);
         let (stop, stats) = (Arc::clone(&stop), Arc::clone(&stats));
         threads.push(thread::spawn(move || {
             service::run(config, text, io, processor, &stop, &mut NoNotify, stats)?;
@@ -562,6 +698,7 @@ fn run_realtime(options: &DemoOptions, quiet: bool) -> anyhow::Result<DemoReport
             wall_s,
             mode: Mode::RealTime,
         },
+        capturing.last().as_deref(),
     ))
 }
 

@@ -45,7 +45,8 @@ use rand_chacha::ChaCha8Rng;
 use crate::can_bus::InProcessBus;
 use crate::d435::D435Sim;
 use crate::demo::{
-    DemoOptions, DemoReport, LiveTrajectory, Mode, StderrObserver, Timing, demo_camera, prepare,
+    Capturing, DemoOptions, DemoReport, LiveTrajectory, Mode, StderrObserver, Timing, demo_camera,
+    prepare,
 };
 use crate::esc_model::EscFault;
 use crate::fil::{self, Fil, FilConfig, Pacing};
@@ -322,13 +323,13 @@ pub fn observe(options: &DemoOptions, quiet: bool) -> anyhow::Result<Observed> {
         depth: Some(depth_rx),
         crash: None,
     };
-    let processor = Arc::new(PipelineProcessor {
+    let capturing = Arc::new(Capturing::new(PipelineProcessor {
         config: prepared.config.processing.clone(),
-    });
+    }));
     let service = Service::start(
         prepared.config.clone(),
         prepared.text.clone(),
-        processor,
+        capturing.clone(),
         Arc::new(Mutex::new(ServiceStats::default())),
         Startup {
             // The robot's randomness differs from the handheld's, both from the seed.
@@ -413,6 +414,7 @@ pub fn observe(options: &DemoOptions, quiet: bool) -> anyhow::Result<Observed> {
                     wall_s: wall.elapsed().as_secs_f64(),
                     mode: Mode::Lockstep,
                 },
+                capturing.last().as_deref(),
             )
         })
         .map_err(|e| e.to_string());

@@ -537,7 +537,12 @@ fn angles_of(
         );
     }
     let svg = side_view_svg(&found);
-    Ok(Processed { result, cloud, svg })
+    Ok(Processed {
+        result,
+        cloud,
+        svg,
+        angles: Some(Box::new(found)),
+    })
 }
 
 /// Reads a run directory and builds its cloud and angles. `Err` names what is missing or wrong.

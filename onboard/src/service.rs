@@ -96,6 +96,9 @@ pub struct Processed {
     pub cloud: Cloud,
     /// The side-view report.
     pub svg: String,
+    /// The angle calculator's whole finding (witnesses, tyres, ground), where the processor
+    /// ran it: for reports and the simulator's checks; not sent or recorded.
+    pub angles: Option<Box<angles::AnglesResult>>,
 }
 
 /// Builds the cloud and computes the angles of a recorded run (see `crate::process`).

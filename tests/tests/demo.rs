@@ -5,10 +5,12 @@
 //!
 //! Each vehicle's result is compared with
 //! - its committed golden result (`tests/golden/demo-lockstep.txt`): angles to 0.01 degree, the
-//!   cloud's point count, the witnesses' support, the ground clearance to 1 mm, the warnings. A
+//!   cloud's point count, the witnesses' support, parts and places (1 mm), the ground clearance
+//!   to 1 mm, the warnings. A
 //!   change that moves any of them fails here and shows as a diff of that file to review;
 //!   `UPDATE_GOLDEN=1` rewrites it.
-//! - the truth, at [`BAR_DEG`].
+//! - the truth: each angle within [`BAR_DEG`], decided by the same part as the truth's (the part
+//!   nearest the measured witness, `hil_sim::demo::WitnessReport`).
 //!
 //! Runs go at 20 % radio loss and 5 % corruption (radio seed 1), laser + wheel odometry as on
 //! the robot. They take 5 to 10 s each in release; a debug build runs the pipeline too slowly
@@ -52,14 +54,25 @@ fn scratch(name: &str) -> PathBuf {
 /// One line of the golden file: what must not move without review.
 fn golden_line(vehicle: &str, r: &DemoReport) -> String {
     let m = &r.measured;
+    let parts: Vec<String> = r
+        .witnesses
+        .iter()
+        .map(|w| {
+            w.as_ref().map_or_else(
+                || "-".to_owned(),
+                |w| format!("{}@{:.3},{:.3}", w.part, w.x_m, w.z_m),
+            )
+        })
+        .collect();
     format!(
-        "{vehicle} approach {:.2} departure {:.2} breakover {:.2} clearance_mm {:.0} points {} support {:?} warnings {}",
+        "{vehicle} approach {:.2} departure {:.2} breakover {:.2} clearance_mm {:.0} points {} support {:?} witnesses {} warnings {}",
         m.approach_deg,
         m.departure_deg,
         m.breakover_deg,
         r.ground_clearance_m * 1e3,
         r.cloud_points,
         r.support,
+        parts.join(" "),
         r.warnings
     )
 }
@@ -121,6 +134,26 @@ fn run(vehicle: &str) {
             (measured - truth).abs() < BAR_DEG,
             "{vehicle} {name}: measured {measured:.2} vs true {truth:.2} degrees (run dir {})",
             report.run_dir.display()
+        );
+    }
+    for (name, w) in ["approach", "departure", "breakover"]
+        .iter()
+        .zip(&report.witnesses)
+    {
+        let w = w
+            .as_ref()
+            .unwrap_or_else(|| panic!("{vehicle} {name}: no witness"));
+        println!(
+            "{vehicle} {name} witness: {} at ({:.3}, {:.3}) m, {:.1} mm off it; true part {}",
+            w.part,
+            w.x_m,
+            w.z_m,
+            w.off_part_m * 1e3,
+            w.true_part
+        );
+        assert_eq!(
+            w.part, w.true_part,
+            "{vehicle} {name}: the angle is decided by another part than the truth's"
         );
     }
     check_golden(vehicle, &golden_line(vehicle, &report));

@@ -126,6 +126,7 @@ impl Processor for CountingProcessor {
             result,
             cloud,
             svg: "<svg/>".into(),
+            angles: None,
         })
     }
 }
