@@ -239,7 +239,11 @@ pub(super) fn parse(bytes: Vec<u8>, limits: &ParseLimits) -> Result<LasCloud, Pa
     Ok(LasCloud {
         raw: RawCloud {
             points,
-            encoding: if raw.compressed { "LAZ" } else { "LAS" },
+            encoding: if raw.compressed {
+                "LAZ"
+            } else {
+                "uncompressed"
+            },
         },
         notes: vec![
             format!(

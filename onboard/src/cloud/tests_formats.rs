@@ -255,7 +255,10 @@ fn las_and_laz_round_trip_within_the_scale() {
         for (a, b) in back.points_m.iter().zip(&points) {
             assert!(close(*a, *b, 0.5e-4 + 1e-12), "{a:?} vs {b:?}");
         }
-        assert_eq!(stats.encoding, if compressed { "LAZ" } else { "LAS" });
+        assert_eq!(
+            stats.encoding,
+            if compressed { "LAZ" } else { "uncompressed" }
+        );
         assert!(
             stats.notes.iter().any(|n| n.contains("taken as metres")),
             "{:?}",
