@@ -30,8 +30,6 @@ use super::{ParseError, ParseLimits, RawCloud};
 pub(super) const SIGNATURE: &[u8; 4] = b"LASF";
 /// Size of the LAS 1.0-1.2 public header block, the smallest there is.
 const MIN_HEADER_LEN: usize = 227;
-/// Size of the LAS 1.4 header block (with the extended VLR and 64-bit count fields).
-const HEADER_1_4_LEN: usize = 375;
 /// Size of an extended VLR's header.
 const EVLR_HEADER_LEN: u64 = 60;
 /// Bytes of point records decoded per batch.
@@ -82,12 +80,13 @@ impl RawHeader {
                  {MIN_HEADER_LEN} bytes"
             )));
         }
-        let minor = bytes[25];
-        let header_size = u16_at(bytes, 94);
-        let extended = minor >= 4 && header_size >= HEADER_1_4_LEN as u64;
+        let (major, minor) = (bytes[24], bytes[25]);
+        // As the `las` crate reads them: LAS 1.4 headers (whatever their declared size) carry
+        // the extended VLR and 64-bit count fields, and a non-zero legacy count wins.
+        let extended = (major, minor) >= (1, 4);
         let legacy_points = u32_at(bytes, 107);
-        let points = if extended {
-            legacy_points.max(u64_at(bytes, 247))
+        let points = if extended && legacy_points == 0 {
+            u64_at(bytes, 247)
         } else {
             legacy_points
         };
@@ -108,7 +107,7 @@ impl RawHeader {
     fn check(&self, bytes: &[u8], limits: &ParseLimits) -> Result<(), ParseError> {
         let len = bytes.len() as u64;
         limits.check_points(usize::try_from(self.points).unwrap_or(usize::MAX))?;
-        if self.evlr_count > 0 {
+        if self.evlr_start > 0 && self.evlr_count > 0 {
             let length = self
                 .evlr_start
                 .checked_add(20)

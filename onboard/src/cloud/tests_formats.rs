@@ -348,8 +348,9 @@ fn las_refuses_truncation_huge_counts_and_bad_scales() {
         ),
         "{e}"
     );
-    // 1.4 count field (byte 247) raised beyond the limit.
+    // The 1.4 count field (byte 247) raised beyond the limit, the legacy one (byte 107) zero.
     let mut huge = bytes.clone();
+    huge[107..111].copy_from_slice(&[0; 4]);
     huge[247..255].copy_from_slice(&(1u64 << 40).to_le_bytes());
     let e = parse_cloud(&huge, CloudFormat::Las).unwrap_err();
     assert!(
