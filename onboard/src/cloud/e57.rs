@@ -67,9 +67,12 @@ pub(super) fn parse(bytes: &[u8], limits: &ParseLimits) -> Result<E57Cloud, Pars
     let declared = scans
         .iter()
         .fold(0u64, |sum, s| sum.saturating_add(s.records));
-    limits.check_points(usize::try_from(declared).unwrap_or(usize::MAX))?;
+    let declared = usize::try_from(declared).unwrap_or(usize::MAX);
+    limits.check_points(declared)?;
 
-    let mut points = Vec::new();
+    // Within `max_points` (checked): reserved once, so the cloud never holds twice its size
+    // while growing.
+    let mut points = Vec::with_capacity(declared);
     let mut flagged_invalid = 0;
     let mut spherical_scans = 0;
     let mut posed_scans = 0;

@@ -203,7 +203,8 @@ pub(super) fn parse(bytes: Vec<u8>, limits: &ParseLimits) -> Result<LasCloud, Pa
     let declared = header.number_of_points();
     let record_len = usize::from(header.point_format().len()).max(1);
     let batch = (BATCH_BYTES / record_len).max(1) as u64;
-    let mut points = Vec::new();
+    // Within `max_points` (checked before the crate ran): reserved once.
+    let mut points = Vec::with_capacity(usize::try_from(declared).unwrap_or(0));
     let mut data = las::PointDataBuilder::new().for_header(&header).build();
     let mut read = 0u64;
     while read < declared {
