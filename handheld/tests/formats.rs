@@ -1,6 +1,6 @@
 //! `passangle angles` on one demo-like cloud written as PLY, E57 (one scan, and two scans with
-//! their own poses), LAS and LAZ: the same angles to 0.001 degrees, through the library and
-//! through the command line.
+//! their own poses), LAS and LAZ (and a LAZ in projected-grid coordinates): the same angles to
+//! 0.001 degrees, through the library and through the command line.
 #![allow(clippy::unwrap_used, missing_docs)]
 
 #[path = "../../onboard/tests/synth/mod.rs"]
@@ -133,6 +133,18 @@ fn ply_e57_las_and_laz_copies_give_the_same_angles() {
         .unwrap();
         std::fs::write(path, out.into_inner()).unwrap();
     }
+    // The same cloud in projected-grid coordinates (500 km east, 5,000 km north, 100 m up), as a
+    // surveyor's LAS holds it: offsets large against the vehicle.
+    let utm = dir.join("cloud-utm.laz");
+    let shifted = Cloud {
+        points_m: cloud
+            .points_m
+            .iter()
+            .map(|p| [p[0] + 500_000.0, p[1] + 5_000_000.0, p[2] + 100.0])
+            .collect(),
+    };
+    let out = write_las(Cursor::new(Vec::new()), &shifted, LAS_RESOLUTION_M, true).unwrap();
+    std::fs::write(&utm, out.into_inner()).unwrap();
 
     // The library: read_cloud + compute_angles, at full precision.
     let config = AnglesConfig::default();
@@ -147,7 +159,7 @@ fn ply_e57_las_and_laz_copies_give_the_same_angles() {
         reference[1],
         reference[2]
     );
-    for path in [&e57, &e57_two, &las, &laz] {
+    for path in [&e57, &e57_two, &las, &laz, &utm] {
         let (c, stats) = read_cloud(path).unwrap();
         assert_eq!(c.points_m.len(), cloud.points_m.len(), "{}", path.display());
         let got = angles_deg(&compute_angles(&c.points_m, &config).unwrap());
@@ -187,7 +199,7 @@ fn ply_e57_las_and_laz_copies_give_the_same_angles() {
             .map(|k| v[k].as_f64().unwrap_or_else(|| panic!("{k} in {v}")))
     };
     let from_ply = cli(&ply);
-    for path in [&e57, &e57_two, &las, &laz] {
+    for path in [&e57, &e57_two, &las, &laz, &utm] {
         let got = cli(path);
         for (g, r) in got.iter().zip(from_ply) {
             assert!(
