@@ -1,4 +1,5 @@
-//! `passangle angles CLOUD`: the passing angles of any underside point cloud (PLY, PCD, XYZ/CSV).
+//! `passangle angles CLOUD`: the passing angles of any underside point cloud (PLY, PCD, XYZ/CSV,
+//! E57 from terrestrial scanners, LAS/LAZ).
 //!
 //! Reads the cloud through `onboard::cloud`, runs the pure calculator `onboard::angles`, and prints
 //! a table (default) or one JSON object (`--json`); `--report FILE.svg` writes the side view.
@@ -18,7 +19,8 @@ use serde_json::{Value, json};
 /// Arguments of `passangle angles`.
 #[derive(Debug, clap::Args)]
 pub struct AnglesArgs {
-    /// Point cloud file: .ply, .pcd, .xyz, .csv or .txt (metres, z roughly up).
+    /// Point cloud file: .ply, .pcd, .xyz, .csv, .txt, .e57, .las or .laz (metres, z roughly up;
+    /// E57 scans are merged by their poses, LAS in feet is converted).
     pub cloud: PathBuf,
     /// Direction of the vehicle's front in the cloud: `+x` (default) or `-x`.
     #[arg(long, default_value = "+x", allow_hyphen_values = true)]
@@ -238,7 +240,8 @@ fn to_json(args: &AnglesArgs, stats: &ReadStats, r: &AnglesResult) -> Value {
         },
         "points": {
             "read": stats.points_in_file,
-            "dropped": stats.dropped_non_finite + p.non_finite,
+            "dropped": stats.dropped_non_finite + stats.dropped_invalid + p.non_finite,
+            "flagged_invalid": stats.dropped_invalid,
             "excluded": p.excluded,
             "used": p.input - p.non_finite - p.excluded,
             "ground": p.ground,
@@ -259,6 +262,7 @@ fn to_json(args: &AnglesArgs, stats: &ReadStats, r: &AnglesResult) -> Value {
         "envelope_bin_m": r.bin_m,
         "band_y_m": [finite_or_null(r.band_y_m.0), finite_or_null(r.band_y_m.1)],
         "warnings": r.warnings,
+        "reader_notes": stats.notes,
     })
 }
 
@@ -270,6 +274,35 @@ fn finite_or_null(v: f64) -> Value {
     }
 }
 
+/// The table's first lines: the file, its format, the point counts and the reader's notes.
+fn write_source(
+    out: &mut impl Write,
+    args: &AnglesArgs,
+    stats: &ReadStats,
+    non_finite: usize,
+    excluded: usize,
+) -> std::io::Result<()> {
+    writeln!(
+        out,
+        "{} ({} {}): {} points read, {non_finite} dropped (NaN/inf), {excluded} excluded",
+        args.cloud.display(),
+        stats.format,
+        stats.encoding,
+        stats.points_in_file,
+    )?;
+    if stats.dropped_invalid > 0 {
+        writeln!(
+            out,
+            "{} points flagged invalid by the file (no return) dropped",
+            stats.dropped_invalid
+        )?;
+    }
+    for note in &stats.notes {
+        writeln!(out, "note: {note}")?;
+    }
+    Ok(())
+}
+
 fn write_table(
     out: &mut impl Write,
     args: &AnglesArgs,
@@ -277,15 +310,12 @@ fn write_table(
     r: &AnglesResult,
 ) -> std::io::Result<()> {
     let p = r.points;
-    writeln!(
+    write_source(
         out,
-        "{} ({} {}): {} points read, {} dropped (NaN/inf), {} excluded",
-        args.cloud.display(),
-        stats.format,
-        stats.encoding,
-        stats.points_in_file,
-        stats.dropped_non_finite + p.non_finite,
-        p.excluded
+        args,
+        stats,
+        p.non_finite + stats.dropped_non_finite,
+        p.excluded,
     )?;
     writeln!(
         out,

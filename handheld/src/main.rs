@@ -2,6 +2,7 @@
 //! offline commands.
 
 mod angles;
+mod export;
 mod field;
 mod lidar;
 mod replay;
@@ -34,6 +35,9 @@ enum Command {
     Fetch(field::FetchArgs),
     /// Rebuild a recorded run's point cloud offline (optionally with another pipeline config).
     Replay(replay::ReplayArgs),
+    /// Write a recorded run as MCAP with Foxglove schemas (lidar frames, fused cloud, transforms,
+    /// depth images, odometry).
+    Export(export::ExportArgs),
 }
 
 fn main() -> anyhow::Result<()> {
@@ -47,5 +51,6 @@ fn main() -> anyhow::Result<()> {
         Command::Abort(args) => field::abort(&args, &mut std::io::stdout().lock()),
         Command::Fetch(args) => field::fetch(&args, &mut std::io::stdout().lock()),
         Command::Replay(args) => replay::run(&args, &mut std::io::stdout().lock()),
+        Command::Export(args) => export::run(&args, &mut std::io::stdout().lock()),
     }
 }

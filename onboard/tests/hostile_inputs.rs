@@ -1,6 +1,6 @@
 //! Hostile files against every reader of untrusted bytes: the pcap reader and UDP unwrapping, the
-//! PLY / PCD (incl. LZF `binary_compressed`) / XYZ cloud readers and the recording's odometry
-//! reader. Each committed file in `tests/hostile/` must give an error, not a panic; then
+//! PLY / PCD (incl. LZF `binary_compressed`) / XYZ / E57 / LAS / LAZ cloud readers and the
+//! recording's odometry reader. Each committed file in `tests/hostile/` must give an error, not a panic; then
 //! thousands of deterministic mutations of it and of valid seeds must not panic either.
 //!
 //! Memory is measured, not assumed: a counting global allocator records the peak heap of each
@@ -23,7 +23,10 @@ use std::panic::{AssertUnwindSafe, catch_unwind};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicUsize, Ordering};
 
-use onboard::cloud::{CloudFormat, ParseError, ParseLimits, detect_format, parse_cloud_with};
+use onboard::cloud::{
+    Cloud, CloudFormat, ParseError, ParseLimits, detect_format, parse_cloud_with, write_e57,
+    write_las,
+};
 use onboard::pcap::{MAX_RECORD_LEN, PcapError, PcapReader, udp_in_frame};
 use onboard::recorder::parse_odometry_csv;
 
@@ -242,7 +245,20 @@ fn valid_cloud_seeds() -> Vec<(&'static str, Vec<u8>, CloudFormat)> {
     pcd_lzf.extend(24u32.to_le_bytes());
     pcd_lzf.push(23);
     pcd_lzf.extend(&soa);
+    let cloud = Cloud {
+        points_m: (0..40).map(|i| [f64::from(i) * 0.1, 0.5, 0.25]).collect(),
+    };
+    let mut e57 = Vec::new();
+    write_e57(std::io::Cursor::new(&mut e57), &cloud, "seed").expect("writing to a Vec");
+    let las = |compressed| {
+        write_las(std::io::Cursor::new(Vec::new()), &cloud, 1e-3, compressed)
+            .expect("writing to a Vec")
+            .into_inner()
+    };
     vec![
+        ("E57", e57, CloudFormat::E57),
+        ("LAS", las(false), CloudFormat::Las),
+        ("LAZ", las(true), CloudFormat::Las),
         ("binary PLY", ply, CloudFormat::Ply),
         ("ascii PLY", ascii_ply, CloudFormat::Ply),
         ("ascii PCD", pcd_ascii, CloudFormat::Pcd),
@@ -327,6 +343,30 @@ fn issue_files(report: &mut Vec<String>) {
         ),
         ("pcd-ascii-huge-count.pcd", "above the limit"),
         ("all-non-finite.xyz", "empty cloud"),
+        // A valid E57 whose header declares a 1 TiB XML section (the e57 crate allocates it).
+        (
+            "e57-xml-length-huge.e57",
+            "XML section of 1099511627776 bytes, more than the file's 3072",
+        ),
+        // Three points whose fields are all declared constant (minimum = maximum): the e57
+        // crate's decoder makes points without end from such a scan (4 GB and growing, measured
+        // under a 3 GB ulimit).
+        ("e57-constant-fields.e57", "every field is a constant"),
+        // An extended VLR of 2^50 bytes (the las crate allocates its declared length).
+        (
+            "las-evlr-length-huge.las",
+            "ends beyond the file's 1235 bytes",
+        ),
+        (
+            "las-huge-count.las",
+            "points: 1099511627776 declared, above the limit",
+        ),
+        // A LAZ chunk table declaring 2^32 - 1 chunks: the laz crate reserves 64 GiB for it
+        // (its allocation of 68,719,476,720 bytes fails and aborts the process).
+        (
+            "laz-chunk-table-bomb.laz",
+            "declares 4294967295 chunks for 40 points",
+        ),
     ] {
         let bytes = hostile(name);
         let format = detect_format(Some(Path::new(name)), &bytes).expect("a cloud extension");
@@ -432,6 +472,11 @@ fn mutations(report: &mut Vec<String>) {
         "ply-ascii-huge-count.ply",
         "pcd-ascii-huge-count.pcd",
         "all-non-finite.xyz",
+        "e57-xml-length-huge.e57",
+        "e57-constant-fields.e57",
+        "las-evlr-length-huge.las",
+        "las-huge-count.las",
+        "laz-chunk-table-bomb.laz",
     ] {
         let bytes = hostile(name);
         let format = detect_format(Some(Path::new(name)), &bytes).expect("a cloud extension");

@@ -16,6 +16,12 @@
 //! - PCD (v0.7 and older headers): `ascii`, `binary`, `binary_compressed` (LZF, decoded here).
 //! - `.xyz` / `.csv` / `.txt`: one point per line, separated by whitespace, commas or semicolons; `#`
 //!   comments; an optional header line naming the `x`, `y`, `z` columns.
+//! - E57 (ASTM E2807, terrestrial scanners): every scan, brought into the file's frame by its pose;
+//!   Cartesian or spherical coordinates; points flagged invalid are dropped and counted in
+//!   [`ReadStats::dropped_invalid`] (see `e57.rs`).
+//! - LAS 1.0-1.4 and LAZ: scale and offset applied; feet converted to metres when the CRS says so,
+//!   geographic and geocentric CRSs refused, no CRS taken as metres with a note in
+//!   [`ReadStats::notes`] (see `las.rs`).
 //!
 //! Writers: [`write_ply`] (ascii or binary little endian, `double` x y z) and [`write_xyz`].
 //!
@@ -25,8 +31,13 @@
 //! each) and, for PCD `binary_compressed`, a decoded block of at most `max_decoded_bytes` (which
 //! must also equal FIELDS x POINTS and be reachable from the compressed size at LZF's best ratio).
 //! So a parse allocates at most the file's size, plus `24 x max_points`, plus
-//! `max_decoded_bytes`: with the defaults, 192 MB + 128 MiB beyond the file itself.
+//! `max_decoded_bytes`: with the defaults, 192 MB + 128 MiB beyond the file itself. E57 and LAS/LAZ
+//! have their own checks before the crates that decode them allocate (`e57.rs`, `las.rs`); their
+//! decoders work in bounded batches (an E57 data packet is at most 64 KiB, LAS/LAZ records are
+//! decoded 1 MiB at a time), and `onboard/tests/hostile_inputs.rs` measures their peaks.
 
+mod e57;
+mod las;
 mod lzf;
 mod pcd;
 mod ply;
@@ -52,6 +63,10 @@ pub enum CloudFormat {
     Pcd,
     /// Delimited text: whitespace, comma or semicolon separated x y z per line.
     Text,
+    /// ASTM E2807 E57 (terrestrial laser scanners).
+    E57,
+    /// ASPRS LAS, plain or LASzip-compressed (LAZ).
+    Las,
 }
 
 impl fmt::Display for CloudFormat {
@@ -60,6 +75,8 @@ impl fmt::Display for CloudFormat {
             CloudFormat::Ply => "PLY",
             CloudFormat::Pcd => "PCD",
             CloudFormat::Text => "text",
+            CloudFormat::E57 => "E57",
+            CloudFormat::Las => "LAS",
         })
     }
 }
@@ -75,14 +92,23 @@ pub struct ReadStats {
     pub points_in_file: usize,
     /// Points dropped because x, y or z was NaN or infinite.
     pub dropped_non_finite: usize,
+    /// Points dropped because the file flags them as having no valid position (E57 invalid
+    /// states); 0 for formats without such flags.
+    pub dropped_invalid: usize,
+    /// What the reader converted or assumed (scans merged, units), one sentence each.
+    pub notes: Vec<String>,
 }
 
 /// A malformed or unsupported cloud. Line numbers are 1-based and count header lines too.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum ParseError {
-    /// The bytes are not a PLY, PCD or text cloud the reader recognises.
-    #[error("unknown cloud format (expected PLY, PCD, or x y z text)")]
+    /// The bytes are not a PLY, PCD, E57, LAS/LAZ or text cloud the reader recognises.
+    #[error("unknown cloud format (expected PLY, PCD, E57, LAS/LAZ, or x y z text)")]
     UnknownFormat,
+    /// A binary container (E57, LAS/LAZ) is malformed or unsupported; the message names the
+    /// part (scan, point, record, CRS) and what is wrong.
+    #[error("{0}")]
+    Container(String),
     /// The header is malformed; the message names the field.
     #[error("header line {line}: {message}")]
     Header {
@@ -167,10 +193,18 @@ pub fn detect_format(path: Option<&Path>, bytes: &[u8]) -> Option<CloudFormat> {
         Some("ply") => return Some(CloudFormat::Ply),
         Some("pcd") => return Some(CloudFormat::Pcd),
         Some("xyz" | "csv" | "txt" | "pts") => return Some(CloudFormat::Text),
+        Some("e57") => return Some(CloudFormat::E57),
+        Some("las" | "laz") => return Some(CloudFormat::Las),
         _ => {}
     }
     if bytes.starts_with(b"ply") {
         return Some(CloudFormat::Ply);
+    }
+    if bytes.starts_with(e57::SIGNATURE) {
+        return Some(CloudFormat::E57);
+    }
+    if bytes.starts_with(las::SIGNATURE) {
+        return Some(CloudFormat::Las);
     }
     let head = &bytes[..bytes.len().min(256)];
     let head = String::from_utf8_lossy(head);
@@ -231,12 +265,43 @@ pub fn parse_cloud_with(
     format: CloudFormat,
     limits: &ParseLimits,
 ) -> Result<(Cloud, ReadStats), ParseError> {
-    let raw = match format {
-        CloudFormat::Ply => ply::parse(bytes, limits)?,
-        CloudFormat::Pcd => pcd::parse(bytes, limits)?,
-        CloudFormat::Text => text::parse(bytes, limits)?,
+    match format {
+        // The `las` crate reads from an owned buffer: a copy of the bytes, within the 4 x file
+        // bound of the hostile-input test. `read_cloud_with` hands the file's own buffer over.
+        CloudFormat::Las => parse_owned(bytes.to_vec(), format, limits),
+        _ => parse_borrowed(bytes, format, limits),
+    }
+}
+
+fn parse_borrowed(
+    bytes: &[u8],
+    format: CloudFormat,
+    limits: &ParseLimits,
+) -> Result<(Cloud, ReadStats), ParseError> {
+    let (raw, dropped_invalid, notes) = match format {
+        CloudFormat::Ply => (ply::parse(bytes, limits)?, 0, Vec::new()),
+        CloudFormat::Pcd => (pcd::parse(bytes, limits)?, 0, Vec::new()),
+        CloudFormat::Text => (text::parse(bytes, limits)?, 0, Vec::new()),
+        CloudFormat::E57 => {
+            let c = e57::parse(bytes, limits)?;
+            (c.raw, c.flagged_invalid, c.notes)
+        }
+        CloudFormat::Las => return parse_owned(bytes.to_vec(), format, limits),
     };
-    finish(raw, format)
+    finish(raw, format, dropped_invalid, notes)
+}
+
+fn parse_owned(
+    bytes: Vec<u8>,
+    format: CloudFormat,
+    limits: &ParseLimits,
+) -> Result<(Cloud, ReadStats), ParseError> {
+    if format == CloudFormat::Las {
+        let c = las::parse(bytes, limits)?;
+        finish(c.raw, format, 0, c.notes)
+    } else {
+        parse_borrowed(&bytes, format, limits)
+    }
 }
 
 /// Read a cloud file with the default [`ParseLimits`]; the format comes from the extension, else
@@ -260,7 +325,7 @@ pub fn read_cloud_with(
     };
     let format =
         detect_format(Some(path), &bytes).ok_or_else(|| parse_err(ParseError::UnknownFormat))?;
-    parse_cloud_with(&bytes, format, limits).map_err(parse_err)
+    parse_owned(bytes, format, limits).map_err(parse_err)
 }
 
 /// PLY body encodings the writer can produce.
@@ -305,17 +370,50 @@ pub fn write_xyz<W: Write>(mut out: W, cloud: &Cloud) -> io::Result<()> {
     out.flush()
 }
 
+/// Write a cloud as E57: one scan of `double` Cartesian x, y, z in metres, without a pose.
+/// `guid` names the file (E57 requires one; any unique string).
+pub fn write_e57<W: io::Read + Write + io::Seek>(
+    out: W,
+    cloud: &Cloud,
+    guid: &str,
+) -> io::Result<()> {
+    e57::write(out, &cloud.points_m, guid).map_err(io::Error::other)
+}
+
+/// Write a cloud as LAS 1.4 (point format 0), or LAZ when `compressed`: coordinates rounded to
+/// `resolution_m` (the LAS scale) about an offset at the centre of the cloud's bounding box,
+/// without a CRS (readers take it as metres). Returns the writer.
+pub fn write_las<W: Write + io::Seek + Send + Sync + 'static>(
+    out: W,
+    cloud: &Cloud,
+    resolution_m: f64,
+    compressed: bool,
+) -> io::Result<W> {
+    las::write(out, &cloud.points_m, resolution_m, compressed).map_err(io::Error::other)
+}
+
 /// Points as parsed, before non-finite ones are dropped.
 struct RawCloud {
     points: Vec<[f64; 3]>,
     encoding: &'static str,
 }
 
-fn finish(raw: RawCloud, format: CloudFormat) -> Result<(Cloud, ReadStats), ParseError> {
-    let points_in_file = raw.points.len();
+fn finish(
+    raw: RawCloud,
+    format: CloudFormat,
+    dropped_invalid: usize,
+    notes: Vec<String>,
+) -> Result<(Cloud, ReadStats), ParseError> {
+    let points_in_file = raw.points.len() + dropped_invalid;
     let mut points_m = raw.points;
     points_m.retain(|p| p.iter().all(|v| v.is_finite()));
-    let dropped_non_finite = points_in_file - points_m.len();
+    let dropped_non_finite = points_in_file - dropped_invalid - points_m.len();
+    if points_m.is_empty() && dropped_invalid > 0 {
+        return Err(ParseError::Container(format!(
+            "empty cloud: {points_in_file} points in the file, {dropped_invalid} flagged invalid \
+             by the file, {dropped_non_finite} dropped as NaN/inf, none left"
+        )));
+    }
     if points_m.is_empty() {
         return Err(ParseError::Empty {
             points_in_file,
@@ -329,6 +427,8 @@ fn finish(raw: RawCloud, format: CloudFormat) -> Result<(Cloud, ReadStats), Pars
             encoding: raw.encoding,
             points_in_file,
             dropped_non_finite,
+            dropped_invalid,
+            notes,
         },
     ))
 }
@@ -425,3 +525,5 @@ fn parse_f64(token: &str) -> Option<f64> {
 
 #[cfg(test)]
 mod tests;
+#[cfg(test)]
+mod tests_formats;

@@ -4,6 +4,14 @@ use proptest::prelude::*;
 
 use super::*;
 
+const ALL_FORMATS: [CloudFormat; 5] = [
+    CloudFormat::Ply,
+    CloudFormat::Pcd,
+    CloudFormat::Text,
+    CloudFormat::E57,
+    CloudFormat::Las,
+];
+
 fn sample() -> Cloud {
     Cloud {
         points_m: vec![[1.0, -2.5, 0.125], [0.1, 0.2, 0.3], [-1e-3, 4.0, 1234.5]],
@@ -300,14 +308,14 @@ proptest! {
 
     #[test]
     fn parsers_never_panic_on_random_bytes(bytes in proptest::collection::vec(any::<u8>(), 0..512)) {
-        for format in [CloudFormat::Ply, CloudFormat::Pcd, CloudFormat::Text] {
+        for format in ALL_FORMATS {
             let _ = parse_cloud(&bytes, format);
         }
     }
 
     #[test]
     fn parsers_never_panic_on_mutated_files(
-        which in 0usize..4,
+        which in 0usize..7,
         edits in proptest::collection::vec((any::<u16>(), any::<u8>()), 1..8),
         cut in any::<u16>(),
     ) {
@@ -317,7 +325,10 @@ proptest! {
             2 => { let mut v = pcd_header("binary_compressed", 1).into_bytes();
                    let soa = [0u8; 20]; let block = lzf::compress(&soa);
                    v.extend((block.len() as u32).to_le_bytes()); v.extend(20u32.to_le_bytes()); v.extend(block); v }
-            _ => pcd_header("ascii", 2).into_bytes(),
+            3 => pcd_header("ascii", 2).into_bytes(),
+            4 => { let mut v = Vec::new(); write_e57(io::Cursor::new(&mut v), &sample(), "m").unwrap(); v }
+            5 => write_las(io::Cursor::new(Vec::new()), &sample(), 1e-3, false).unwrap().into_inner(),
+            _ => write_las(io::Cursor::new(Vec::new()), &sample(), 1e-3, true).unwrap().into_inner(),
         };
         for (at, b) in edits {
             if !bytes.is_empty() {
@@ -326,7 +337,7 @@ proptest! {
             }
         }
         bytes.truncate(cut as usize % (bytes.len() + 1));
-        for format in [CloudFormat::Ply, CloudFormat::Pcd, CloudFormat::Text] {
+        for format in ALL_FORMATS {
             let _ = parse_cloud(&bytes, format);
         }
     }
