@@ -17,7 +17,8 @@ targets=("$@")
 triple=$(rustc -vV | sed -n 's/^host: //p')
 export RUSTFLAGS="-Cpasses=sancov-module -Cllvm-args=-sanitizer-coverage-level=4 \
 -Cllvm-args=-sanitizer-coverage-inline-8bit-counters -Cllvm-args=-sanitizer-coverage-pc-table \
--Cllvm-args=-sanitizer-coverage-trace-compares --cfg fuzzing -Cdebug-assertions -Coverflow-checks"
+-Cllvm-args=-sanitizer-coverage-trace-compares --cfg fuzzing"
+# Debug assertions and overflow checks come from fuzz/Cargo.toml's release profile (per package).
 bins=()
 for t in "${targets[@]}"; do bins+=(--bin "$t"); done
 cargo build --release --target "$triple" "${bins[@]}"
@@ -29,6 +30,8 @@ for t in "${targets[@]}"; do
         pcap_reader) cp "$hostile"/*.pcap "$corpus"/ ;;
         cloud_parse) cp "$hostile"/*.ply "$hostile"/*.pcd "$hostile"/*.xyz "$corpus"/ ;;
         recording_readers) cp "$hostile"/*.csv "$corpus"/ ;;
+        e57_cloud) cp "$hostile"/*.e57 "$corpus"/ ;;
+        las_cloud) cp "$hostile"/*.las "$hostile"/*.laz "$corpus"/ ;;
     esac
     echo "==> $t for $seconds s"
     log=target/fuzz-corpus/$t.log

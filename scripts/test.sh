@@ -45,6 +45,19 @@ cargo fmt --all -- --check
 step "clippy (pedantic, warnings are errors)"
 cargo clippy --workspace --all-targets -- -D warnings
 
+step "python venv for the MCAP read-back check (PyPI mcap)"
+# handheld/tests/export.rs reads the exported MCAP back with the PyPI reader as well as the mcap
+# crate; it runs the Python given in PASSANGLE_PYTHON.
+pyvenv=target/py-venv
+if ! "$pyvenv/bin/python" -c 'import mcap' 2>/dev/null; then
+    if ! python3 -c 'import venv, ensurepip' 2>/dev/null && [[ $(id -u) == 0 ]] && command -v apt-get >/dev/null; then
+        (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq python3-venv) >/dev/null
+    fi
+    (python3 -m venv "$pyvenv" && "$pyvenv/bin/pip" install --quiet 'mcap==1.6.0') \
+        || echo "NOTE: no venv with PyPI mcap: the export test's PyPI read-back will be SKIPPED (it says so)" >&2
+fi
+[[ -x "$pyvenv/bin/python" ]] && export PASSANGLE_PYTHON="$PWD/$pyvenv/bin/python"
+
 step "host tests: cargo test --workspace"
 # The real VLP-16 captures live beside the checkout (../shared/data/vlp16, never copied in). Their
 # tests fail loudly when the folder is missing; here, where a clean clone may not have it, say so

@@ -264,16 +264,18 @@ fn export_writes_every_channel_and_reads_back() {
 }
 
 /// Reads the file with the PyPI `mcap` reader (`tests/mcap_read.py`): the same messages per
-/// topic, schemas and encodings. Says so loudly when python3 with `mcap` is not installed.
+/// topic, schemas and encodings, with `$PASSANGLE_PYTHON` (`scripts/test.sh` points it at a venv
+/// with `mcap`) or `python3`. Says so loudly when that Python lacks `mcap`.
 fn check_with_pypi_mcap(
     out: &Path,
     counts: &BTreeMap<String, u64>,
     schemas: &BTreeMap<String, String>,
 ) {
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/mcap_read.py");
-    let probe = Command::new("python3").args(["-c", "import mcap"]).output();
+    let python = std::env::var("PASSANGLE_PYTHON").unwrap_or_else(|_| "python3".to_owned());
+    let probe = Command::new(&python).args(["-c", "import mcap"]).output();
     if probe.is_ok_and(|o| o.status.success()) {
-        let py = Command::new("python3")
+        let py = Command::new(&python)
             .arg(&script)
             .arg(out)
             .output()
