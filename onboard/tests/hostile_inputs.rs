@@ -405,28 +405,26 @@ fn issue_files(report: &mut Vec<String>) {
     }
 }
 
-// Corrupt arithmetic-coded points (found by fuzzing las_cloud): the laz crate's decoder
-// asserts its symbol range in debug builds; with those assertions off, as in release (root
-// Cargo.toml), the stream runs dry and the read fails cleanly. The header is valid, so the
-// decoder's buffers are allocated: the general cloud bound applies, not the header one.
+/// Corrupt arithmetic-coded points (found by fuzzing `las_cloud`): the laz crate's decoder
+/// asserts its symbol range in debug builds; with those assertions off, as in release (root
+/// Cargo.toml), the stream runs dry and the read fails cleanly. The header is valid, so the
+/// decoder's buffers are allocated: the general cloud bound applies, not the header one.
 fn laz_decoder_overflow(report: &mut Vec<String>) {
     let defaults = ParseLimits::default();
-    {
-        let name = "laz-decoder-symbol-overflow.laz";
-        let bytes = hostile(name);
-        let format = detect_format(Some(Path::new(name)), &bytes).expect("a cloud extension");
-        let (r, peak) = measured(|| parse_cloud_with(&bytes, format, &defaults));
-        let err = r
-            .unwrap_or_else(|p| panic!("{name} panicked: {p}"))
-            .expect_err(name);
-        assert!(
-            err.to_string().contains("failed to fill whole buffer"),
-            "{name}: {err}"
-        );
-        let bound = cloud_bound(bytes.len(), &defaults);
-        assert!(peak <= bound, "{name}: peak {peak} B above {bound} B");
-        report.push(format!("{name} ({} B): {err}, peak {peak} B", bytes.len()));
-    }
+    let name = "laz-decoder-symbol-overflow.laz";
+    let bytes = hostile(name);
+    let format = detect_format(Some(Path::new(name)), &bytes).expect("a cloud extension");
+    let (r, peak) = measured(|| parse_cloud_with(&bytes, format, &defaults));
+    let err = r
+        .unwrap_or_else(|p| panic!("{name} panicked: {p}"))
+        .expect_err(name);
+    assert!(
+        err.to_string().contains("failed to fill whole buffer"),
+        "{name}: {err}"
+    );
+    let bound = cloud_bound(bytes.len(), &defaults);
+    assert!(peak <= bound, "{name}: peak {peak} B above {bound} B");
+    report.push(format!("{name} ({} B): {err}, peak {peak} B", bytes.len()));
 }
 
 /// The LZF bomb within the limits (it decodes, within the stated bound) and a 47 MB block
