@@ -527,4 +527,95 @@ mod tests {
         assert_eq!(f.depth_mm[(60 * 212 + 106) as usize], 0);
         assert_eq!(f.to_z16_bytes().len(), 212 * 120 * 2);
     }
+
+    /// Frame 0 of a camera parked at `x` facing the vehicle's rear (the front tyres ahead).
+    fn facing_rear(cfg: &D435Config, x: f64) -> (Z16Frame, Isometry) {
+        let scene = Scene::from_vehicle(&test_sedan());
+        let pose = Pose {
+            position_m: Vec3::new(x, 0.0, 0.0),
+            yaw_rad: std::f64::consts::PI,
+            ..Pose::default()
+        };
+        let traj = SampledTrajectory::new(vec![(0.0, pose, 0.0)]).expect("one sample");
+        let cam = D435Sim::new(&scene, &traj, cfg.clone(), 3);
+        (cam.frame(0), cam.world_from_camera(0))
+    }
+
+    #[test]
+    fn the_stereo_geometry_blanks_the_left_band_and_the_occlusion_shadow() {
+        let clean = D435Config {
+            noise_k_per_m: 0.0,
+            invalid_probability: 0.0,
+            ..small()
+        };
+        let stereo = D435Config {
+            stereo_baseline_m: 0.05,
+            ..clean.clone()
+        };
+        let k = clean.intrinsics();
+        let (a, _) = facing_rear(&clean, 1.3);
+        let (b, _) = facing_rear(&stereo, 1.3);
+        let (mut band, mut shadow) = (0, 0);
+        for v in 0..k.height {
+            for u in 0..k.width {
+                let i = (v * k.width + u) as usize;
+                let (da, db) = (a.depth_mm[i], b.depth_mm[i]);
+                if db != 0 {
+                    // Valid stereo pixels are the same as without stereo, right of the band.
+                    assert_eq!(da, db);
+                    let z = f64::from(db) / 1000.0;
+                    assert!(f64::from(u) >= k.fx_px * 0.05 / z, "({u},{v}) z {z}");
+                } else if da != 0 {
+                    let z = f64::from(da) / 1000.0;
+                    if f64::from(u) < k.fx_px * 0.05 / z {
+                        band += 1;
+                    } else {
+                        shadow += 1;
+                    }
+                }
+            }
+        }
+        assert!(band > 50, "left band {band} pixels");
+        assert!(shadow > 5, "occlusion shadow {shadow} pixels");
+    }
+
+    #[test]
+    fn dark_rubber_leaves_holes_only_on_tyres() {
+        let clean = D435Config {
+            noise_k_per_m: 0.0,
+            invalid_probability: 0.0,
+            ..small()
+        };
+        let dark = D435Config {
+            dark_invalid_probability: 1.0,
+            ..clean.clone()
+        };
+        let k = clean.intrinsics();
+        let (a, world_from_camera) = facing_rear(&clean, 1.3);
+        let (b, _) = facing_rear(&dark, 1.3);
+        let scene = Scene::from_vehicle(&test_sedan());
+        let mut holes = 0;
+        for v in 0..k.height {
+            for u in 0..k.width {
+                let i = (v * k.width + u) as usize;
+                if a.depth_mm[i] == 0 || b.depth_mm[i] != 0 {
+                    assert_eq!(a.depth_mm[i], b.depth_mm[i], "({u},{v})");
+                    continue;
+                }
+                holes += 1;
+                let ray = world_from_camera
+                    .apply_vector(Vec3::new(
+                        (f64::from(u) - k.cx_px) / k.fx_px,
+                        (f64::from(v) - k.cy_px) / k.fy_px,
+                        1.0,
+                    ))
+                    .normalized();
+                let hit = scene
+                    .cast(world_from_camera.translation, ray, 20.0)
+                    .expect("a surface");
+                assert_eq!(hit.surface.kind, SurfaceKind::Tyre, "({u},{v})");
+            }
+        }
+        assert!(holes > 20, "{holes} tyre pixels");
+    }
 }

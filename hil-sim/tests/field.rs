@@ -242,6 +242,17 @@ fn the_hall_surrounds_the_vehicle_with_walls_pillars_a_second_vehicle_and_a_floo
     let span = heights.iter().fold(f64::MIN, |m, h| m.max(*h))
         - heights.iter().fold(f64::MAX, |m, h| m.min(*h));
     assert!(span > 0.001 && span <= 0.006, "floor span {span}");
+    // The analytic slope matches central differences.
+    for (x, y) in [(0.7, 0.2), (-1.3, -0.4), (3.0, 1.0)] {
+        let (gx, gy) = hall.floor.gradient(x, y);
+        let h = 1e-5;
+        let fx = (hall.floor.height(x + h, y) - hall.floor.height(x - h, y)) / (2.0 * h);
+        let fy = (hall.floor.height(x, y + h) - hall.floor.height(x, y - h)) / (2.0 * h);
+        assert!(
+            (gx - fx).abs() < 1e-8 && (gy - fy).abs() < 1e-8,
+            "{gx} {fx} {gy} {fy}"
+        );
+    }
     let pose = s.motion().pose_at(5.0);
     let flat = s.run.pose_at(5.0);
     assert!((pose.position_m.z - flat.position_m.z).abs() > 1e-5);

@@ -240,35 +240,49 @@ impl Floor {
 
     /// Floor height at (x, y), metres.
     pub fn height(&self, x: f64, y: f64) -> f64 {
-        if self.is_flat() {
-            return 0.0;
-        }
-        let wave: f64 = self
-            .waves
-            .iter()
-            .map(|w| w[3] * (w[0] * x + w[1] * y + w[2]).sin())
-            .sum();
-        let window: f64 = self
-            .contacts
-            .iter()
-            .map(|c| {
-                let d2 = (x - c[0]).powi(2) + (y - c[1]).powi(2);
-                1.0 - (-d2 / (CONTACT_WINDOW_M * CONTACT_WINDOW_M)).exp()
-            })
-            .product();
-        self.amplitude_m * wave * window
+        self.height_and_gradient(x, y).0
     }
 
-    /// The floor's slope (dz/dx, dz/dy) at (x, y), by central differences over 1 mm.
+    /// The floor's slope (dz/dx, dz/dy) at (x, y).
     pub fn gradient(&self, x: f64, y: f64) -> (f64, f64) {
+        let (_, gx, gy) = self.height_and_gradient(x, y);
+        (gx, gy)
+    }
+
+    /// Height and slope together, analytically: h = A S W with S the waves' sum and W the
+    /// product of the contact windows.
+    fn height_and_gradient(&self, x: f64, y: f64) -> (f64, f64, f64) {
         if self.is_flat() {
-            return (0.0, 0.0);
+            return (0.0, 0.0, 0.0);
         }
-        let h = 1e-3;
-        (
-            (self.height(x + h, y) - self.height(x - h, y)) / (2.0 * h),
-            (self.height(x, y + h) - self.height(x, y - h)) / (2.0 * h),
-        )
+        let (mut s, mut sx, mut sy) = (0.0, 0.0, 0.0);
+        for w in &self.waves {
+            let (sin, cos) = (w[0] * x + w[1] * y + w[2]).sin_cos();
+            s += w[3] * sin;
+            sx += w[3] * cos * w[0];
+            sy += w[3] * cos * w[1];
+        }
+        let rho2 = CONTACT_WINDOW_M * CONTACT_WINDOW_M;
+        let factors = self.contacts.map(|c| {
+            let (dx, dy) = (x - c[0], y - c[1]);
+            let e = (-(dx * dx + dy * dy) / rho2).exp();
+            // (1 - e) and its gradient.
+            (1.0 - e, 2.0 * e * dx / rho2, 2.0 * e * dy / rho2)
+        });
+        let w: f64 = factors.iter().map(|f| f.0).product();
+        let (mut wx, mut wy) = (0.0, 0.0);
+        for (i, f) in factors.iter().enumerate() {
+            let others: f64 = factors
+                .iter()
+                .enumerate()
+                .filter(|(j, _)| *j != i)
+                .map(|(_, g)| g.0)
+                .product();
+            wx += others * f.1;
+            wy += others * f.2;
+        }
+        let a = self.amplitude_m;
+        (a * s * w, a * (sx * w + s * wx), a * (sy * w + s * wy))
     }
 
     /// The ray's first crossing of the floor before `t_max`, with the floor's unit normal: from
@@ -279,13 +293,18 @@ impl Floor {
             return None;
         }
         let mut t = -o.z / d.z;
+        let mut slope_xy = (0.0, 0.0);
         for _ in 0..8 {
+            if !(t > 0.0 && t < t_max + 1.0) {
+                return None;
+            }
             let p = o + d * t;
-            let f = p.z - self.height(p.x, p.y);
+            let (h, gx, gy) = self.height_and_gradient(p.x, p.y);
+            slope_xy = (gx, gy);
+            let f = p.z - h;
             if f.abs() < 1e-10 {
                 break;
             }
-            let (gx, gy) = self.gradient(p.x, p.y);
             let slope = d.z - gx * d.x - gy * d.y;
             if slope >= -1e-12 {
                 return None;
@@ -295,16 +314,15 @@ impl Floor {
         if !(t > 0.0 && t < t_max) {
             return None;
         }
-        let p = o + d * t;
-        let (gx, gy) = self.gradient(p.x, p.y);
+        let (gx, gy) = slope_xy;
         Some((t, Vec3::new(-gx, -gy, 1.0).normalized()))
     }
 
     /// Distance from `p` to the floor (vertical gap times the slope's cosine; exact for a plane,
     /// within the undulation's curvature otherwise).
     pub fn distance(&self, p: Vec3) -> f64 {
-        let (gx, gy) = self.gradient(p.x, p.y);
-        (p.z - self.height(p.x, p.y)).abs() / (1.0 + gx * gx + gy * gy).sqrt()
+        let (h, gx, gy) = self.height_and_gradient(p.x, p.y);
+        (p.z - h).abs() / (1.0 + gx * gx + gy * gy).sqrt()
     }
 }
 
