@@ -3,8 +3,11 @@
 //! per set.
 //!
 //! Run: `cargo run --release -p hil-sim --example evaluate -- [--set tuning|held-out|both]
-//! [--protocol FILE] [--jobs N] [--only TEXT]` (defaults: both sets, `hil-sim/evaluation.toml`, two
-//! worker threads; `--only` keeps the runs whose vehicle or world contains TEXT).
+//! [--protocol FILE] [--jobs N] [--only TEXT] [--oracle]` (defaults: both sets,
+//! `hil-sim/evaluation.toml`, two worker threads; `--only` keeps the runs whose vehicle or world
+//! contains TEXT; `--oracle` replaces the pipeline by the true poses: every simulated return
+//! placed with the exact pose of its firing, one centroid per 5 mm voxel as the pipeline's output,
+//! the true path as the scan's path, so the tables show the calculator alone on the same runs).
 //!
 //! Per run (all seeded; the same command prints the same tables): the protocol's template
 //! scenario with the run's vehicle, world and seed, the robot starting 1 m ahead of the vehicle's
@@ -178,7 +181,67 @@ fn run_pipeline(
     Ok(pipeline.finish())
 }
 
-fn run(template_path: &Path, template: &Scenario, entry: &Entry) -> anyhow::Result<Outcome> {
+/// The oracle's cloud and path (vehicle frame): every return of the run placed with the true
+/// pose of its firing (the decoder's maths on the reported range), reduced to one centroid per
+/// 5 mm voxel, and the true robot positions every 0.1 s.
+fn oracle_cloud(
+    scenario: &Scenario,
+    scene: &hil_sim::world::Scene,
+) -> (Vec<[f64; 3]>, Vec<[f64; 3]>, usize) {
+    use hil_sim::vlp16::{ELEVATION_DEG, VERTICAL_OFFSET_MM, Vlp16Sim};
+    let motion = scenario.motion();
+    let sim = Vlp16Sim::new(
+        scene,
+        &motion,
+        scenario.lidar_config(),
+        scenario.lidar_seed(),
+    );
+    let packets = Vlp16Sim::<hil_sim::trajectory::StraightRun>::packets_in(scenario.duration_s);
+    let mut cells: std::collections::BTreeMap<[i64; 3], ([f64; 3], u32)> =
+        std::collections::BTreeMap::new();
+    for k in 0..packets {
+        sim.data_packet_with_truth(k, |f| {
+            if f.distance_raw == 0 {
+                return;
+            }
+            let laser = f.channel % 16;
+            let (sin_w, cos_w) = ELEVATION_DEG[laser].to_radians().sin_cos();
+            let (sin_a, cos_a) = sim.azimuth_at(f.time_s).sin_cos();
+            let r = f64::from(f.distance_raw) * 0.002;
+            let p = hil_sim::geometry::Vec3::new(
+                r * cos_w * sin_a,
+                r * cos_w * cos_a,
+                r * sin_w + VERTICAL_OFFSET_MM[laser] / 1000.0,
+            );
+            let w = f.world_from_lidar.apply(p);
+            let key = [w.x, w.y, w.z].map(|v| (v / 0.005).floor() as i64);
+            let e = cells.entry(key).or_insert(([0.0; 3], 0));
+            e.0[0] += w.x;
+            e.0[1] += w.y;
+            e.0[2] += w.z;
+            e.1 += 1;
+        });
+    }
+    let cloud = cells
+        .into_values()
+        .map(|(s, n)| s.map(|v| v / f64::from(n)))
+        .collect();
+    let steps = (scenario.duration_s / 0.1) as u32;
+    let path = (0..=steps)
+        .map(|i| {
+            let p = motion.pose_at(f64::from(i) * 0.1).position_m;
+            [p.x, p.y, p.z]
+        })
+        .collect();
+    (cloud, path, packets as usize)
+}
+
+fn run(
+    template_path: &Path,
+    template: &Scenario,
+    entry: &Entry,
+    oracle: bool,
+) -> anyhow::Result<Outcome> {
     let scenario = scenario_of(template_path, template, entry)?;
     let truth = true_angles(&scenario.vehicle, &TruthOptions::default());
     let truth_deg = [
@@ -188,23 +251,30 @@ fn run(template_path: &Path, template: &Scenario, entry: &Entry) -> anyhow::Resu
     ]
     .map(f64::to_degrees);
     let scene = scenario.scene();
-    let lidar = scenario.decoded_lidar_frames(&scene);
-    let wheel = scenario.wheel_odometry(0.2);
-    let cpu0 = thread_cpu_s();
-    let built = run_pipeline(&scenario, &lidar, &wheel)?;
-    let cpu_s = thread_cpu_s() - cpu0;
-    let Some(first) = built.trajectory.first() else {
-        bail!("the pipeline built no trajectory");
-    };
-    let motion = scenario.motion();
-    let t0 = pose_of(&motion.pose_at(first.stamp_s).to_isometry());
-    let cloud: Vec<[f64; 3]> = built.points_in_world.iter().map(|&p| t0.apply(p)).collect();
-    let config = AnglesConfig {
-        scan_path_in_cloud: built
+    let (cloud, path, frames, cpu_s) = if oracle {
+        let (cloud, path, packets) = oracle_cloud(&scenario, &scene);
+        (cloud, path, packets, 0.0)
+    } else {
+        let lidar = scenario.decoded_lidar_frames(&scene);
+        let wheel = scenario.wheel_odometry(0.2);
+        let cpu0 = thread_cpu_s();
+        let built = run_pipeline(&scenario, &lidar, &wheel)?;
+        let cpu_s = thread_cpu_s() - cpu0;
+        let Some(first) = built.trajectory.first() else {
+            bail!("the pipeline built no trajectory");
+        };
+        let motion = scenario.motion();
+        let t0 = pose_of(&motion.pose_at(first.stamp_s).to_isometry());
+        let cloud: Vec<[f64; 3]> = built.points_in_world.iter().map(|&p| t0.apply(p)).collect();
+        let path = built
             .trajectory
             .iter()
             .map(|tp| t0.apply(tp.world_from_robot.translation))
-            .collect(),
+            .collect();
+        (cloud, path, lidar.len(), cpu_s)
+    };
+    let config = AnglesConfig {
+        scan_path_in_cloud: path,
         ..AnglesConfig::default()
     };
     let (error_deg, missing) = match compute_angles(&cloud, &config) {
@@ -235,7 +305,7 @@ fn run(template_path: &Path, template: &Scenario, entry: &Entry) -> anyhow::Resu
         error_deg,
         missing,
         cpu_s,
-        frames: lidar.len(),
+        frames,
     })
 }
 
@@ -368,6 +438,9 @@ struct Args {
     /// Only runs whose vehicle or world name contains this.
     #[arg(long)]
     only: Option<String>,
+    /// The calculator alone: true poses instead of the pipeline.
+    #[arg(long)]
+    oracle: bool,
 }
 
 fn main() -> anyhow::Result<()> {
@@ -395,9 +468,15 @@ fn main() -> anyhow::Result<()> {
         ],
         other => bail!("--set must be tuning, held-out or both, not {other:?}"),
     };
-    println!(
-        "Protocol {shown}: lidar + wheel odometry, pipeline and angle calculator at their defaults; errors are measured - true, degrees.\n"
-    );
+    if args.oracle {
+        println!(
+            "Protocol {shown}, oracle: lidar returns placed with the true poses (5 mm voxel centroids), angle calculator at its defaults; errors are measured - true, degrees.\n"
+        );
+    } else {
+        println!(
+            "Protocol {shown}: lidar + wheel odometry, pipeline and angle calculator at their defaults; errors are measured - true, degrees.\n"
+        );
+    }
     for (name, groups) in sets {
         let mut list = entries(dir, groups);
         if let Some(o) = &args.only {
@@ -421,7 +500,7 @@ fn main() -> anyhow::Result<()> {
                         };
                         let Some(entry) = list.get(i) else { break };
                         let t = Instant::now();
-                        let r = run(&template_path, &template, entry);
+                        let r = run(&template_path, &template, entry, args.oracle);
                         match &r {
                             Ok(o) => eprintln!(
                                 "{name} {}/{}/{}: {} frames, pipeline {:.1} ms CPU per frame, run {:.1} s",
