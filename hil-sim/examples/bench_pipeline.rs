@@ -52,7 +52,7 @@ use hil_sim::scenario::Scenario;
 use hil_sim::trajectory::Trajectory;
 use hil_sim::truth::{TruthOptions, true_angles};
 use hil_sim::wheel_odometry::WheelNoise;
-use hil_sim::world::{Scene, SurfaceId, SurfaceKind};
+use hil_sim::world::Scene;
 use onboard::angles::{AnglesConfig, compute_angles};
 use onboard::cloud::{Cloud, PlyEncoding, write_ply};
 use onboard::pipeline::geom::{Pose, rpy_of};
@@ -165,9 +165,10 @@ fn mounts_from(scenario: &Scenario, config: &mut PipelineConfig) {
 
 /// Depth frames at 10 Hz (every 3rd of the 30 Hz stream).
 fn depth_frames(scenario: &Scenario, scene: &Scene) -> Vec<DepthImage> {
+    let motion = scenario.motion();
     let sim = D435Sim::new(
         scene,
-        &scenario.run,
+        &motion,
         scenario.file.depth.clone(),
         scenario.depth_seed(),
     );
@@ -250,26 +251,9 @@ fn path_in_vehicle(built: &BuiltCloud, t0: &Pose) -> Vec<[f64; 3]> {
         .collect()
 }
 
-/// Distance from `p` (vehicle frame) to the nearest true surface.
+/// Distance from `p` (vehicle frame) to the nearest true surface (the hall's too, if any).
 fn surface_distance(scene: &Scene, p: [f64; 3]) -> f64 {
-    let v = Vec3::new(p[0], p[1], p[2]);
-    let mut best = scene.distance_to_surface(
-        SurfaceId {
-            kind: SurfaceKind::Ground,
-            index: 0,
-        },
-        v,
-    );
-    for kind in [SurfaceKind::Tyre, SurfaceKind::Body, SurfaceKind::Part] {
-        for index in 0..256 {
-            let d = scene.distance_to_surface(SurfaceId { kind, index }, v);
-            if d.is_infinite() {
-                break;
-            }
-            best = best.min(d);
-        }
-    }
-    best
+    scene.distance_to_nearest(Vec3::new(p[0], p[1], p[2]))
 }
 
 fn percentile(sorted: &[f64], q: f64) -> f64 {
@@ -291,7 +275,8 @@ struct Figures {
 }
 
 fn evaluate(scenario: &Scenario, scene: &Scene, built: &BuiltCloud, time: &Timing) -> Figures {
-    let truth = |t: f64| pose_of(&scenario.run.pose_at(t).to_isometry());
+    let motion = scenario.motion();
+    let truth = |t: f64| pose_of(&motion.pose_at(t).to_isometry());
     let t0 = truth(built.trajectory[0].stamp_s);
     let mut sq = 0.0;
     let mut final_err = 0.0;
@@ -396,7 +381,8 @@ fn export_frames(
 ) -> anyhow::Result<()> {
     let root = dir.join(name);
     std::fs::create_dir_all(root.join("frames"))?;
-    let robot_at = |t: f64| pose_of(&scenario.run.pose_at(t).to_isometry());
+    let motion = scenario.motion();
+    let robot_at = |t: f64| pose_of(&motion.pose_at(t).to_isometry());
     let mut truth = String::from(
         "# start_s end_s vehicle_from_robot(start_s) vehicle_from_robot(end_s), KITTI rows\n",
     );
@@ -525,7 +511,8 @@ fn save_cloud(
         .map(|c| if c.is_ascii_alphanumeric() { c } else { '_' })
         .collect();
     let stem = dir.join(format!("{run}-{slug}"));
-    let truth = |t: f64| pose_of(&scenario.run.pose_at(t).to_isometry());
+    let motion = scenario.motion();
+    let truth = |t: f64| pose_of(&motion.pose_at(t).to_isometry());
     let t0 = truth(built.trajectory.first().map_or(0.0, |t| t.stamp_s));
     let cloud = Cloud {
         points_m: built.points_in_world.iter().map(|&p| t0.apply(p)).collect(),
@@ -693,7 +680,7 @@ fn main() -> anyhow::Result<()> {
                 file.wheel_odometry = WheelNoise::TYPICAL_MECANUM;
             }
             let scenario = Scenario::from_parts(path, file, base.vehicle.clone())?;
-            let scene = Scene::from_vehicle(&scenario.vehicle);
+            let scene = scenario.scene();
             let lidar = scenario.decoded_lidar_frames(&scene);
             if let Some(dir) = &export_dir {
                 export_frames(dir, &format!("{name}-{seed}"), &scenario, &scene, &lidar)?;

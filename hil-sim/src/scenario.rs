@@ -41,10 +41,22 @@
 //! # Seeds
 //! `seed` feeds independent streams: vibration = `derive_seed(seed, 1)`, lidar = `derive_seed(seed, 2)`,
 //! depth = `derive_seed(seed, 3)`, wheel odometry = `derive_seed(seed, 4)`, the lidar head's
-//! starting azimuth (unless the file sets it) = `derive_seed(seed, 6)`; changing one sensor's
-//! settings never changes another's noise.
+//! starting azimuth (unless the file sets it) = `derive_seed(seed, 6)`, the vehicle's placement =
+//! `derive_seed(seed, 7)`, the hall's placement (walls, pillar phase, other vehicles, tilt
+//! direction, floor waves) = `derive_seed(seed, 8)`; changing one sensor's settings never
+//! changes another's noise.
+//!
+//! ```toml
+//! [placement]                # the parked vehicle against the path; default none
+//! yaw_max_deg = 3.0          # uniform in +-3 degrees about the vehicle's centre
+//! lateral_max_m = 0.1        # uniform in +-0.1 m
+//!
+//! [hall]                     # crate::world::HallSpec; default: an empty, flat world
+//! walls_m = [7.0, 8.0, 6.5, 9.0]   # front, rear, left, right walls from the vehicle's centre
+//! ```
 
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
 use serde::Deserialize;
 
@@ -54,7 +66,7 @@ use crate::trajectory::{StraightRun, Vibration};
 use crate::vehicle::{Vehicle, VehicleError};
 use crate::vlp16::Vlp16Config;
 use crate::wheel_odometry::WheelNoise;
-use crate::world::{Scene, SurfaceKind};
+use crate::world::{Hall, HallSpec, OnFloor, Scene, SurfaceKind};
 
 /// The scenario file as written.
 #[derive(Clone, Debug, Deserialize, PartialEq)]
@@ -81,6 +93,30 @@ pub struct ScenarioFile {
     /// Wheel odometry's error model (default: exact wheels but for `robot.slip`).
     #[serde(default)]
     pub wheel_odometry: WheelNoise,
+    /// Seeded placement of the vehicle against the robot's path (default: none).
+    #[serde(default)]
+    pub placement: Placement,
+    /// The hall around the vehicle, written inline (default: none, an empty flat world).
+    #[serde(default)]
+    pub hall: Option<HallSpec>,
+    /// A world file holding a hall (its keys at the top level), relative to this file; an
+    /// alternative to `[hall]`.
+    #[serde(default)]
+    pub world: Option<PathBuf>,
+}
+
+/// The `[placement]` table: how far the parked vehicle may sit off the robot's path, drawn per
+/// seed (stream `derive_seed(seed, 7)`): a yaw uniform in +-`yaw_max_deg` about the vehicle's
+/// centre and a lateral offset uniform in +-`lateral_max_m`, both added to the `[robot]` run.
+#[derive(Clone, Debug, Default, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct Placement {
+    /// Largest yaw of the vehicle against the path, degrees.
+    #[serde(default)]
+    pub yaw_max_deg: f64,
+    /// Largest lateral offset of the path from the vehicle's centre line, metres.
+    #[serde(default)]
+    pub lateral_max_m: f64,
 }
 
 /// The `[robot]` table.
@@ -155,6 +191,8 @@ pub struct Scenario {
     pub run: StraightRun,
     /// Recording length, seconds.
     pub duration_s: f64,
+    /// The hall, built for this seed (`None`: an empty flat world).
+    pub hall: Option<Arc<Hall>>,
 }
 
 /// Why a scenario was rejected.
@@ -213,7 +251,8 @@ impl Scenario {
         use onboard::vlp16::{DecoderConfig, FrameAssembler};
 
         use crate::vlp16::{Datagram, Vlp16Sim};
-        let sim = Vlp16Sim::new(scene, &self.run, self.lidar_config(), self.lidar_seed());
+        let motion = self.motion();
+        let sim = Vlp16Sim::new(scene, &motion, self.lidar_config(), self.lidar_seed());
         // The default decoder configuration is valid; an error here would leave no frames.
         let Ok(mut assembler) = FrameAssembler::new(DecoderConfig::default()) else {
             return Vec::new();
@@ -276,13 +315,27 @@ impl Scenario {
             reason,
         };
         validate_run(&file).map_err(invalid)?;
+        let p = &file.placement;
+        if !((0.0..=10.0).contains(&p.yaw_max_deg) && (0.0..=0.5).contains(&p.lateral_max_m)) {
+            return Err(invalid((
+                "placement".to_owned(),
+                "yaw_max_deg must lie in 0..=10 and lateral_max_m in 0..=0.5".to_owned(),
+            )));
+        }
         file.lidar.validate().map_err(invalid)?;
         file.depth.validate().map_err(invalid)?;
         file.wheel_odometry.validate().map_err(invalid)?;
         let r = &file.robot;
+        let (yaw_off, lateral_off) = placement_draw(&file);
+        // The vehicle yawed by `yaw_off` about its centre is the path turned by `-yaw_off`
+        // about that centre, in the vehicle frame.
+        let pivot = Vec3::new(-vehicle.wheelbase_m / 2.0, 0.0, 0.0);
+        let (s_y, c_y) = (-yaw_off).sin_cos();
+        let rel = Vec3::new(r.start_x_m, r.lateral_offset_m + lateral_off, 0.0) - pivot;
+        let start = pivot + Vec3::new(c_y * rel.x - s_y * rel.y, s_y * rel.x + c_y * rel.y, 0.0);
         let run = StraightRun {
-            start_m: Vec3::new(r.start_x_m, r.lateral_offset_m, 0.0),
-            heading_rad: r.heading_deg.to_radians(),
+            start_m: start,
+            heading_rad: r.heading_deg.to_radians() - yaw_off,
             yaw_misalignment_rad: r.yaw_misalignment_deg.to_radians(),
             speed_mps: r.speed_mps,
             accel_mps2: r.accel_mps2,
@@ -298,13 +351,54 @@ impl Scenario {
             .unwrap_or_else(|| run.time_for_wheel_distance(r.distance_m));
         check_clearance(&vehicle, &run, r.distance_m * (1.0 - r.slip), r.height_m)
             .map_err(|reason| invalid(("robot".to_owned(), reason)))?;
+        let dir = path.parent().unwrap_or(Path::new("."));
+        let spec = match (&file.hall, &file.world) {
+            (Some(_), Some(_)) => {
+                return Err(invalid((
+                    "world".to_owned(),
+                    "give either [hall] or world, not both".to_owned(),
+                )));
+            }
+            (Some(spec), None) => Some((spec.clone(), dir.to_owned())),
+            (None, Some(w)) => {
+                let world_path = dir.join(w);
+                let spec = load_world(&world_path)
+                    .map_err(|reason| invalid(("world".to_owned(), reason)))?;
+                Some((
+                    spec,
+                    world_path.parent().unwrap_or(Path::new(".")).to_owned(),
+                ))
+            }
+            (None, None) => None,
+        };
+        let hall = match spec {
+            Some((spec, base)) => Some(Arc::new(
+                Hall::build(&spec, &vehicle, &base, derive_seed(file.seed, 8)).map_err(invalid)?,
+            )),
+            None => None,
+        };
         Ok(Self {
             path: path.to_owned(),
             file,
             vehicle,
             run,
             duration_s,
+            hall,
         })
+    }
+
+    /// The scene the sensors see: the vehicle, inside the hall if there is one.
+    pub fn scene(&self) -> Scene {
+        Scene::from_vehicle(&self.vehicle).with_hall(self.hall.clone())
+    }
+
+    /// The robot's true motion: the straight run, on the hall's floor if there is one (the floor's
+    /// undulation moves the robot's height, pitch and roll).
+    pub fn motion(&self) -> OnFloor<'_, StraightRun> {
+        OnFloor {
+            inner: &self.run,
+            floor: self.hall.as_deref().map(|h| &h.floor),
+        }
     }
 
     /// The VLP-16's settings with the head's starting azimuth resolved: the file's
@@ -382,6 +476,7 @@ fn check_clearance(
                         .map_or_else(|| "the body".to_owned(), |b| b.0.clone()),
                     SurfaceKind::Tyre => "a tyre".to_owned(),
                     SurfaceKind::Ground => "the ground".to_owned(),
+                    SurfaceKind::Structure | SurfaceKind::OtherVehicle => "the hall".to_owned(),
                 };
                 return Err(format!(
                     "the robot ({height_m} m tall) would hit {what} at x = {:.3} m, y = {:.3} m (only {:.3} m above the ground)",
@@ -393,6 +488,26 @@ fn check_clearance(
         }
     }
     Ok(())
+}
+
+/// Read a world file: a hall's keys ([`HallSpec`]) at the top level.
+pub fn load_world(path: &Path) -> Result<HallSpec, String> {
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| format!("cannot read world file {}: {e}", path.display()))?;
+    toml::from_str(&text).map_err(|e| format!("world file {}: {e}", path.display()))
+}
+
+/// The placement's yaw (radians) and lateral offset (metres) for this seed.
+fn placement_draw(file: &ScenarioFile) -> (f64, f64) {
+    use rand::{Rng, SeedableRng};
+    let p = &file.placement;
+    if p.yaw_max_deg == 0.0 && p.lateral_max_m == 0.0 {
+        return (0.0, 0.0);
+    }
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(derive_seed(file.seed, 7));
+    let u: f64 = rng.random_range(-1.0..=1.0);
+    let v: f64 = rng.random_range(-1.0..=1.0);
+    (u * p.yaw_max_deg.to_radians(), v * p.lateral_max_m)
 }
 
 fn validate_run(file: &ScenarioFile) -> Result<(), (String, String)> {

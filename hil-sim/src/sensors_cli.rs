@@ -33,7 +33,7 @@ use hil_sim::trajectory::{
 use hil_sim::truth::{TruthOptions, Zone, true_angles};
 use hil_sim::vehicle::Vehicle;
 use hil_sim::vlp16::{Datagram, Vlp16Sim};
-use hil_sim::world::Scene;
+use hil_sim::world::{Floor, OnFloor};
 use onboard::pcap::PcapWriter;
 
 /// pcap time of simulation time 0: 2026-01-01T00:00:00Z, seconds since the UNIX epoch.
@@ -164,23 +164,28 @@ fn load_scenario(path: &Path, duration_override: Option<f64>) -> anyhow::Result<
     Ok(scenario)
 }
 
-/// The robot's motion: the scenario's straight run or a trajectory file.
+/// The robot's motion: the scenario's straight run (on its hall's floor, if any) or a
+/// trajectory file.
 enum Motion {
-    Scenario(StraightRun),
+    Scenario(StraightRun, Option<Box<Floor>>),
     File(SampledTrajectory),
 }
 
 impl Trajectory for Motion {
     fn pose_at(&self, t_s: f64) -> Pose {
         match self {
-            Motion::Scenario(r) => r.pose_at(t_s),
+            Motion::Scenario(r, floor) => OnFloor {
+                inner: r,
+                floor: floor.as_deref(),
+            }
+            .pose_at(t_s),
             Motion::File(f) => f.pose_at(t_s),
         }
     }
 
     fn wheel_distance_at(&self, t_s: f64) -> f64 {
         match self {
-            Motion::Scenario(r) => r.wheel_distance_at(t_s),
+            Motion::Scenario(r, _) => r.wheel_distance_at(t_s),
             Motion::File(f) => f.wheel_distance_at(t_s),
         }
     }
@@ -193,7 +198,10 @@ fn load_motion(
     scenario: &mut Scenario,
 ) -> anyhow::Result<Motion> {
     let Some(path) = file else {
-        return Ok(Motion::Scenario(scenario.run.clone()));
+        return Ok(Motion::Scenario(
+            scenario.run.clone(),
+            scenario.hall.as_ref().map(|h| Box::new(h.floor.clone())),
+        ));
     };
     let text = fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
     let mut trajectory = parse_trajectory_csv(&text)
@@ -235,7 +243,7 @@ pub fn lidar(args: &LidarArgs) -> anyhow::Result<()> {
         args.trajectory_from_start,
         &mut scenario,
     )?;
-    let scene = Scene::from_vehicle(&scenario.vehicle);
+    let scene = scenario.scene();
     let sim = Vlp16Sim::new(
         &scene,
         &motion,
@@ -320,7 +328,7 @@ pub fn depth(args: &DepthArgs) -> anyhow::Result<()> {
         args.trajectory_from_start,
         &mut scenario,
     )?;
-    let scene = Scene::from_vehicle(&scenario.vehicle);
+    let scene = scenario.scene();
     let config = scenario.file.depth.clone();
     let sim = D435Sim::new(&scene, &motion, config.clone(), scenario.depth_seed());
     let frames_dir = args.out.join("depth");

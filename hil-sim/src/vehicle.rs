@@ -175,6 +175,29 @@ pub struct Tyre {
     pub width_m: f64,
     /// Rim radius, metres (inside the sidewall annulus).
     pub rim_radius_m: f64,
+    /// Free (unloaded) tread radius, metres; absent: `radius_m`, a rigid cylinder. When larger
+    /// than `radius_m` the tyre is loaded: the tread is a circle of this radius about the wheel
+    /// centre, flattened where it would pass below the ground (the contact patch), and the
+    /// scene casts it as a mesh ([`crate::world`]). The true angles still use `radius_m` (the
+    /// standards' static loaded radius arc).
+    #[serde(default)]
+    pub tread_radius_m: Option<f64>,
+    /// Outward bulge of each sidewall at the contact patch, metres (0: flat sidewalls). It
+    /// fades to nothing at the top of the tyre.
+    #[serde(default)]
+    pub sidewall_bulge_m: f64,
+}
+
+impl Tyre {
+    /// The free tread radius (`tread_radius_m`, else the static loaded radius).
+    pub fn tread_radius(&self) -> f64 {
+        self.tread_radius_m.unwrap_or(self.radius_m)
+    }
+
+    /// Whether the tyre is modelled as loaded (flattened or bulging) rather than a cylinder.
+    pub fn is_loaded(&self) -> bool {
+        self.tread_radius() > self.radius_m || self.sidewall_bulge_m > 0.0
+    }
 }
 
 /// A body given as a triangle mesh (see docs/simulator.md, "Triangle-mesh vehicles"): it replaces the prisms and the wheel
@@ -438,6 +461,17 @@ impl Vehicle {
         if self.tyre.rim_radius_m >= r {
             return fail("tyre.rim_radius_m", "must be smaller than tyre.radius_m");
         }
+        if let Some(tr) = self.tyre.tread_radius_m
+            && !(tr >= r && tr <= 1.2 * r)
+        {
+            return fail(
+                "tyre.tread_radius_m",
+                "must lie between tyre.radius_m and 1.2 x tyre.radius_m",
+            );
+        }
+        if !(0.0..=0.05).contains(&self.tyre.sidewall_bulge_m) {
+            return fail("tyre.sidewall_bulge_m", "must lie in 0..=0.05 m");
+        }
         if self.tyre.width_m <= 2.0 * RIM_INSET_M {
             return fail(
                 "tyre.width_m",
@@ -456,10 +490,10 @@ impl Vehicle {
                 "must exceed the tyre diameter (the tyres would overlap)",
             );
         }
-        if self.body_height_m <= 2.0 * r + self.arch_clearance_m {
+        if self.body_height_m <= r + self.tyre.tread_radius() + self.arch_clearance_m {
             return fail(
                 "body_height_m",
-                "must exceed the tyre diameter plus arch_clearance_m",
+                "must exceed the tyre's height (radius_m + tread radius) plus arch_clearance_m",
             );
         }
         match (&self.underside, &self.body_mesh) {
@@ -539,7 +573,7 @@ impl Vehicle {
         for (i, w) in section.points.windows(2).enumerate() {
             for axle_x in [0.0, -self.wheelbase_m] {
                 let gap = segment_point_distance(w[0], w[1], [axle_x, self.tyre.radius_m])
-                    - self.tyre.radius_m;
+                    - self.tyre.tread_radius();
                 if gap < MIN_TYRE_GAP_M {
                     return fail(
                         &format!("{name}.points[{i}..={}]", i + 1),
@@ -601,7 +635,7 @@ impl Vehicle {
             poly.push([first, top]);
             out.push((name.to_owned(), poly, s.width_m));
         }
-        let arch_z = 2.0 * self.tyre.radius_m + self.arch_clearance_m;
+        let arch_z = self.tyre.radius_m + self.tyre.tread_radius() + self.arch_clearance_m;
         let arches = [
             (
                 "front arch",

@@ -28,6 +28,21 @@
 //! Reflectivity is the surface's base value ([`base_reflectivity`]) times the cosine of the
 //! incidence angle, at least 1 for any return.
 //!
+//! # Field effects (each off by default; the scenario's `[lidar]` table turns them on)
+//! - **Footprint** (`beam_divergence_mrad`): the beam is not a line. Five rays sample it (centre
+//!   and +- half the divergence across and along the scan line); echoes closer than
+//!   `mixed_pixel_max_gap_m` merge into one return at their energy-weighted range, so at a depth
+//!   edge (a part's silhouette against the floor pan or the ground) the point lands between the
+//!   two surfaces (a mixed pixel), and thin edges widen by the footprint.
+//! - **Dark rubber** (`tyre_return_s50_per_m`): tyre hits return with a probability falling with
+//!   range and grazing incidence (assumed law, `1 / (1 + (s50 / s)^4)`, `s = cos / range`).
+//! - **Range bias** (`range_bias_sigma_m`): each laser adds a fixed bias drawn once per seed
+//!   (stream `derive_seed(seed, 11)` of the sensor's seed), as the calibration residuals of a real
+//!   unit.
+//!
+//! The extra random draws happen only where an effect is on, so a configuration without them
+//! gives the same packets as before they existed.
+//!
 //! # Randomness
 //! Packet `k` draws from `ChaCha8Rng::seed_from_u64(seed)` on stream `k`, so every packet is a pure
 //! function of (scenario, seed, k) and can be produced in any order, bit for bit.
@@ -41,7 +56,7 @@ use serde::Deserialize;
 
 use crate::geometry::{Isometry, Rot3, Vec3};
 use crate::trajectory::Trajectory;
-use crate::world::{Candidates, Scene, SurfaceId, base_reflectivity};
+use crate::world::{Candidates, Hit, Scene, SurfaceId, SurfaceKind, base_reflectivity};
 
 /// Elevation of each laser id in firing order, degrees (manual Table 9-1).
 pub const ELEVATION_DEG: [f64; 16] = [
@@ -93,6 +108,20 @@ pub struct Vlp16Config {
     /// 5 Hz and 0.35 m/s the robot moves 7 cm per rotation). Absent: a scenario draws it from its
     /// seed ([`crate::scenario::Scenario::lidar_config`]); the bare sensor starts at 0.
     pub start_azimuth_deg: Option<f64>,
+    /// Full beam divergence, milliradians, horizontal and vertical (the VLP-16's is about 3 x
+    /// 1.5). All zero (the default): a thin beam, one ray per firing. Otherwise each firing casts
+    /// its centre ray and four rays at +- half the divergence horizontally and vertically, and
+    /// their echoes make the return (see "Footprint" in the module docs).
+    pub beam_divergence_mrad: [f64; 2],
+    /// Echoes of one footprint closer together than this merge into one return at their
+    /// energy-weighted range (a mixed pixel); farther apart, the stronger group wins. Metres.
+    pub mixed_pixel_max_gap_m: f64,
+    /// Dark rubber: a tyre hit returns with probability `1 / (1 + (s50 / s)^4)`, `s = cos(incidence)
+    /// / range` in 1/m, `s50` this value. 0 (the default): tyres return like everything else.
+    pub tyre_return_s50_per_m: f64,
+    /// Standard deviation of each laser's fixed range bias (a calibration residual), metres,
+    /// drawn once per seed and clipped at 3 sigma. 0 (the default): no bias.
+    pub range_bias_sigma_m: f64,
 }
 
 impl Default for Vlp16Config {
@@ -109,6 +138,10 @@ impl Default for Vlp16Config {
             clock_offset_us: 0,
             position_packet_every: 14,
             start_azimuth_deg: None,
+            beam_divergence_mrad: [0.0, 0.0],
+            mixed_pixel_max_gap_m: 1.0,
+            tyre_return_s50_per_m: 0.0,
+            range_bias_sigma_m: 0.0,
         }
     }
 }
@@ -145,6 +178,22 @@ impl Vlp16Config {
         }
         if self.start_azimuth_deg.is_some_and(|a| !a.is_finite()) {
             return bad("start_azimuth_deg", "must be finite");
+        }
+        if self
+            .beam_divergence_mrad
+            .iter()
+            .any(|d| !(0.0..=20.0).contains(d))
+        {
+            return bad("beam_divergence_mrad", "both must lie in 0..=20 mrad");
+        }
+        if !(0.0..=10.0).contains(&self.mixed_pixel_max_gap_m) {
+            return bad("mixed_pixel_max_gap_m", "must lie in 0..=10 m");
+        }
+        if !(0.0..=10.0).contains(&self.tyre_return_s50_per_m) {
+            return bad("tyre_return_s50_per_m", "must lie in 0..=10 per metre");
+        }
+        if !(0.0..=0.1).contains(&self.range_bias_sigma_m) {
+            return bad("range_bias_sigma_m", "must lie in 0..=0.1 m");
         }
         Ok(())
     }
@@ -214,6 +263,8 @@ pub struct Vlp16Sim<'a, T: Trajectory> {
     start_azimuth_rad: f64,
     /// Test only the primitives in the wedge each packet sweeps (see `packet_candidates`).
     culling: bool,
+    /// Fixed range bias of each laser, metres.
+    range_bias_m: [f64; 16],
 }
 
 impl<'a, T: Trajectory> Vlp16Sim<'a, T> {
@@ -228,9 +279,20 @@ impl<'a, T: Trajectory> Vlp16Sim<'a, T> {
             let dt = (c / 16) as f64 * SEQUENCE_S + (c % 16) as f64 * FIRING_S;
             (omega_rad_per_s * dt).sin_cos()
         });
+        let range_bias_m = if config.range_bias_sigma_m > 0.0 {
+            let mut rng = ChaCha8Rng::seed_from_u64(crate::scenario::derive_seed(seed, 11));
+            let mut normals = NormalPairs::default();
+            let sigma = config.range_bias_sigma_m;
+            std::array::from_fn(|_| {
+                (normals.next(&mut rng) * sigma).clamp(-3.0 * sigma, 3.0 * sigma)
+            })
+        } else {
+            [0.0; 16]
+        };
         Self {
             scene,
             trajectory,
+            range_bias_m,
             robot_from_lidar: config.robot_from_lidar(),
             channel_offsets,
             omega_rad_per_s,
@@ -388,23 +450,43 @@ impl<'a, T: Trajectory> Vlp16Sim<'a, T> {
             distance_raw: 0,
             reflectivity: 0,
         };
-        let Some(hit) =
+        let max_cast = self.config.max_range_m + 1.0;
+        let [h_mrad, v_mrad] = self.config.beam_divergence_mrad;
+        let found = if h_mrad > 0.0 || v_mrad > 0.0 {
+            // Unit vectors across the beam: along the azimuth and along the elevation.
+            let across = world_from_lidar.apply_vector(Vec3::new(cos_a, -sin_a, 0.0));
+            let up =
+                world_from_lidar.apply_vector(Vec3::new(-sin_w * sin_a, -sin_w * cos_a, cos_w));
+            self.footprint(origin, dir, across, up, candidates)
+        } else {
             self.scene
-                .cast_among(origin, dir, self.config.max_range_m + 1.0, candidates)
-        else {
+                .cast_among(origin, dir, max_cast, candidates)
+                .map(|hit| (hit, dir, hit.range_m))
+        };
+        let Some((hit, hit_dir, echo_range_m)) = found else {
             return (none, None);
         };
-        let truth = Some((hit.surface, origin + dir * hit.range_m));
+        let truth = Some((hit.surface, origin + hit_dir * hit.range_m));
         let (u_drop, noise) = (rng.random::<f64>(), normals.next(rng));
         let limit = self.config.range_noise_limit_m;
-        let range_m = hit.range_m + (noise * self.config.range_noise_sigma_m).clamp(-limit, limit);
+        let range_m = echo_range_m
+            + self.range_bias_m[laser]
+            + (noise * self.config.range_noise_sigma_m).clamp(-limit, limit);
         if u_drop < self.config.dropout_probability
             || range_m < self.config.min_range_m
             || range_m > self.config.max_range_m
         {
             return (none, truth);
         }
-        let cos_incidence = -hit.normal.dot(dir);
+        let cos_incidence = -hit.normal.dot(hit_dir);
+        let s50 = self.config.tyre_return_s50_per_m;
+        if s50 > 0.0 && hit.surface.kind == SurfaceKind::Tyre {
+            let s = cos_incidence.max(0.0) / echo_range_m.max(1e-3);
+            let p_return = 1.0 / (1.0 + (s50 / s.max(1e-12)).powi(4));
+            if rng.random::<f64>() >= p_return {
+                return (none, truth);
+            }
+        }
         let reflectivity = (base_reflectivity(hit.surface.kind) * cos_incidence)
             .round()
             .clamp(1.0, 255.0) as u8;
@@ -416,6 +498,61 @@ impl<'a, T: Trajectory> Vlp16Sim<'a, T> {
             },
             truth,
         )
+    }
+
+    /// A finite footprint: the centre ray (weight 0.4) and four rays at +- half the divergence
+    /// across (`across`) and along (`up`) the scan line (0.15 each). Each hit's echo energy is its
+    /// weight x the surface's base reflectivity x cos(incidence) / range^2. Echoes sorted by range
+    /// form groups wherever neighbours lie within `mixed_pixel_max_gap_m`; the group of most
+    /// energy is the return, at its energy-weighted mean range (between the surfaces at a depth
+    /// edge: a mixed pixel), reported as its strongest hit. `None` when no ray hits.
+    fn footprint(
+        &self,
+        origin: Vec3,
+        dir: Vec3,
+        across: Vec3,
+        up: Vec3,
+        candidates: Candidates,
+    ) -> Option<(Hit, Vec3, f64)> {
+        let [h, v] = self.config.beam_divergence_mrad.map(|m| m * 0.5e-3);
+        let rays = [
+            (dir, 0.4),
+            ((dir + across * h).normalized(), 0.15),
+            ((dir - across * h).normalized(), 0.15),
+            ((dir + up * v).normalized(), 0.15),
+            ((dir - up * v).normalized(), 0.15),
+        ];
+        let max_cast = self.config.max_range_m + 1.0;
+        let mut echoes: Vec<(Hit, Vec3, f64)> = Vec::with_capacity(5);
+        for (d, w) in rays {
+            if let Some(hit) = self.scene.cast_among(origin, d, max_cast, candidates) {
+                let cos = (-hit.normal.dot(d)).max(0.0);
+                let energy = w * base_reflectivity(hit.surface.kind) * cos.max(0.01)
+                    / hit.range_m.max(0.1).powi(2);
+                echoes.push((hit, d, energy));
+            }
+        }
+        echoes.sort_by(|a, b| a.0.range_m.total_cmp(&b.0.range_m));
+        let gap = self.config.mixed_pixel_max_gap_m;
+        let mut best: Option<(f64, f64, usize)> = None; // (energy, weighted range, strongest echo)
+        let mut start = 0;
+        while start < echoes.len() {
+            let mut end = start + 1;
+            while end < echoes.len() && echoes[end].0.range_m - echoes[end - 1].0.range_m <= gap {
+                end += 1;
+            }
+            let group = &echoes[start..end];
+            let energy: f64 = group.iter().map(|e| e.2).sum();
+            let range = group.iter().map(|e| e.2 * e.0.range_m).sum::<f64>() / energy;
+            let strongest = (start..end)
+                .max_by(|&a, &b| echoes[a].2.total_cmp(&echoes[b].2))
+                .unwrap_or(start);
+            if best.is_none_or(|b| energy > b.0) {
+                best = Some((energy, range, strongest));
+            }
+            start = end;
+        }
+        best.map(|(_, range, i)| (echoes[i].0, echoes[i].1, range))
     }
 
     /// Position packet sent at simulation time `t_s` (no GPS: PPS absent, an empty-fix `$GPRMC`).
@@ -669,5 +806,188 @@ mod tests {
             }
         });
         assert!(seen);
+    }
+
+    /// The five footprint rays' ranges (centre, across +-, up +-), as `footprint` casts them.
+    fn sub_ranges(
+        scene: &Scene,
+        o: Vec3,
+        d: Vec3,
+        across: Vec3,
+        up: Vec3,
+        div: [f64; 2],
+    ) -> Vec<f64> {
+        let [h, v] = div.map(|m| m * 0.5e-3);
+        [d, d + across * h, d - across * h, d + up * v, d - up * v]
+            .iter()
+            .filter_map(|r| scene.cast(o, r.normalized(), 200.0).map(|hit| hit.range_m))
+            .collect()
+    }
+
+    #[test]
+    fn mixed_pixels_put_returns_between_foreground_and_background() {
+        // From under the test sedan, a fan of rays 2 degrees down sweeps across the front-left
+        // tyre's silhouette (1.5-1.8 m away) against the ground behind it (3.4 m away).
+        let scene = Scene::from_vehicle(&test_sedan());
+        let traj = run();
+        let between = |gap: f64| -> (usize, usize) {
+            let cfg = Vlp16Config {
+                beam_divergence_mrad: [3.0, 1.5],
+                mixed_pixel_max_gap_m: gap,
+                ..Vlp16Config::default()
+            };
+            let sim = Vlp16Sim::new(&scene, &traj, cfg, 1);
+            let o = Vec3::new(-1.4, 0.0, 0.12);
+            let e = -2f64.to_radians();
+            let (mut between, mut edges) = (0, 0);
+            for k in 0..4000 {
+                let a = (10.0 + 40.0 * f64::from(k) / 4000.0).to_radians();
+                let d = Vec3::new(e.cos() * a.cos(), e.cos() * a.sin(), e.sin());
+                let across = Vec3::new(-a.sin(), a.cos(), 0.0);
+                let up = Vec3::new(-e.sin() * a.cos(), -e.sin() * a.sin(), e.cos());
+                let Some((hit, _, range)) = sim.footprint(o, d, across, up, Candidates::ALL) else {
+                    continue;
+                };
+                let subs = sub_ranges(&scene, o, d, across, up, [3.0, 1.5]);
+                let (lo, hi) = subs
+                    .iter()
+                    .fold((f64::MAX, f64::MIN), |(l, h), r| (l.min(*r), h.max(*r)));
+                assert!(
+                    range >= lo - 1e-9 && range <= hi + 1e-9,
+                    "{range} outside {lo}..{hi}"
+                );
+                assert!(scene.distance_to_surface(hit.surface, o + d * 0.0) >= 0.0);
+                if hi - lo > 1.0 {
+                    edges += 1;
+                    if range > lo + 0.3 && range < hi - 0.3 {
+                        between += 1;
+                    }
+                }
+            }
+            (between, edges)
+        };
+        let (mixed, edges) = between(3.0);
+        assert!(
+            edges > 4 && mixed > 2,
+            "{mixed} mixed of {edges} edge footprints"
+        );
+        // Echoes farther apart than the gap stay apart: the stronger one is the return.
+        let (separate, edges) = between(0.5);
+        assert!(edges > 4 && separate == 0, "{separate} mixed of {edges}");
+    }
+
+    /// Every firing of packets `0..n` with the scene's surface, the true range and incidence.
+    fn firings(
+        sim: &Vlp16Sim<'_, StraightRun>,
+        scene: &Scene,
+        n: u64,
+    ) -> Vec<(SurfaceKind, f64, f64, u16, usize)> {
+        let mut out = Vec::new();
+        for k in 0..n {
+            sim.data_packet_with_truth(k, |f| {
+                if let Some((surface, point)) = f.hit {
+                    let laser = f.channel % 16;
+                    let origin = f.world_from_lidar.apply(Vec3::new(
+                        0.0,
+                        0.0,
+                        VERTICAL_OFFSET_MM[laser] / 1000.0,
+                    ));
+                    let range = (point - origin).norm();
+                    let dir = (point - origin) * (1.0 / range);
+                    let cos = scene
+                        .cast(origin, dir, range + 1.0)
+                        .map_or(0.0, |h| -h.normal.dot(dir));
+                    out.push((surface.kind, range, cos, f.distance_raw, laser));
+                }
+            });
+        }
+        out
+    }
+
+    #[test]
+    fn dark_rubber_drops_out_at_the_rate_the_law_gives() {
+        let scene = Scene::from_vehicle(&test_sedan());
+        let traj = run();
+        let s50 = 0.25;
+        let cfg = Vlp16Config {
+            tyre_return_s50_per_m: s50,
+            range_noise_sigma_m: 0.0,
+            dropout_probability: 0.0,
+            ..Vlp16Config::default()
+        };
+        let sim = Vlp16Sim::new(&scene, &traj, cfg, 4);
+        let (mut expected, mut variance, mut returned, mut n) = (0.0, 0.0, 0.0, 0);
+        let mut others_lost = 0;
+        for (kind, range, cos, raw, _) in firings(&sim, &scene, 1500) {
+            if !(0.5..100.0).contains(&range) {
+                continue;
+            }
+            if kind == SurfaceKind::Tyre {
+                let p = 1.0 / (1.0 + (s50 * range / cos.max(1e-12)).powi(4));
+                expected += p;
+                variance += p * (1.0 - p);
+                returned += f64::from(u8::from(raw != 0));
+                n += 1;
+            } else {
+                others_lost += usize::from(raw == 0);
+            }
+        }
+        assert!(n > 500, "{n} tyre firings");
+        assert_eq!(others_lost, 0, "only tyres drop out");
+        assert!(
+            (returned - expected).abs() < 4.0 * variance.sqrt(),
+            "returned {returned} of {n}, expected {expected:.1} +- {:.1}",
+            variance.sqrt()
+        );
+        assert!(
+            returned < 0.95 * f64::from(n),
+            "the law bites: {returned} of {n}"
+        );
+    }
+
+    #[test]
+    #[allow(clippy::float_cmp)] // the same seed gives the same biases to the bit
+    fn each_laser_has_a_fixed_range_bias_per_seed() {
+        let scene = Scene::from_vehicle(&test_sedan());
+        let traj = run();
+        let cfg = Vlp16Config {
+            range_bias_sigma_m: 0.01,
+            range_noise_sigma_m: 0.0,
+            dropout_probability: 0.0,
+            ..Vlp16Config::default()
+        };
+        let sim = Vlp16Sim::new(&scene, &traj, cfg.clone(), 9);
+        assert_eq!(
+            sim.range_bias_m,
+            Vlp16Sim::new(&scene, &traj, cfg.clone(), 9).range_bias_m
+        );
+        assert_ne!(
+            sim.range_bias_m,
+            Vlp16Sim::new(&scene, &traj, cfg, 10).range_bias_m
+        );
+        let mut per_laser: Vec<Vec<f64>> = vec![Vec::new(); 16];
+        for (_, range, _, raw, laser) in firings(&sim, &scene, 300) {
+            if raw != 0 {
+                per_laser[laser].push(f64::from(raw) * 0.002 - range);
+            }
+        }
+        let mut means = Vec::new();
+        for (laser, residuals) in per_laser.iter().enumerate() {
+            // Upward lasers under the low test floor see it closer than the minimum range.
+            if residuals.len() < 50 {
+                continue;
+            }
+            let (lo, hi) = residuals
+                .iter()
+                .fold((f64::MAX, f64::MIN), |(l, h), r| (l.min(*r), h.max(*r)));
+            // Constant but for the 2 mm quantum.
+            assert!(hi - lo <= 0.002 + 1e-9, "laser {laser}: {lo}..{hi}");
+            assert!((f64::midpoint(lo, hi) - sim.range_bias_m[laser]).abs() < 0.0011);
+            assert!(sim.range_bias_m[laser].abs() <= 0.03 + 1e-12);
+            means.push(f64::midpoint(lo, hi));
+        }
+        assert!(means.len() >= 8, "{} lasers with returns", means.len());
+        let spread = means.iter().fold(0.0_f64, |m, x| m.max(x.abs()));
+        assert!(spread > 0.005, "biases {means:?}");
     }
 }

@@ -49,6 +49,15 @@ pub struct WheelNoise {
     /// Correlation time of the yaw-rate error, seconds.
     #[serde(default = "default_tau")]
     pub yaw_rate_tau_s: f64,
+    /// A constant relative scale error per run, uniform in +- this (0.02: the wheels read up to
+    /// 2 % long or short for the whole run), on top of the wandering one.
+    #[serde(default)]
+    pub scale_error_max: f64,
+    /// A constant yaw-rate bias per run whose magnitude is uniform in `[min, max]` degrees per
+    /// second, with a random sign (`[0.1, 0.3]`: a left-right imbalance of the rollers), on top
+    /// of the Gaussian one.
+    #[serde(default)]
+    pub yaw_rate_bias_range_degps: [f64; 2],
 }
 
 fn default_tau() -> f64 {
@@ -71,6 +80,8 @@ impl WheelNoise {
         yaw_rate_bias_sigma_degps: 0.0,
         yaw_rate_sigma_degps: 0.0,
         yaw_rate_tau_s: 1.0,
+        scale_error_max: 0.0,
+        yaw_rate_bias_range_degps: [0.0, 0.0],
     };
 
     /// An assumed mecanum chassis on a hard floor (see the module docs: not measured): scale
@@ -84,6 +95,8 @@ impl WheelNoise {
         yaw_rate_bias_sigma_degps: 0.1,
         yaw_rate_sigma_degps: 0.2,
         yaw_rate_tau_s: 0.3,
+        scale_error_max: 0.0,
+        yaw_rate_bias_range_degps: [0.0, 0.0],
     };
 
     /// True when every error is zero.
@@ -92,6 +105,8 @@ impl WheelNoise {
             && self.lateral_sigma_mps == 0.0
             && self.yaw_rate_bias_sigma_degps == 0.0
             && self.yaw_rate_sigma_degps == 0.0
+            && self.scale_error_max == 0.0
+            && self.yaw_rate_bias_range_degps[1] == 0.0
     }
 
     /// The first invalid field and why: standard deviations finite and non-negative (at most
@@ -114,6 +129,19 @@ impl WheelNoise {
                     format!("must lie in [0, {max}], got {v}"),
                 ));
             }
+        }
+        if !(0.0..=0.2).contains(&self.scale_error_max) {
+            return Err((
+                "wheel_odometry.scale_error_max".to_owned(),
+                format!("must lie in [0, 0.2], got {}", self.scale_error_max),
+            ));
+        }
+        let [lo, hi] = self.yaw_rate_bias_range_degps;
+        if !(lo >= 0.0 && lo <= hi && hi <= 45.0) {
+            return Err((
+                "wheel_odometry.yaw_rate_bias_range_degps".to_owned(),
+                format!("need 0 <= min <= max <= 45, got [{lo}, {hi}]"),
+            ));
         }
         let taus = [
             ("scale_tau_s", self.scale_tau_s),
@@ -173,7 +201,9 @@ pub fn simulate(
     let dt = 1.0 / rate_hz;
     let (s, c) = (-run.yaw_misalignment_rad).sin_cos();
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    let bias_radps = noise.yaw_rate_bias_sigma_degps.to_radians() * gaussian(&mut rng);
+    let (scale_const, bias_const_radps) = constant_errors(noise, seed);
+    let bias_radps =
+        noise.yaw_rate_bias_sigma_degps.to_radians() * gaussian(&mut rng) + bias_const_radps;
     let mut scale = GaussMarkov::new(noise.scale_sigma, noise.scale_tau_s, dt, &mut rng);
     let mut lateral = GaussMarkov::new(noise.lateral_sigma_mps, noise.lateral_tau_s, dt, &mut rng);
     let yaw_sigma = noise.yaw_rate_sigma_degps.to_radians();
@@ -189,7 +219,7 @@ pub fn simulate(
             - run.wheel_distance_at(t - 0.5 * dt).max(0.0))
             / dt;
         let (e_scale, e_lat, e_wz) = (
-            scale.step(&mut rng),
+            scale.step(&mut rng) + scale_const,
             lateral.step(&mut rng),
             bias_radps + yaw_rate.step(&mut rng),
         );
@@ -213,6 +243,22 @@ pub fn simulate(
         eyaw += e_wz * dt;
     }
     out
+}
+
+/// The run's constant scale error and yaw-rate bias (rad/s) from `scale_error_max` and
+/// `yaw_rate_bias_range_degps`, drawn on their own stream (`derive_seed(seed, 21)`) so that the
+/// Gauss-Markov errors of a seed stay the same with or without them.
+pub fn constant_errors(noise: &WheelNoise, seed: u64) -> (f64, f64) {
+    use rand::Rng;
+    let [lo, hi] = noise.yaw_rate_bias_range_degps;
+    if noise.scale_error_max == 0.0 && hi == 0.0 {
+        return (0.0, 0.0);
+    }
+    let mut rng = ChaCha8Rng::seed_from_u64(crate::scenario::derive_seed(seed, 21));
+    let scale = noise.scale_error_max * rng.random_range(-1.0..=1.0);
+    let magnitude = lo + (hi - lo) * rng.random::<f64>();
+    let sign = if rng.random::<bool>() { 1.0 } else { -1.0 };
+    (scale, sign * magnitude.to_radians())
 }
 
 #[cfg(test)]
@@ -319,5 +365,35 @@ mod tests {
                 "{w:?}"
             );
         }
+    }
+
+    #[test]
+    fn constant_errors_stay_within_their_ranges_and_shift_the_whole_run() {
+        let mut r = run(0.0, 0.0);
+        r.accel_mps2 = 0.0;
+        let n = WheelNoise {
+            scale_error_max: 0.02,
+            yaw_rate_bias_range_degps: [0.1, 0.3],
+            ..WheelNoise::EXACT
+        };
+        assert!(!n.is_exact());
+        let (mut pos, mut neg) = (0, 0);
+        for seed in 1..=200 {
+            let (scale, bias) = constant_errors(&n, seed);
+            assert!(scale.abs() <= 0.02, "{scale}");
+            let b = bias.to_degrees().abs();
+            assert!((0.1..=0.3).contains(&b), "{b}");
+            pos += usize::from(bias > 0.0);
+            neg += usize::from(bias < 0.0);
+            // The final heading is the bias times the run's time; the distance along the body
+            // is the wheel distance times (1 + scale), to first order.
+            let odo = simulate(&r, &n, seed, 10.0, 100.0);
+            let last = odo.last().expect("samples");
+            assert!((last.yaw_rad - bias * 10.0).abs() < 1e-9, "{last:?}");
+            let along = last.x_m.hypot(last.y_m);
+            assert!((along / 3.0 - 1.0 - scale).abs() < 2e-3, "{along} {scale}");
+        }
+        assert!(pos > 70 && neg > 70, "signs {pos} / {neg}");
+        assert_eq!(constant_errors(&WheelNoise::EXACT, 3), (0.0, 0.0));
     }
 }

@@ -23,7 +23,10 @@ use std::sync::Arc;
 use crate::geometry::Vec3;
 // The primitives' bounding boxes are the meshes' (one slab test for both).
 use crate::mesh::{Bounds as Aabb, Mesh};
-use crate::vehicle::{Axis, Part, RIM_INSET_M, Vehicle};
+use crate::vehicle::{Axis, Part, RIM_INSET_M, Tyre, Vehicle};
+
+pub mod hall;
+pub use hall::{Floor, Hall, HallSpec, OnFloor};
 
 /// What kind of surface a ray hit.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -37,6 +40,10 @@ pub enum SurfaceKind {
     Body,
     /// An optional part (index into `Vehicle::parts`).
     Part,
+    /// A hall's wall, ceiling or pillar (index: see [`hall::Hall`]).
+    Structure,
+    /// Another parked vehicle in a hall (index: which one).
+    OtherVehicle,
 }
 
 /// Which surface a ray hit.
@@ -66,6 +73,9 @@ struct TyrePrim {
     half_width: f64,
     rim_radius: f64,
     bounds: Aabb,
+    /// A loaded tyre's surface (flattened contact patch, bulging sidewalls), cast instead of
+    /// the cylinder.
+    mesh: Option<Arc<Mesh>>,
 }
 
 #[derive(Clone, Debug)]
@@ -115,6 +125,9 @@ pub struct Scene {
     /// A mesh body with its bounds, cast as the body surface after the prisms.
     body_mesh: Option<(Arc<Mesh>, Aabb)>,
     parts: Vec<PartPrim>,
+    /// The hall around the vehicle (floor, walls, pillars, other vehicles); `None`: an empty,
+    /// flat world.
+    hall: Option<Arc<Hall>>,
 }
 
 /// Base diffuse reflectivity of each kind of surface on the VLP-16's 0..100 calibrated scale
@@ -125,6 +138,8 @@ pub fn base_reflectivity(kind: SurfaceKind) -> f64 {
         SurfaceKind::Tyre => 6.0,
         SurfaceKind::Body => 40.0,
         SurfaceKind::Part => 60.0,
+        SurfaceKind::Structure => 50.0,
+        SurfaceKind::OtherVehicle => 35.0,
     }
 }
 
@@ -137,8 +152,24 @@ impl Scene {
             .iter()
             .map(|&[x, y, z]| {
                 let hw = t.width_m / 2.0;
+                let centre = Vec3::new(x, y, z);
+                if t.is_loaded() {
+                    let mesh = loaded_tyre_mesh(t, centre);
+                    let b = mesh.bounds();
+                    return TyrePrim {
+                        centre,
+                        radius: t.radius_m,
+                        half_width: hw,
+                        rim_radius: t.rim_radius_m,
+                        bounds: Aabb {
+                            min: b.min,
+                            max: b.max,
+                        },
+                        mesh: Some(Arc::new(mesh)),
+                    };
+                }
                 TyrePrim {
-                    centre: Vec3::new(x, y, z),
+                    centre,
                     radius: t.radius_m,
                     half_width: hw,
                     rim_radius: t.rim_radius_m,
@@ -146,6 +177,7 @@ impl Scene {
                         min: Vec3::new(x - t.radius_m, y - hw, z - t.radius_m),
                         max: Vec3::new(x + t.radius_m, y + hw, z + t.radius_m),
                     },
+                    mesh: None,
                 }
             })
             .collect();
@@ -187,7 +219,60 @@ impl Scene {
             prisms,
             body_mesh,
             parts,
+            hall: None,
         }
+    }
+
+    /// This scene inside `hall` (its floor replaces the flat ground; its walls, pillars and other
+    /// vehicles are cast after the vehicle's primitives and never culled by wedges).
+    #[must_use]
+    pub fn with_hall(mut self, hall: Option<Arc<Hall>>) -> Self {
+        self.hall = hall;
+        self
+    }
+
+    /// The hall, if any.
+    pub fn hall(&self) -> Option<&Hall> {
+        self.hall.as_deref()
+    }
+
+    /// Distance from `p` to the nearest surface of any kind: ground or floor, the vehicle and
+    /// the hall (for tests and cloud checks).
+    pub fn distance_to_nearest(&self, p: Vec3) -> f64 {
+        let ground = self.distance_to_surface(
+            SurfaceId {
+                kind: SurfaceKind::Ground,
+                index: 0,
+            },
+            p,
+        );
+        let hall = self
+            .hall
+            .as_ref()
+            .map_or(f64::INFINITY, |h| h.distance_to_structures(p));
+        ground.min(hall).min(self.distance_to_nearest_vehicle(p))
+    }
+
+    /// Distance from `p` to the nearest tyre, body surface or part.
+    pub fn distance_to_nearest_vehicle(&self, p: Vec3) -> f64 {
+        let mut best = f64::INFINITY;
+        for (kind, n) in [
+            (SurfaceKind::Tyre, self.tyres.len()),
+            (
+                SurfaceKind::Body,
+                self.prisms.len() + usize::from(self.body_mesh.is_some()),
+            ),
+            (SurfaceKind::Part, self.parts.len()),
+        ] {
+            for index in 0..n {
+                let id = SurfaceId {
+                    kind,
+                    index: index as u16,
+                };
+                best = best.min(self.distance_to_surface(id, p));
+            }
+        }
+        best
     }
 
     /// Cast a ray from `origin` along the unit vector `dir`; the nearest hit closer than `max_range_m`.
@@ -203,6 +288,30 @@ impl Scene {
         dir: Vec3,
         max_range_m: f64,
         candidates: Candidates,
+    ) -> Option<Hit> {
+        self.cast_inner(origin, dir, max_range_m, candidates, true)
+    }
+
+    /// The vehicle's primitives only (no ground, no hall): how another vehicle standing in a hall
+    /// is cast.
+    pub(crate) fn cast_vehicle_only(
+        &self,
+        origin: Vec3,
+        dir: Vec3,
+        max_range_m: f64,
+    ) -> Option<Hit> {
+        self.cast_inner(origin, dir, max_range_m, Candidates::ALL, false)
+    }
+
+    // One nearest-hit loop over every kind of primitive.
+    #[allow(clippy::too_many_lines)]
+    fn cast_inner(
+        &self,
+        origin: Vec3,
+        dir: Vec3,
+        max_range_m: f64,
+        candidates: Candidates,
+        surroundings: bool,
     ) -> Option<Hit> {
         let inv = Vec3::new(1.0 / dir.x, 1.0 / dir.y, 1.0 / dir.z);
         let mut best: Option<Hit> = None;
@@ -225,19 +334,32 @@ impl Scene {
                 });
             }
         };
-        if dir.z < 0.0 && origin.z > 0.0 {
-            keep(
-                -origin.z / dir.z,
-                Vec3::new(0.0, 0.0, 1.0),
-                SurfaceKind::Ground,
-                0,
-                &mut t_max,
-            );
+        match &self.hall {
+            _ if !surroundings => {}
+            Some(h) if !h.floor.is_flat() => {
+                if let Some((t, n)) = h.floor.cast(origin, dir, t_max) {
+                    keep(t, n, SurfaceKind::Ground, 0, &mut t_max);
+                }
+            }
+            _ => {
+                if dir.z < 0.0 && origin.z > 0.0 {
+                    keep(
+                        -origin.z / dir.z,
+                        Vec3::new(0.0, 0.0, 1.0),
+                        SurfaceKind::Ground,
+                        0,
+                        &mut t_max,
+                    );
+                }
+            }
         }
         for (i, ty) in self.tyres.iter().enumerate() {
             if candidates.has_tyre(i)
                 && ty.bounds.hit(origin, inv, t_max)
-                && let Some((t, n)) = hit_tyre(ty, origin, dir, t_max)
+                && let Some((t, n)) = match &ty.mesh {
+                    Some(m) => m.cast(origin, dir, t_max),
+                    None => hit_tyre(ty, origin, dir, t_max),
+                }
             {
                 keep(t, n, SurfaceKind::Tyre, i, &mut t_max);
             }
@@ -300,6 +422,12 @@ impl Scene {
                 keep(t, n, SurfaceKind::Part, i, &mut t_max);
             }
         }
+        if surroundings
+            && let Some(h) = &self.hall
+            && let Some((t, n, kind, index)) = h.cast(origin, dir, t_max)
+        {
+            keep(t, n, kind, index, &mut t_max);
+        }
         best
     }
 
@@ -341,11 +469,18 @@ impl Scene {
     pub fn distance_to_surface(&self, id: SurfaceId, p: Vec3) -> f64 {
         let i = usize::from(id.index);
         match id.kind {
-            SurfaceKind::Ground => p.z.abs(),
-            SurfaceKind::Tyre => self
-                .tyres
-                .get(i)
-                .map_or(f64::INFINITY, |t| tyre_distance(t, p)),
+            SurfaceKind::Ground => match &self.hall {
+                Some(h) => h.floor.distance(p),
+                None => p.z.abs(),
+            },
+            SurfaceKind::Tyre => self.tyres.get(i).map_or(f64::INFINITY, |t| match &t.mesh {
+                Some(m) => m.distance(p),
+                None => tyre_distance(t, p),
+            }),
+            SurfaceKind::Structure | SurfaceKind::OtherVehicle => self
+                .hall
+                .as_ref()
+                .map_or(f64::INFINITY, |h| h.distance_to(id, p)),
             SurfaceKind::Body => match (self.prisms.get(i), &self.body_mesh) {
                 (Some(pr), _) => prism_distance(pr, p),
                 (None, Some((mesh, _))) if i == self.prisms.len() => mesh.distance(p),
@@ -469,6 +604,92 @@ fn part_prim(part: &Part) -> PartPrim {
             }
         }
     }
+}
+
+/// Angular segments of a loaded tyre's mesh around its axle.
+const LOADED_TYRE_SEGMENTS: usize = 96;
+
+/// The surface of a loaded tyre centred at `centre` (axle along y) as a triangle mesh.
+///
+/// Around the axle, at angle `th` from straight down, the tread's radius is the free radius `R`
+/// except where that would pass below the ground: there it is `h / cos th` (h = the static
+/// loaded radius, the centre's height), a flat contact patch on z = 0 from `-acos(h/R)` to
+/// `+acos(h/R)` (angles sampled exactly at both ends). Across the tread, the profile runs from
+/// the rim edge (rim radius, at the sidewall plane) up the sidewall to a 1.5 cm shoulder and
+/// over the flat tread to the other side; each sidewall bulges outward by
+/// `bulge * cos(th)^4 * sin(pi s)` (s = 0 at the rim, 1 at the shoulder; none above the axle).
+/// Each rim disc sits [`RIM_INSET_M`] inside its sidewall plane, joined to the sidewall's rim
+/// edge by a short cylinder (the rim's lip).
+pub fn loaded_tyre_mesh(t: &Tyre, centre: Vec3) -> Mesh {
+    let (h, big_r, rim, hw, bulge) = (
+        t.radius_m,
+        t.tread_radius(),
+        t.rim_radius_m,
+        t.width_m / 2.0,
+        t.sidewall_bulge_m,
+    );
+    let mut angles: Vec<f64> = (0..LOADED_TYRE_SEGMENTS)
+        .map(|k| std::f64::consts::TAU * k as f64 / LOADED_TYRE_SEGMENTS as f64)
+        .collect();
+    if big_r > h {
+        let edge = (h / big_r).acos();
+        angles.push(edge);
+        angles.push(std::f64::consts::TAU - edge);
+        angles.sort_by(f64::total_cmp);
+        angles.dedup_by(|a, b| (*a - *b).abs() < 1e-9);
+    }
+    // Profile across the tyre at one angle: (radius, y) from the +y rim disc to the -y one.
+    let profile = |th: f64| -> Vec<(f64, f64)> {
+        let c = th.cos();
+        let tread = if c > 0.0 { big_r.min(h / c) } else { big_r };
+        let shoulder = 0.015_f64.min(0.25 * (tread - rim));
+        let b = bulge * c.max(0.0).powi(4);
+        let wall = |s: f64| {
+            (
+                rim + s * (tread - shoulder - rim),
+                b * (std::f64::consts::PI * s).sin(),
+            )
+        };
+        let mut side: Vec<(f64, f64)> = vec![(rim, hw - RIM_INSET_M), (rim, hw)];
+        for s in [0.25, 0.5, 0.75] {
+            let (r, dy) = wall(s);
+            side.push((r, hw + dy));
+        }
+        side.push((tread - shoulder, hw));
+        side.push((tread, hw - shoulder));
+        let mut out = side.clone();
+        out.extend(side.iter().rev().map(|&(r, y)| (r, -y)));
+        out
+    };
+    let per_ring = profile(0.0).len();
+    let mut vertices = Vec::with_capacity(angles.len() * per_ring + 2);
+    for &th in &angles {
+        let (s, c) = th.sin_cos();
+        for (r, y) in profile(th) {
+            vertices.push(Vec3::new(centre.x + r * s, centre.y + y, centre.z - r * c));
+        }
+    }
+    let hub = [
+        Vec3::new(centre.x, centre.y + hw - RIM_INSET_M, centre.z),
+        Vec3::new(centre.x, centre.y - hw + RIM_INSET_M, centre.z),
+    ];
+    let hub_index = vertices.len() as u32;
+    vertices.extend(hub);
+    let n = angles.len();
+    let mut triangles = Vec::with_capacity(n * (2 * per_ring));
+    for k in 0..n {
+        let (a, b) = ((k * per_ring) as u32, (((k + 1) % n) * per_ring) as u32);
+        for j in 0..per_ring as u32 - 1 {
+            triangles.push([a + j, b + j, b + j + 1]);
+            triangles.push([a + j, b + j + 1, a + j + 1]);
+        }
+        // Rim discs: fans from the hub centres to the first and last profile points.
+        triangles.push([hub_index, a, b]);
+        let last = per_ring as u32 - 1;
+        triangles.push([hub_index + 1, a + last, b + last]);
+    }
+    // Every vertex is finite and every index in range by construction.
+    Mesh::new(vertices, triangles).unwrap_or_default()
 }
 
 fn v3(a: [f64; 3]) -> Vec3 {

@@ -92,6 +92,8 @@ fn vehicle() -> impl Strategy<Value = Vehicle> {
                         radius_m: r,
                         width_m: tw,
                         rim_radius_m: rim,
+                        tread_radius_m: None,
+                        sidewall_bulge_m: 0.0,
                     },
                     underside: Some(Underside {
                         front: place(front, 1.6, 0.6),

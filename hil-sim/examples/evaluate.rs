@@ -1,0 +1,540 @@
+//! The held-out protocol's bench (issue 30): every run of `hil-sim/evaluation.toml` through the
+//! offline pipeline and the angle calculator, against the geometry's true angles, as one table
+//! per set.
+//!
+//! Run: `cargo run --release -p hil-sim --example evaluate -- [--set tuning|held-out|both]
+//! [--protocol FILE] [--jobs N] [--only TEXT] [--oracle]` (defaults: both sets,
+//! `hil-sim/evaluation.toml`, two worker threads; `--only` keeps the runs whose vehicle or world
+//! contains TEXT; `--oracle` replaces the pipeline by the true poses: every simulated return
+//! placed with the exact pose of its firing, one centroid per 5 mm voxel as the pipeline's output,
+//! the true path as the scan's path, so the tables show the calculator alone on the same runs).
+//!
+//! Per run (all seeded; the same command prints the same tables): the protocol's template
+//! scenario with the run's vehicle, world and seed, the robot starting 1 m ahead of the vehicle's
+//! front and driving to 1 m behind its rear; the simulated VLP-16 packets decoded by
+//! `onboard::vlp16::FrameAssembler`; wheel odometry at 100 Hz with the template's wheel errors; the
+//! pipeline with its default settings, laser + wheel (the camera is off in the defaults); the built
+//! cloud moved into the vehicle frame by the true start pose (on the hall's floor) with the
+//! estimated trajectory as the scan's path; `onboard::angles::compute_angles` with its default
+//! settings; `hil_sim::truth::true_angles` (49 CFR zone, flexible parts included). Nothing is
+//! tuned here: every setting is the crate's default.
+//!
+//! Output: per set, a row per run with the true angles, the three errors (measured - true,
+//! degrees; `-` where the calculator gave none), the mean and largest |error| of the run, how many
+//! of its angles lie within 0.5 degree, and, for a run with a missing angle, the calculator's
+//! reason; then the set's summary (per angle: mean and largest |error|, within 0.5 degree;
+//! runs with every angle within 0.5 degree; runs without angles). Timing goes to stderr only.
+
+use std::path::{Path, PathBuf};
+use std::sync::Mutex;
+use std::time::Instant;
+
+use anyhow::{Context as _, bail};
+use hil_sim::geometry::Isometry;
+use hil_sim::scenario::Scenario;
+use hil_sim::trajectory::Trajectory;
+use hil_sim::truth::{TruthOptions, true_angles};
+use hil_sim::vehicle::Vehicle;
+use onboard::angles::{AnglesConfig, compute_angles};
+use onboard::pipeline::geom::{Pose, rpy_of};
+use onboard::pipeline::{BuiltCloud, LidarFrame, Pipeline, PipelineConfig, WheelOdometry};
+use serde::Deserialize;
+
+/// The protocol file.
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct Protocol {
+    template: PathBuf,
+    tuning: Vec<Group>,
+    held_out: Vec<Group>,
+}
+
+/// A cross product of vehicles, worlds and seeds.
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct Group {
+    vehicles: Vec<PathBuf>,
+    worlds: Vec<String>,
+    seeds: Vec<u64>,
+}
+
+/// One run of the protocol.
+#[derive(Clone)]
+struct Entry {
+    vehicle: PathBuf,
+    /// `None`: the empty world.
+    world: Option<PathBuf>,
+    seed: u64,
+}
+
+impl Entry {
+    fn vehicle_name(&self) -> String {
+        stem(&self.vehicle)
+    }
+
+    fn world_name(&self) -> String {
+        self.world
+            .as_ref()
+            .map_or_else(|| "empty".to_owned(), |w| stem(w))
+    }
+}
+
+fn stem(p: &Path) -> String {
+    p.file_stem()
+        .map_or_else(String::new, |s| s.to_string_lossy().into_owned())
+}
+
+/// What one run gave.
+struct Outcome {
+    /// True approach, breakover, departure, degrees.
+    truth_deg: [f64; 3],
+    /// Measured - true, degrees (`None`: no angle).
+    error_deg: [Option<f64>; 3],
+    /// Why angles are missing (the calculator's error or which angle it did not find).
+    missing: Option<String>,
+    cpu_s: f64,
+    frames: usize,
+}
+
+fn entries(dir: &Path, groups: &[Group]) -> Vec<Entry> {
+    let mut out = Vec::new();
+    for g in groups {
+        for v in &g.vehicles {
+            for w in &g.worlds {
+                for &seed in &g.seeds {
+                    out.push(Entry {
+                        vehicle: dir.join(v),
+                        world: (w != "empty").then(|| dir.join(w)),
+                        seed,
+                    });
+                }
+            }
+        }
+    }
+    out
+}
+
+fn pose_of(iso: &Isometry) -> Pose {
+    Pose {
+        rotation: iso.rotation.0,
+        translation: [iso.translation.x, iso.translation.y, iso.translation.z],
+    }
+}
+
+/// The scenario of one run: the template with the run's vehicle, world and seed, the robot from
+/// 1 m ahead of the vehicle's front to 1 m behind its rear.
+fn scenario_of(
+    template_path: &Path,
+    template: &Scenario,
+    entry: &Entry,
+) -> anyhow::Result<Scenario> {
+    let vehicle = Vehicle::load(&entry.vehicle)?;
+    let mut file = template.file.clone();
+    file.vehicle.clone_from(&entry.vehicle);
+    file.world.clone_from(&entry.world);
+    file.hall = None;
+    file.seed = entry.seed;
+    file.duration_s = None;
+    file.robot.start_x_m = vehicle.front_x_m() + 1.0;
+    file.robot.distance_m = vehicle.front_x_m() - vehicle.rear_x_m() + 2.0;
+    Ok(Scenario::from_parts(template_path, file, vehicle)?)
+}
+
+/// CPU time of this thread, seconds (`/proc/thread-self/schedstat`).
+fn thread_cpu_s() -> f64 {
+    std::fs::read_to_string("/proc/thread-self/schedstat")
+        .ok()
+        .and_then(|t| t.split_whitespace().next()?.parse::<u64>().ok())
+        .map_or(0.0, |ns| ns as f64 * 1e-9)
+}
+
+/// The pipeline on lidar frames and wheel odometry in arrival order (a lidar frame is available
+/// after its 0.1 s sweep), laser + wheel with the default settings and the scenario's mounts.
+fn run_pipeline(
+    scenario: &Scenario,
+    lidar: &[LidarFrame],
+    wheel: &[WheelOdometry],
+) -> anyhow::Result<BuiltCloud> {
+    let mut config = PipelineConfig::default();
+    config.fusion.use_visual = false;
+    config.visual.enabled = false;
+    let lidar_mount = pose_of(&scenario.file.lidar.robot_from_lidar());
+    let camera_mount = pose_of(&scenario.file.depth.robot_from_camera());
+    config.mounts.lidar_xyz_m = lidar_mount.translation;
+    config.mounts.lidar_rpy_rad = rpy_of(&lidar_mount.rotation);
+    config.mounts.camera_xyz_m = camera_mount.translation;
+    config.mounts.camera_rpy_rad = rpy_of(&camera_mount.rotation);
+    let mut events: Vec<(f64, Result<&LidarFrame, &WheelOdometry>)> = lidar
+        .iter()
+        .map(|f| (f.stamp_s + 0.1, Ok(f)))
+        .chain(wheel.iter().map(|w| (w.stamp_s, Err(w))))
+        .collect();
+    events.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let mut pipeline = Pipeline::new(config).context("pipeline settings")?;
+    for (_, e) in events {
+        match e {
+            Ok(f) => pipeline.push_lidar_frame(f.clone()),
+            Err(w) => pipeline.push_wheel_odometry(*w),
+        }
+        .context("simulated input")?;
+    }
+    Ok(pipeline.finish())
+}
+
+/// The oracle's cloud and path (vehicle frame): every return of the run placed with the true
+/// pose of its firing (the decoder's maths on the reported range), reduced to one centroid per
+/// 5 mm voxel, and the true robot positions every 0.1 s.
+fn oracle_cloud(
+    scenario: &Scenario,
+    scene: &hil_sim::world::Scene,
+) -> (Vec<[f64; 3]>, Vec<[f64; 3]>, usize) {
+    use hil_sim::vlp16::{ELEVATION_DEG, VERTICAL_OFFSET_MM, Vlp16Sim};
+    let motion = scenario.motion();
+    let sim = Vlp16Sim::new(
+        scene,
+        &motion,
+        scenario.lidar_config(),
+        scenario.lidar_seed(),
+    );
+    let packets = Vlp16Sim::<hil_sim::trajectory::StraightRun>::packets_in(scenario.duration_s);
+    let mut cells: std::collections::BTreeMap<[i64; 3], ([f64; 3], u32)> =
+        std::collections::BTreeMap::new();
+    for k in 0..packets {
+        sim.data_packet_with_truth(k, |f| {
+            if f.distance_raw == 0 {
+                return;
+            }
+            let laser = f.channel % 16;
+            let (sin_w, cos_w) = ELEVATION_DEG[laser].to_radians().sin_cos();
+            let (sin_a, cos_a) = sim.azimuth_at(f.time_s).sin_cos();
+            let r = f64::from(f.distance_raw) * 0.002;
+            let p = hil_sim::geometry::Vec3::new(
+                r * cos_w * sin_a,
+                r * cos_w * cos_a,
+                r * sin_w + VERTICAL_OFFSET_MM[laser] / 1000.0,
+            );
+            let w = f.world_from_lidar.apply(p);
+            let key = [w.x, w.y, w.z].map(|v| (v / 0.005).floor() as i64);
+            let e = cells.entry(key).or_insert(([0.0; 3], 0));
+            e.0[0] += w.x;
+            e.0[1] += w.y;
+            e.0[2] += w.z;
+            e.1 += 1;
+        });
+    }
+    let cloud = cells
+        .into_values()
+        .map(|(s, n)| s.map(|v| v / f64::from(n)))
+        .collect();
+    let steps = (scenario.duration_s / 0.1) as u32;
+    let path = (0..=steps)
+        .map(|i| {
+            let p = motion.pose_at(f64::from(i) * 0.1).position_m;
+            [p.x, p.y, p.z]
+        })
+        .collect();
+    (cloud, path, packets as usize)
+}
+
+fn run(
+    template_path: &Path,
+    template: &Scenario,
+    entry: &Entry,
+    oracle: bool,
+) -> anyhow::Result<Outcome> {
+    let scenario = scenario_of(template_path, template, entry)?;
+    let truth = true_angles(&scenario.vehicle, &TruthOptions::default());
+    let truth_deg = [
+        truth.approach.angle_rad,
+        truth.breakover.angle_rad,
+        truth.departure.angle_rad,
+    ]
+    .map(f64::to_degrees);
+    let scene = scenario.scene();
+    let (cloud, path, frames, cpu_s) = if oracle {
+        let (cloud, path, packets) = oracle_cloud(&scenario, &scene);
+        (cloud, path, packets, 0.0)
+    } else {
+        let lidar = scenario.decoded_lidar_frames(&scene);
+        let wheel = scenario.wheel_odometry(0.2);
+        let cpu0 = thread_cpu_s();
+        let built = run_pipeline(&scenario, &lidar, &wheel)?;
+        let cpu_s = thread_cpu_s() - cpu0;
+        let Some(first) = built.trajectory.first() else {
+            bail!("the pipeline built no trajectory");
+        };
+        let motion = scenario.motion();
+        let t0 = pose_of(&motion.pose_at(first.stamp_s).to_isometry());
+        let cloud: Vec<[f64; 3]> = built.points_in_world.iter().map(|&p| t0.apply(p)).collect();
+        let path = built
+            .trajectory
+            .iter()
+            .map(|tp| t0.apply(tp.world_from_robot.translation))
+            .collect();
+        (cloud, path, lidar.len(), cpu_s)
+    };
+    let config = AnglesConfig {
+        scan_path_in_cloud: path,
+        ..AnglesConfig::default()
+    };
+    let (error_deg, missing) = match compute_angles(&cloud, &config) {
+        Ok(r) => {
+            let measured = [&r.approach, &r.breakover, &r.departure]
+                .map(|a| a.as_ref().map(|a| a.angle_rad.to_degrees()));
+            let names = ["approach", "breakover", "departure"];
+            let absent: Vec<&str> = (0..3)
+                .filter(|&k| measured[k].is_none())
+                .map(|k| names[k])
+                .collect();
+            let missing = (!absent.is_empty()).then(|| {
+                format!(
+                    "no {} found; warnings: {}",
+                    absent.join(", "),
+                    r.warnings.join("; ")
+                )
+            });
+            (
+                [0, 1, 2].map(|k| measured[k].map(|m| m - truth_deg[k])),
+                missing,
+            )
+        }
+        Err(e) => ([None; 3], Some(e.to_string())),
+    };
+    Ok(Outcome {
+        truth_deg,
+        error_deg,
+        missing,
+        cpu_s,
+        frames,
+    })
+}
+
+fn fmt_err(e: Option<f64>) -> String {
+    e.map_or_else(|| "-".to_owned(), |v| format!("{v:+.2}"))
+}
+
+// One table and its summary, printed in order.
+#[allow(clippy::too_many_lines)]
+fn print_set(name: &str, entries: &[Entry], outcomes: &[anyhow::Result<Outcome>]) {
+    println!("## {name} set: {} runs\n", entries.len());
+    println!(
+        "| vehicle | world | seed | true a / b / d deg | approach err | breakover err | departure err | mean abs | max abs | within 0.5 | missing |"
+    );
+    println!("|---|---|---|---|---|---|---|---|---|---|---|");
+    let mut per_angle: [Vec<f64>; 3] = [Vec::new(), Vec::new(), Vec::new()];
+    let (mut runs_all_ok, mut runs_without, mut angles_total) = (0, Vec::new(), 0);
+    for (e, o) in entries.iter().zip(outcomes) {
+        let (v, w) = (e.vehicle_name(), e.world_name());
+        match o {
+            Err(err) => {
+                println!(
+                    "| {v} | {w} | {} | - | - | - | - | - | - | 0/3 | run failed: {err:#} |",
+                    e.seed
+                );
+                runs_without.push(format!("{v}/{w}/{}: run failed: {err:#}", e.seed));
+                angles_total += 3;
+            }
+            Ok(o) => {
+                let found: Vec<f64> = o.error_deg.iter().flatten().map(|x| x.abs()).collect();
+                for (k, err) in o.error_deg.iter().enumerate() {
+                    if let Some(x) = err {
+                        per_angle[k].push(x.abs());
+                    }
+                }
+                angles_total += 3;
+                let within = found.iter().filter(|x| **x <= 0.5).count();
+                if within == 3 {
+                    runs_all_ok += 1;
+                }
+                let (mean, max) = if found.is_empty() {
+                    ("-".to_owned(), "-".to_owned())
+                } else {
+                    (
+                        format!("{:.2}", found.iter().sum::<f64>() / found.len() as f64),
+                        format!("{:.2}", found.iter().fold(0.0_f64, |m, x| m.max(*x))),
+                    )
+                };
+                if let Some(why) = &o.missing {
+                    runs_without.push(format!("{v}/{w}/{}: {why}", e.seed));
+                }
+                println!(
+                    "| {v} | {w} | {} | {:.2} / {:.2} / {:.2} | {} | {} | {} | {mean} | {max} | {within}/3 | {} |",
+                    e.seed,
+                    o.truth_deg[0],
+                    o.truth_deg[1],
+                    o.truth_deg[2],
+                    fmt_err(o.error_deg[0]),
+                    fmt_err(o.error_deg[1]),
+                    fmt_err(o.error_deg[2]),
+                    o.missing.as_deref().unwrap_or(""),
+                );
+            }
+        }
+    }
+    println!("\n| {name} | approach | breakover | departure |");
+    println!("|---|---|---|---|");
+    let stat = |f: &dyn Fn(&[f64]) -> String| -> String {
+        per_angle
+            .iter()
+            .map(|v| f(v))
+            .collect::<Vec<_>>()
+            .join(" | ")
+    };
+    println!(
+        "| angles found | {} |",
+        stat(&|v| format!("{} of {}", v.len(), entries.len()))
+    );
+    println!(
+        "| mean abs error deg | {} |",
+        stat(&|v| if v.is_empty() {
+            "-".to_owned()
+        } else {
+            format!("{:.2}", v.iter().sum::<f64>() / v.len() as f64)
+        })
+    );
+    println!(
+        "| max abs error deg | {} |",
+        stat(&|v| if v.is_empty() {
+            "-".to_owned()
+        } else {
+            format!("{:.2}", v.iter().fold(0.0_f64, |m, x| m.max(*x)))
+        })
+    );
+    println!(
+        "| within 0.5 deg | {} |",
+        stat(&|v| format!(
+            "{} of {}",
+            v.iter().filter(|x| **x <= 0.5).count(),
+            entries.len()
+        ))
+    );
+    let within_all: usize = per_angle
+        .iter()
+        .map(|v| v.iter().filter(|x| **x <= 0.5).count())
+        .sum();
+    println!(
+        "\n{name}: {within_all} of {angles_total} angles within 0.5 degree; {runs_all_ok} of {} runs with all three within 0.5 degree; {} runs without all angles",
+        entries.len(),
+        runs_without.len()
+    );
+    for r in &runs_without {
+        println!("- {r}");
+    }
+    println!();
+}
+
+/// The held-out protocol's bench (see the module docs).
+#[derive(clap::Parser)]
+struct Args {
+    /// Which set: tuning, held-out or both.
+    #[arg(long, default_value = "both")]
+    set: String,
+    /// The protocol file.
+    #[arg(long)]
+    protocol: Option<PathBuf>,
+    /// Worker threads (each run is single-threaded and seeded, so the tables do not depend on it).
+    #[arg(long, default_value_t = 2)]
+    jobs: usize,
+    /// Only runs whose vehicle or world name contains this.
+    #[arg(long)]
+    only: Option<String>,
+    /// The calculator alone: true poses instead of the pipeline.
+    #[arg(long)]
+    oracle: bool,
+}
+
+fn main() -> anyhow::Result<()> {
+    let args = <Args as clap::Parser>::parse();
+    let shown = args.protocol.as_ref().map_or_else(
+        || "hil-sim/evaluation.toml".to_owned(),
+        |p| p.display().to_string(),
+    );
+    let protocol_path = args
+        .protocol
+        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("evaluation.toml"));
+    let text = std::fs::read_to_string(&protocol_path)
+        .with_context(|| protocol_path.display().to_string())?;
+    let protocol: Protocol =
+        toml::from_str(&text).with_context(|| protocol_path.display().to_string())?;
+    let dir = protocol_path.parent().unwrap_or(Path::new("."));
+    let template_path = dir.join(&protocol.template);
+    let template = Scenario::load(&template_path)?;
+    let sets: Vec<(&str, &[Group])> = match args.set.as_str() {
+        "tuning" => vec![("tuning", &protocol.tuning)],
+        "held-out" => vec![("held-out", &protocol.held_out)],
+        "both" => vec![
+            ("tuning", &protocol.tuning),
+            ("held-out", &protocol.held_out),
+        ],
+        other => bail!("--set must be tuning, held-out or both, not {other:?}"),
+    };
+    if args.oracle {
+        println!(
+            "Protocol {shown}, oracle: lidar returns placed with the true poses (5 mm voxel centroids), angle calculator at its defaults; errors are measured - true, degrees.\n"
+        );
+    } else {
+        println!(
+            "Protocol {shown}: lidar + wheel odometry, pipeline and angle calculator at their defaults; errors are measured - true, degrees.\n"
+        );
+    }
+    for (name, groups) in sets {
+        let mut list = entries(dir, groups);
+        if let Some(o) = &args.only {
+            list.retain(|e| {
+                e.vehicle_name().contains(o.as_str()) || e.world_name().contains(o.as_str())
+            });
+        }
+        let results: Mutex<Vec<Option<anyhow::Result<Outcome>>>> =
+            Mutex::new((0..list.len()).map(|_| None).collect());
+        let next = Mutex::new(0usize);
+        let started = Instant::now();
+        std::thread::scope(|s| {
+            for _ in 0..args.jobs.max(1) {
+                s.spawn(|| {
+                    loop {
+                        let i = {
+                            let mut n = next.lock().expect("not poisoned");
+                            let i = *n;
+                            *n += 1;
+                            i
+                        };
+                        let Some(entry) = list.get(i) else { break };
+                        let t = Instant::now();
+                        let r = run(&template_path, &template, entry, args.oracle);
+                        match &r {
+                            Ok(o) => eprintln!(
+                                "{name} {}/{}/{}: {} frames, pipeline {:.1} ms CPU per frame, run {:.1} s",
+                                entry.vehicle_name(),
+                                entry.world_name(),
+                                entry.seed,
+                                o.frames,
+                                o.cpu_s * 1e3 / o.frames.max(1) as f64,
+                                t.elapsed().as_secs_f64()
+                            ),
+                            Err(e) => eprintln!(
+                                "{name} {}/{}/{}: {e:#}",
+                                entry.vehicle_name(),
+                                entry.world_name(),
+                                entry.seed
+                            ),
+                        }
+                        results.lock().expect("not poisoned")[i] = Some(r);
+                    }
+                });
+            }
+        });
+        eprintln!(
+            "{name}: {} runs in {:.0} s",
+            list.len(),
+            started.elapsed().as_secs_f64()
+        );
+        let outcomes: Vec<anyhow::Result<Outcome>> = results
+            .into_inner()
+            .expect("not poisoned")
+            .into_iter()
+            .map(|r| r.unwrap_or_else(|| Err(anyhow::anyhow!("not run"))))
+            .collect();
+        print_set(name, &list, &outcomes);
+    }
+    Ok(())
+}
