@@ -234,8 +234,17 @@ fn lidar_thread(
     // The VLP-16 sends UDP datagrams; the service reads them with its production reader.
     let socket =
         std::net::UdpSocket::bind("127.0.0.1:0").context("binding the lidar's UDP socket")?;
-    let scene = crate::world::Scene::from_vehicle(&scenario.vehicle);
-    let sim = Vlp16Sim::new(&scene, live, scenario.lidar_config(), scenario.lidar_seed());
+    let scene = scenario.scene();
+    let on_floor = crate::world::OnFloor {
+        inner: live,
+        floor: scenario.hall.as_deref().map(|h| &h.floor),
+    };
+    let sim = Vlp16Sim::new(
+        &scene,
+        &on_floor,
+        scenario.lidar_config(),
+        scenario.lidar_seed(),
+    );
     let mut index = 0u64;
     while !stop.load(Ordering::Relaxed) {
         // Cast a packet once the robot's pose at its time is known (the runner reports every 10 ms).
@@ -278,8 +287,17 @@ fn camera_thread(
     tx: &std::sync::mpsc::SyncSender<service::DepthFrame>,
     stop: &AtomicBool,
 ) {
-    let scene = crate::world::Scene::from_vehicle(&scenario.vehicle);
-    let sim = crate::d435::D435Sim::new(&scene, live, demo_camera(scenario), scenario.depth_seed());
+    let scene = scenario.scene();
+    let on_floor = crate::world::OnFloor {
+        inner: live,
+        floor: scenario.hall.as_deref().map(|h| &h.floor),
+    };
+    let sim = crate::d435::D435Sim::new(
+        &scene,
+        &on_floor,
+        demo_camera(scenario),
+        scenario.depth_seed(),
+    );
     let mut index = 0u64;
     while !stop.load(Ordering::Relaxed) {
         // Render a frame once the robot's pose at its exposure is known.

@@ -52,7 +52,7 @@ use crate::esc_model::EscFault;
 use crate::fil::{self, Fil, FilConfig, Pacing};
 use crate::pty::MemPipe;
 use crate::vlp16::{PACKET_S, Vlp16Sim};
-use crate::world::Scene;
+use crate::world::OnFloor;
 
 /// The wall clock of the simulated robot at simulated time 0: 2026-01-01T00:00:00Z, us since
 /// the Unix epoch (the same epoch as the simulator's pcap files). Recordings stamp everything
@@ -110,8 +110,8 @@ struct World<'s> {
     fil: Fil,
     live: LiveTrajectory,
     path: Vec<(f64, f64, f64, f64)>,
-    lidar: Vlp16Sim<'s, LiveTrajectory>,
-    camera: D435Sim<'s, LiveTrajectory>,
+    lidar: Vlp16Sim<'s, OnFloor<'s, LiveTrajectory>>,
+    camera: D435Sim<'s, OnFloor<'s, LiveTrajectory>>,
     next_packet: u64,
     next_frame: u64,
     lidar_tx: SyncSender<LidarPacket>,
@@ -204,8 +204,9 @@ impl World<'_> {
                 position: false,
             });
         }
-        let frame_us =
-            |c: &D435Sim<'_, LiveTrajectory>, i: u64| (c.frame_time_s(i) * 1e6).round() as u64;
+        let frame_us = |c: &D435Sim<'_, OnFloor<'_, LiveTrajectory>>, i: u64| {
+            (c.frame_time_s(i) * 1e6).round() as u64
+        };
         while frame_us(&self.camera, self.next_frame) + SENSOR_LATENCY_US <= t {
             let f = self.camera.frame(self.next_frame);
             self.next_frame += 1;
@@ -276,18 +277,29 @@ pub fn observe(options: &DemoOptions, quiet: bool) -> anyhow::Result<Observed> {
     fresh_robot_disk(&options.run_root)?;
     let prepared = prepare(options)?;
     let scenario = &prepared.scenario;
-    let scene = Scene::from_vehicle(&scenario.vehicle);
+    // The scenario's world: the vehicle, and its hall (walls, pillars, other vehicles, floor)
+    // where it has one; the robot rides on that floor.
+    let scene = scenario.scene();
     let live = LiveTrajectory {
         start: prepared.start,
         samples: Arc::new(Mutex::new(vec![(0.0, 0.0, 0.0, 0.0)])),
     };
+    let on_floor = OnFloor {
+        inner: &live,
+        floor: scenario.hall.as_deref().map(|h| &h.floor),
+    };
     let lidar = Vlp16Sim::new(
         &scene,
-        &live,
+        &on_floor,
         scenario.lidar_config(),
         scenario.lidar_seed(),
     );
-    let camera = D435Sim::new(&scene, &live, demo_camera(scenario), scenario.depth_seed());
+    let camera = D435Sim::new(
+        &scene,
+        &on_floor,
+        demo_camera(scenario),
+        scenario.depth_seed(),
+    );
 
     let (fw_uart, onboard_uart) = MemPipe::pair();
     let (stand_in, _unused) = MemPipe::pair();

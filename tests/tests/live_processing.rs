@@ -18,7 +18,6 @@ use std::path::{Path, PathBuf};
 use hil_sim::scenario::Scenario;
 use hil_sim::trajectory::Trajectory;
 use hil_sim::vlp16::{Datagram, Vlp16Sim};
-use hil_sim::world::Scene;
 use onboard::process::{ProcessConfig, REORDER_WINDOW_S, RunBuilder, build_cloud};
 use onboard::recorder::{RecordedOutcome, RunRecorder};
 use protocol::bounded::Text;
@@ -53,10 +52,11 @@ impl Arrival {
 fn arrivals(duration_s: f64, batched: bool) -> Vec<Arrival> {
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../hil-sim/scenarios/sedan-pass.toml");
     let scenario = Scenario::load(&path).unwrap();
-    let scene = Scene::from_vehicle(&scenario.vehicle);
+    let scene = scenario.scene();
+    let motion = scenario.motion();
     let sim = Vlp16Sim::new(
         &scene,
-        &scenario.run,
+        &motion,
         scenario.lidar_config(),
         scenario.lidar_seed(),
     );
