@@ -19,7 +19,7 @@
 //! vehicle geometry, independent of the onboard code).
 
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 use std::thread;
 use std::time::{Duration, Instant};
@@ -129,6 +129,11 @@ pub struct DemoReport {
     pub wall_s: f64,
     /// Lockstep or real time.
     pub mode: Mode,
+    /// Lidar data packets the simulated VLP-16 sent.
+    pub lidar_packets_sent: u64,
+    /// Lidar data packets the service received (good and malformed): in real time, those the
+    /// UDP path or a late loop dropped are missing; in lockstep none is.
+    pub lidar_packets_received: u64,
     /// Points in the robot's cloud.
     pub cloud_points: u32,
     /// Ground clearance, m.
@@ -230,6 +235,7 @@ fn lidar_thread(
     live: &LiveTrajectory,
     to: std::net::SocketAddr,
     stop: &AtomicBool,
+    sent: &AtomicU64,
 ) -> anyhow::Result<()> {
     // The VLP-16 sends UDP datagrams; the service reads them with its production reader.
     let socket =
@@ -257,6 +263,7 @@ fn lidar_thread(
             .send_to(&sim.data_packet(index).to_bytes(), to)
             .context("sending a lidar packet")?;
         index += 1;
+        sent.fetch_add(1, Ordering::Relaxed);
     }
     Ok(())
 }
@@ -456,6 +463,8 @@ impl Prepared {
             run_s: timing.run_s,
             wall_s: timing.wall_s,
             mode: timing.mode,
+            lidar_packets_sent: timing.lidar_packets[0],
+            lidar_packets_received: timing.lidar_packets[1],
             cloud_points: r.cloud_points,
             ground_clearance_m: f64::from(r.ground_clearance_m),
             wheelbase_m: f64::from(r.wheelbase_m),
@@ -575,6 +584,8 @@ pub(crate) struct Timing {
     /// The demo on the wall clock, s.
     pub(crate) wall_s: f64,
     pub(crate) mode: Mode,
+    /// Lidar data packets the simulated VLP-16 sent and the service received.
+    pub(crate) lidar_packets: [u64; 2],
 }
 
 /// Runs the demo (lockstep unless `options.realtime`); prints progress to stderr unless `quiet`.
@@ -647,10 +658,12 @@ fn run_realtime(options: &DemoOptions, quiet: bool) -> anyhow::Result<DemoReport
         alive_timeout_ms: 500,
     };
     let (lidar_rx, lidar_addr) = service::spawn_lidar_reader(&lidar_config, Arc::clone(&stop))?;
+    let lidar_sent = Arc::new(AtomicU64::new(0));
     {
         let (stop, scenario, live) = (Arc::clone(&stop), scenario.clone(), live.clone());
+        let sent = Arc::clone(&lidar_sent);
         threads.push(thread::spawn(move || {
-            lidar_thread(&scenario, &live, lidar_addr.into(), &stop)
+            lidar_thread(&scenario, &live, lidar_addr.into(), &stop, &sent)
         }));
     }
     let (depth_tx, depth_rx) = std::sync::mpsc::sync_channel(8);
@@ -708,6 +721,9 @@ fn run_realtime(options: &DemoOptions, quiet: bool) -> anyhow::Result<DemoReport
     }
     let m = outcome?;
     let wall_s = t0.elapsed().as_secs_f64();
+    let received = stats
+        .lock()
+        .map_or(0, |s| s.lidar_packets + s.lidar_malformed);
     Ok(prepared.report(
         options,
         &m,
@@ -715,6 +731,7 @@ fn run_realtime(options: &DemoOptions, quiet: bool) -> anyhow::Result<DemoReport
             run_s: wall_s,
             wall_s,
             mode: Mode::RealTime,
+            lidar_packets: [lidar_sent.load(Ordering::Relaxed), received],
         },
         capturing.last().as_deref(),
     ))

@@ -101,6 +101,10 @@ pub fn demo(args: &DemoArgs) -> anyhow::Result<()> {
         report.run_s, report.cloud_points, report.warnings
     );
     println!(
+        "  lidar packets: {} sent, {} received by the service",
+        report.lidar_packets_sent, report.lidar_packets_received
+    );
+    println!(
         "  {} demo, {:.1} s of wall time",
         match report.mode {
             demo::Mode::Lockstep => "lockstep",

@@ -425,6 +425,10 @@ pub fn observe(options: &DemoOptions, quiet: bool) -> anyhow::Result<Observed> {
                     run_s: end_us.saturating_sub(connected_us) as f64 * 1e-6,
                     wall_s: wall.elapsed().as_secs_f64(),
                     mode: Mode::Lockstep,
+                    lidar_packets: [
+                        world.next_packet,
+                        world.stats.lidar_packets + world.stats.lidar_malformed,
+                    ],
                 },
                 capturing.last().as_deref(),
             )

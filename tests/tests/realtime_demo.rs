@@ -31,6 +31,22 @@ fn realtime_demo_delivers() {
         "real time: measured {m:?} true {t:?}, robot at rest -> result {:?} s, {:.1} s",
         report.stop_to_result_s, report.wall_s
     );
+    // Timing on the wall clock, with generous bounds: the lidar path loses almost nothing, and
+    // the result follows the stop within seconds (None: the Processing progress was lost on the
+    // lossy radio, so there is no start to time from).
+    let (sent, received) = (report.lidar_packets_sent, report.lidar_packets_received);
+    println!(
+        "lidar packets: {sent} sent, {received} received ({} dropped)",
+        sent.saturating_sub(received)
+    );
+    assert!(sent > 10_000, "{sent}");
+    assert!(
+        sent.saturating_sub(received) * 100 <= sent,
+        "more than 1 % of the lidar packets dropped: {received} of {sent}"
+    );
+    if let Some(s) = report.stop_to_result_s {
+        assert!(s < 30.0, "robot at rest -> result took {s} s");
+    }
     for (measured, truth) in [
         (m.approach_deg, t.approach_deg),
         (m.departure_deg, t.departure_deg),
