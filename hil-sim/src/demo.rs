@@ -39,7 +39,7 @@ use protocol::bounded::Text;
 use protocol::radio::{StartMeasurement, Zone};
 
 use crate::can_bus::InProcessBus;
-use crate::fil::{Fil, FilConfig, Pacing};
+use crate::fil::{Fil, FilConfig, FilError, Pacing};
 use crate::geometry::{Pose, Vec3};
 use crate::pty::MemPipe;
 use crate::scenario::Scenario;
@@ -322,6 +322,24 @@ fn camera_thread(
         let _ = tx.try_send(frame);
         index += 1;
     }
+}
+
+/// The firmware's controller with the simulated ESCs and chassis on an in-process CAN bus, its
+/// UART at `fw_uart` (the service holds the other end; the runner's own host stand-in stays
+/// silent).
+pub(crate) fn robot_in_the_loop(fw_uart: MemPipe, pacing: Pacing) -> Result<Fil, FilError> {
+    let (stand_in, _unused) = MemPipe::pair();
+    let bus = InProcessBus::new();
+    Fil::new(
+        FilConfig {
+            pacing,
+            ..FilConfig::default()
+        },
+        Box::new(bus.node()),
+        Box::new(bus.node()),
+        Box::new(fw_uart),
+        Box::new(stand_in),
+    )
 }
 
 /// The demo's `[processing.pipeline]` overrides: the product's laser + wheel pipeline (laser
@@ -624,21 +642,10 @@ fn run_realtime(options: &DemoOptions, quiet: bool) -> anyhow::Result<DemoReport
     };
     let mut threads = Vec::new();
     let (fw_uart, onboard_uart) = MemPipe::pair();
-    let (stand_in, _unused) = MemPipe::pair();
     {
         let (stop, samples) = (Arc::clone(&stop), Arc::clone(&samples));
         threads.push(thread::spawn(move || -> anyhow::Result<()> {
-            let bus = InProcessBus::new();
-            let mut fil = Fil::new(
-                FilConfig {
-                    pacing: Pacing::RealTime,
-                    ..FilConfig::default()
-                },
-                Box::new(bus.node()),
-                Box::new(bus.node()),
-                Box::new(fw_uart),
-                Box::new(stand_in),
-            )?;
+            let mut fil = robot_in_the_loop(fw_uart, Pacing::RealTime)?;
             let mut t = 0;
             while !stop.load(Ordering::Relaxed) {
                 t += 5_000;

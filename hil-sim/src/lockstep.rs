@@ -42,14 +42,13 @@ use onboard::service::{
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-use crate::can_bus::InProcessBus;
 use crate::d435::D435Sim;
 use crate::demo::{
     Capturing, DemoOptions, DemoReport, LiveTrajectory, Mode, StderrObserver, Timing, demo_camera,
-    prepare,
+    prepare, robot_in_the_loop,
 };
 use crate::esc_model::EscFault;
-use crate::fil::{self, Fil, FilConfig, Pacing};
+use crate::fil::{self, Fil, Pacing};
 use crate::pty::MemPipe;
 use crate::vlp16::{PACKET_S, Vlp16Sim};
 use crate::world::OnFloor;
@@ -302,18 +301,7 @@ pub fn observe(options: &DemoOptions, quiet: bool) -> anyhow::Result<Observed> {
     );
 
     let (fw_uart, onboard_uart) = MemPipe::pair();
-    let (stand_in, _unused) = MemPipe::pair();
-    let bus = InProcessBus::new();
-    let mut fil = Fil::new(
-        FilConfig {
-            pacing: Pacing::Virtual,
-            ..FilConfig::default()
-        },
-        Box::new(bus.node()),
-        Box::new(bus.node()),
-        Box::new(fw_uart),
-        Box::new(stand_in),
-    )?;
+    let mut fil = robot_in_the_loop(fw_uart, Pacing::Virtual)?;
     if let Some((at_s, esc_id, fault)) = options.faults.esc_fault {
         fil.schedule([fil::Event {
             at_us: (at_s * 1e6).round() as u64,
