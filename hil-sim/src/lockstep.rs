@@ -15,7 +15,8 @@
 //! 1. the firmware, ESCs and chassis run to `t` (1 ms ticks);
 //! 2. every lidar packet whose last firing is at least [`SENSOR_LATENCY_US`] before `t` is cast
 //!    at the robot's pose and queued to the service, stamped with that firing time plus the
-//!    latency; every depth frame exposed by then likewise;
+//!    latency; every depth frame exposed at least that long before `t` is queued too (the
+//!    service stamps it when it reads it, as it does a camera's frame);
 //! 3. the radio moves the bytes due by `t`; the service runs one loop iteration at `t`;
 //! 4. the handheld reads what arrived and answers (in [`ClientClock::idle`]'s caller).
 //!
