@@ -205,6 +205,11 @@ fn run(config_path: &Path) -> Result<(), (u8, anyhow::Error)> {
         .with_context(|| format!("reading {}", config_path.display()))
         .map_err(|e| (exit::NOINPUT, e))?;
     let config = OnboardConfig::parse(&text, config_path).map_err(|e| (exit::DATAERR, e.into()))?;
+    // The pairing keys are checked as `check-config` checks them (owner, mode, contents) before
+    // anything opens: a key file others can read is a key others may have copied.
+    if let Some(first) = config.file_problems().into_iter().next() {
+        return Err((exit::DATAERR, first.into()));
+    }
     let shutdown = Arc::new(AtomicBool::new(false));
     // Before any other thread starts, so that every thread inherits the blocked signals.
     install_signals(Arc::clone(&shutdown)).map_err(|e| (exit::SOFTWARE, e))?;
