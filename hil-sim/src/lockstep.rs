@@ -54,8 +54,8 @@ use crate::pty::MemPipe;
 use crate::vlp16::{PACKET_S, Vlp16Sim};
 use crate::world::OnFloor;
 
-/// The wall clock of the simulated robot at simulated time 0: 2026-01-01T00:00:00Z, us since
-/// the Unix epoch (the same epoch as the simulator's pcap files). Recordings stamp everything
+/// The wall clock of the simulated robot at simulated time 0, us since the Unix epoch: the same
+/// fixed epoch as the simulator's pcap files (`passangle-sim lidar`). Recordings stamp everything
 /// with this plus the simulated time, so they do not depend on when the demo ran.
 pub const WALL_EPOCH_US: u64 = 1_767_225_600_000_000;
 
