@@ -228,6 +228,48 @@ pub(crate) fn fit_circle(points: &[[f64; 2]]) -> Option<Circle> {
     })
 }
 
+/// Covariance of a geometric circle fit's `(u, v, r)`: `sigma^2 (J^T J)^-1` with `J` the
+/// Jacobian of the orthogonal distances `|p - c| - r` at `circle`, the first-order propagation
+/// of independent residuals of standard deviation `sigma_m` (Gauss-Markov). A short arc makes
+/// `J^T J` nearly singular along the direction that trades the centre's height against the
+/// radius, and that shows as a large variance of `v` and `r`. `None` for fewer than 4 points or
+/// a singular fit.
+pub(crate) fn circle_covariance(
+    points: &[[f64; 2]],
+    circle: Circle,
+    sigma_m: f64,
+) -> Option<[[f64; 3]; 3]> {
+    if points.len() < 4 {
+        return None;
+    }
+    let mut jtj = [[0.0; 3]; 3];
+    for p in points {
+        let (du, dv) = (p[0] - circle.u, p[1] - circle.v);
+        let dist = du.hypot(dv);
+        if dist < 1e-12 {
+            continue;
+        }
+        let jac = [-du / dist, -dv / dist, -1.0];
+        for i in 0..3 {
+            for j in 0..3 {
+                jtj[i][j] += jac[i] * jac[j];
+            }
+        }
+    }
+    let mut cov = [[0.0; 3]; 3];
+    for k in 0..3 {
+        let mut e = [0.0; 3];
+        e[k] = 1.0;
+        let col = solve3(jtj, e)?;
+        for i in 0..3 {
+            cov[i][k] = col[i] * sigma_m * sigma_m;
+        }
+    }
+    (0..3)
+        .all(|i| cov[i][i].is_finite() && cov[i][i] >= 0.0)
+        .then_some(cov)
+}
+
 /// Median of a slice (sorts it). `None` when empty.
 pub(crate) fn median(values: &mut [f64]) -> Option<f64> {
     if values.is_empty() {
@@ -259,6 +301,40 @@ mod tests {
             (c.u - 1.5).abs() < 1e-9 && (c.v - 0.35).abs() < 1e-9 && (c.r - 0.4).abs() < 1e-9,
             "{c:?}"
         );
+    }
+
+    #[test]
+    fn a_short_arc_has_a_larger_covariance_than_a_long_one() {
+        let arc = |from: f64, to: f64| -> Vec<[f64; 2]> {
+            (0..=40)
+                .map(|i| {
+                    let t = from + (to - from) * f64::from(i) / 40.0;
+                    [0.3 * t.cos(), 0.28 + 0.3 * t.sin()]
+                })
+                .collect()
+        };
+        let c = Circle {
+            u: 0.0,
+            v: 0.28,
+            r: 0.3,
+        };
+        // The lower third of a tyre against its lower two thirds.
+        let short = circle_covariance(&arc(-2.4, -0.74), c, 0.003).unwrap();
+        let long = circle_covariance(&arc(-3.0, -0.14), c, 0.003).unwrap();
+        assert!(short[1][1] > 4.0 * long[1][1], "{short:?} {long:?}");
+        // Along the whole circle: the centre to sigma / sqrt(n / 2), the radius to sigma / sqrt(n).
+        let full: Vec<[f64; 2]> = (0..100)
+            .map(|i| {
+                let t = std::f64::consts::TAU * f64::from(i) / 100.0;
+                [0.3 * t.cos(), 0.28 + 0.3 * t.sin()]
+            })
+            .collect();
+        let cov = circle_covariance(&full, c, 0.01).unwrap();
+        assert!(
+            (cov[0][0].sqrt() - 0.01 / 50f64.sqrt()).abs() < 1e-6,
+            "{cov:?}"
+        );
+        assert!((cov[2][2].sqrt() - 0.01 / 10.0).abs() < 1e-6, "{cov:?}");
     }
 
     #[test]

@@ -30,10 +30,16 @@
 //!
 //! 6. **Coverage** (`check_coverage`): a partial scan gives wrong angles, not missing ones (the
 //!    underside the robot has not reached yet is seen only by the lidar's flat rings, so the
-//!    envelope simply ends early). The calculator refuses with [`AnglesError::Incomplete`], naming
-//!    what is missing, when the underside between the axles has a gap, when the scan's path (if
-//!    given, [`AnglesConfig::scan_path_in_cloud`]) stops short of an end of the underside or of an
-//!    axle, or, without a path, when the cloud itself ends at an end of the underside.
+//!    envelope simply ends early). A quantity whose part of the vehicle was not covered is
+//!    reported as not measured, with the reason ([`AnglesResult::not_measured`]), never as a
+//!    number: the approach (departure) when the scan's path (if given,
+//!    [`AnglesConfig::scan_path_in_cloud`]) stops short of the front (rear) end of the underside
+//!    or, without a path, when the cloud itself ends there; the breakover and the clearance when
+//!    the underside between the axles has a gap. When the path does not reach both axles nothing
+//!    is measured ([`AnglesError::Incomplete`]).
+//! 7. **Uncertainty** ([`uncertainty`]): every angle and the clearance carry an expanded
+//!    uncertainty (k = 2) from a budget of this run's own data: noise at the witness, envelope
+//!    bin, tyre fits' covariances, floor flatness, and the trajectory's stated error.
 //!
 //! Every angle comes with its witness (the limiting envelope sample) in the vehicle and the cloud
 //! frame and the number of points supporting it; the result also carries the tyre fits, the
@@ -45,10 +51,12 @@ mod geom;
 mod ground;
 mod svg;
 mod tyres;
+mod uncertainty;
 
 pub use envelope::EnvelopeSample;
 pub use geom::{V3, VehicleFrame};
 pub use svg::side_view_svg;
+pub use uncertainty::Uncertainty;
 
 use envelope::{EnvelopeParams, lower_envelope};
 use geom::{sub, unit};
@@ -136,6 +144,11 @@ pub struct AnglesConfig {
     /// path does not reach both axles and within [`PATH_REACH_M`] of both ends of the underside
     /// (see `check_coverage`).
     pub scan_path_in_cloud: Vec<V3>,
+    /// Standard uncertainty of the scan's trajectory along the path per metre travelled
+    /// (dimensionless; 0.01: 1 cm per metre). The pipeline states it for its own clouds; 0 for a
+    /// cloud whose scanner's uncertainty is not known here (the results' uncertainties then
+    /// leave it out, [`uncertainty`]).
+    pub trajectory_x_sigma_per_m: f64,
 }
 
 impl Default for AnglesConfig {
@@ -157,6 +170,7 @@ impl Default for AnglesConfig {
             seed: 0x5eed,
             skip_faces_across_path: true,
             scan_path_in_cloud: Vec::new(),
+            trajectory_x_sigma_per_m: 0.0,
         }
     }
 }
@@ -228,6 +242,10 @@ pub struct Tyre {
     pub loaded_radius_m: f64,
     /// Fitted free tread radius (metres).
     pub free_radius_m: f64,
+    /// Standard uncertainty of the centre's x (metres, from the fit's covariance).
+    pub u_centre_x_m: f64,
+    /// Standard uncertainty of the static loaded radius (metres, from the fit's covariance).
+    pub u_loaded_radius_m: f64,
     /// Visible width between the inner and the outer face (metres).
     pub width_m: f64,
     /// y of the inner face (toward the centreline), vehicle frame.
@@ -251,6 +269,8 @@ pub struct AngleFinding {
     pub witness_in_cloud: V3,
     /// Points supporting the limiting sample (its envelope bin's lowest mode).
     pub support: usize,
+    /// Expanded uncertainty of the angle (radians) and its budget.
+    pub uncertainty: Uncertainty,
 }
 
 /// Lowest body point between the axles.
@@ -262,6 +282,43 @@ pub struct Clearance {
     pub witness_in_vehicle: V3,
     /// Where, cloud frame.
     pub witness_in_cloud: V3,
+    /// Expanded uncertainty of the height (metres) and its budget.
+    pub uncertainty: Uncertainty,
+}
+
+/// A result the calculator does not give, and why.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Quantity {
+    /// The approach angle.
+    Approach,
+    /// The departure angle.
+    Departure,
+    /// The ramp breakover angle.
+    Breakover,
+    /// The ground clearance between the axles.
+    GroundClearance,
+}
+
+impl Quantity {
+    /// The name used in reports and JSON (`approach`, `departure`, `breakover`,
+    /// `ground_clearance`).
+    pub fn name(self) -> &'static str {
+        match self {
+            Quantity::Approach => "approach",
+            Quantity::Departure => "departure",
+            Quantity::Breakover => "breakover",
+            Quantity::GroundClearance => "ground_clearance",
+        }
+    }
+}
+
+/// A quantity that was not measured: the scan lacks what it needs. Reported instead of a number.
+#[derive(Debug, Clone, PartialEq)]
+pub struct NotMeasured {
+    /// Which.
+    pub quantity: Quantity,
+    /// What is missing, in words (names the part of the vehicle or the scan).
+    pub reason: String,
 }
 
 /// Point bookkeeping.
@@ -339,8 +396,20 @@ pub struct AnglesResult {
     pub points: PointCounts,
     /// The zone used.
     pub zone: Zone,
+    /// The quantities above that are `None`, each with its reason.
+    pub not_measured: Vec<NotMeasured>,
     /// Things a person should check.
     pub warnings: Vec<String>,
+}
+
+impl AnglesResult {
+    /// Why `quantity` was not measured (`None` when it was).
+    pub fn not_measured_reason(&self, quantity: Quantity) -> Option<&str> {
+        self.not_measured
+            .iter()
+            .find(|n| n.quantity == quantity)
+            .map(|n| n.reason.as_str())
+    }
 }
 
 /// An axle as used by the angles.
@@ -352,6 +421,12 @@ pub struct Axle {
     pub loaded_radius_m: f64,
     /// Free tread radius (fitted), which bounds the tyre zone.
     pub free_radius_m: f64,
+    /// Standard uncertainty of `x_m` (metres): the tyres' fits, or half their disagreement.
+    pub u_x_m: f64,
+    /// Standard uncertainty of `loaded_radius_m` (metres): the tyres' fits or half their
+    /// disagreement, plus one noise sigma for the silhouette's outward bias; 0 with the user's
+    /// override (whose own uncertainty the user states).
+    pub u_loaded_radius_m: f64,
 }
 
 /// Slope (radians) of the plane through a point at horizontal distance `d_m` (> 0, away from the
@@ -419,7 +494,12 @@ pub fn compute_angles(
     let mut warnings = Vec::new();
     let settled = settle_frame(&points, config, &mut warnings)?;
     let (frame, fits) = (settled.frame, settled.fits);
-    let (front, rear) = axles(&fits, config);
+    let tyre_sigma = fits
+        .iter()
+        .map(|(_, f)| f.residual_rms_m)
+        .fold(0.0, f64::max);
+    let noise_m = config.noise_m.unwrap_or(settled.sigma.max(tyre_sigma));
+    let (front, rear) = axles(&fits, config, noise_m);
     for front in [true, false] {
         if let (_, Some(left_out)) = axle_members(&fits, front) {
             warnings.push(format!(
@@ -429,10 +509,6 @@ pub fn compute_angles(
             ));
         }
     }
-    let tyre_sigma = fits
-        .iter()
-        .map(|(_, f)| f.residual_rms_m)
-        .fold(0.0, f64::max);
     let band_y_m = band(&fits, config.band, &mut warnings);
     // The overhangs, where faces across the path are left out of the envelope's modes.
     let (front_x, rear_x) = zone_limits(front, rear, Zone::Axle);
@@ -441,7 +517,7 @@ pub fn compute_angles(
         &fits,
         (rear_x, front_x),
         config,
-        config.noise_m.unwrap_or(settled.sigma.max(tyre_sigma)),
+        noise_m,
         band_y_m,
         &mut counts,
     );
@@ -453,14 +529,21 @@ pub fn compute_angles(
         ));
     }
     refine_ends(&mut body, front, rear, config.zone);
-    check_coverage(
+    let not_covered = check_coverage(
         &body.samples,
         (front, rear),
         &frame,
         &settled.in_frame,
         config,
     )?;
-    let findings = find_angles(&body.samples, front, rear, config.zone, &frame);
+    let inputs = uncertainty::Inputs {
+        noise_m: body.noise_sigma_m,
+        bin_m: body.bin_m,
+        ground_m: settled.sigma,
+        trajectory_per_m: config.trajectory_x_sigma_per_m,
+    };
+    let mut findings = find_angles(&body.samples, front, rear, config.zone, &frame, inputs);
+    let not_measured = not_measured(&mut findings, not_covered);
     let plane = settled.plane;
     let heading = frame.x_axis_in_cloud;
     let sign = if config.front_is_positive_x {
@@ -493,6 +576,7 @@ pub fn compute_angles(
         envelope: body.samples,
         points: counts,
         zone: config.zone,
+        not_measured,
         warnings,
     };
     geometry_warnings(&mut result, config);
@@ -577,7 +661,7 @@ fn settle_frame(
         if round == 3 {
             warnings.extend(round_warnings);
             // Move the origin to mid-wheelbase on the centreline.
-            let (front, rear) = axles(&fits, config);
+            let (front, rear) = axles(&fits, config, sigma);
             let shift = [0.5 * (front.x_m + rear.x_m), centreline_y(&fits), 0.0];
             for (_, f) in &mut fits {
                 f.centre_x -= shift[0];
@@ -903,16 +987,30 @@ fn axle_members(
     }
 }
 
-fn axles(fits: &[(TyrePosition, TyreFit)], config: &AnglesConfig) -> (Axle, Axle) {
+fn axles(fits: &[(TyrePosition, TyreFit)], config: &AnglesConfig, noise_m: f64) -> (Axle, Axle) {
     let axle = |front: bool| {
         let sel = axle_members(fits, front).0;
         let n = sel.len().max(1) as f64;
+        let xs: Vec<(f64, f64)> = sel
+            .iter()
+            .map(|f| (f.centre_x, f.covariance[0][0]))
+            .collect();
+        let radii: Vec<(f64, f64)> = sel
+            .iter()
+            .map(|f| (f.loaded_radius_m, f.covariance[1][1]))
+            .collect();
         Axle {
             x_m: sel.iter().map(|f| f.centre_x).sum::<f64>() / n,
             loaded_radius_m: config
                 .tyre_radius_m
                 .unwrap_or_else(|| sel.iter().map(|f| f.loaded_radius_m).sum::<f64>() / n),
             free_radius_m: sel.iter().map(|f| f.free_radius_m).sum::<f64>() / n,
+            u_x_m: uncertainty::axle_mean_u(&xs),
+            u_loaded_radius_m: if config.tyre_radius_m.is_some() {
+                0.0
+            } else {
+                uncertainty::axle_mean_u(&radii).hypot(noise_m)
+            },
         }
     };
     (axle(true), axle(false))
@@ -1036,16 +1134,29 @@ pub const MAX_UNDERSIDE_GAP_M: f64 = 0.3;
 /// the underside: a cloud that ends where the underside ends was cut, not scanned past the end.
 pub const GROUND_BEYOND_M: f64 = 0.3;
 
-/// Refuse a scan that does not cover the vehicle (module doc, step 6). `samples` is the envelope
-/// after [`drop_detached`], sorted by x; `in_frame` every usable point in the vehicle frame.
+/// What the scan does not cover (module doc, step 6): an error when the axles themselves were
+/// not covered (nothing can be measured), otherwise the quantities whose part of the vehicle was
+/// not seen. `samples` is the envelope after [`drop_detached`], sorted by x; `in_frame` every
+/// usable point in the vehicle frame.
 fn check_coverage(
     samples: &[EnvelopeSample],
     (front, rear): (Axle, Axle),
     frame: &VehicleFrame,
     in_frame: &[V3],
     config: &AnglesConfig,
-) -> Result<(), AnglesError> {
-    let incomplete = |s: String| Err(AnglesError::Incomplete(s));
+) -> Result<Vec<NotMeasured>, AnglesError> {
+    let between_axles = |reason: String| {
+        Ok(vec![
+            NotMeasured {
+                quantity: Quantity::Breakover,
+                reason: reason.clone(),
+            },
+            NotMeasured {
+                quantity: Quantity::GroundClearance,
+                reason,
+            },
+        ])
+    };
     // Between the tyres' treads: the breakover's zone.
     let (lo, hi) = (
         rear.x_m + rear.free_radius_m,
@@ -1056,29 +1167,36 @@ fn check_coverage(
         .map(|s| s.x_m)
         .filter(|x| *x > lo && *x < hi)
         .collect();
+    let mut out = Vec::new();
     if between.is_empty() {
-        return incomplete(format!(
+        out = between_axles(format!(
             "the underside between the axles was not seen (no body points between x {lo:.2} and {hi:.2} m, vehicle frame)"
-        ));
+        ))?;
     }
     if let Some(w) = between
         .windows(2)
         .max_by(|a, b| (a[1] - a[0]).total_cmp(&(b[1] - b[0])))
         .filter(|w| w[1] - w[0] > MAX_UNDERSIDE_GAP_M)
     {
-        return incomplete(format!(
+        out = between_axles(format!(
             "the underside between the axles is not covered from x {:.2} to {:.2} m (vehicle frame; a gap of {:.2} m, at most {MAX_UNDERSIDE_GAP_M} m allowed)",
             w[0],
             w[1],
             w[1] - w[0]
-        ));
+        ))?;
     }
     let (Some(rear_end), Some(front_end)) = (samples.first(), samples.last()) else {
-        return Ok(());
+        return Ok(out);
     };
     let (rear_end, front_end) = (rear_end.x_m, front_end.x_m);
     if config.scan_path_in_cloud.is_empty() {
-        return check_ground_beyond(in_frame, rear_end, front_end, config.ground_threshold_m);
+        out.extend(check_ground_beyond(
+            in_frame,
+            rear_end,
+            front_end,
+            config.ground_threshold_m,
+        ));
+        return Ok(out);
     }
     let xs = config
         .scan_path_in_cloud
@@ -1090,31 +1208,38 @@ fn check_coverage(
     let path =
         format!("the scan's path runs from x {path_lo:.2} to {path_hi:.2} m (vehicle frame)");
     if path_lo > rear.x_m || path_hi < front.x_m {
-        return incomplete(format!(
+        return Err(AnglesError::Incomplete(format!(
             "the underside between the axles was not covered: {path}, the axles are at x {:.2} and {:.2} m; a tyre pair seen only from afar is not measured",
             rear.x_m, front.x_m
-        ));
+        )));
     }
     if front_end > path_hi + PATH_REACH_M {
-        return incomplete(format!(
-            "approach: the front overhang was not seen from below: {path}, the scanned underside reaches x {front_end:.2} m, more than {PATH_REACH_M} m beyond the path"
-        ));
+        out.push(NotMeasured {
+            quantity: Quantity::Approach,
+            reason: format!(
+                "the front overhang was not seen from below: {path}, the scanned underside reaches x {front_end:.2} m, more than {PATH_REACH_M} m beyond the path"
+            ),
+        });
     }
     if rear_end < path_lo - PATH_REACH_M {
-        return incomplete(format!(
-            "departure: the rear overhang was not seen from below: {path}, the scanned underside reaches x {rear_end:.2} m, more than {PATH_REACH_M} m beyond the path"
-        ));
+        out.push(NotMeasured {
+            quantity: Quantity::Departure,
+            reason: format!(
+                "the rear overhang was not seen from below: {path}, the scanned underside reaches x {rear_end:.2} m, more than {PATH_REACH_M} m beyond the path"
+            ),
+        });
     }
-    Ok(())
+    Ok(out)
 }
 
-/// Without a path: ground must be seen [`GROUND_BEYOND_M`] beyond each end of the underside.
+/// Without a path: ground must be seen [`GROUND_BEYOND_M`] beyond each end of the underside, or
+/// that end's angle is not measured.
 fn check_ground_beyond(
     in_frame: &[V3],
     rear_end: f64,
     front_end: f64,
     ground_threshold_m: f64,
-) -> Result<(), AnglesError> {
+) -> Vec<NotMeasured> {
     let ground_x = in_frame
         .iter()
         .filter(|p| p[2].abs() < ground_threshold_m)
@@ -1122,18 +1247,66 @@ fn check_ground_beyond(
     let (g_lo, g_hi) = ground_x.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), x| {
         (a.min(x), b.max(x))
     });
-    for (name, end, beyond) in [
-        ("approach: the front", front_end, g_hi - front_end),
-        ("departure: the rear", rear_end, rear_end - g_lo),
+    let mut out = Vec::new();
+    for (quantity, name, end, beyond) in [
+        (Quantity::Approach, "front", front_end, g_hi - front_end),
+        (Quantity::Departure, "rear", rear_end, rear_end - g_lo),
     ] {
         if beyond < GROUND_BEYOND_M {
-            return Err(AnglesError::Incomplete(format!(
-                "{name} overhang may extend beyond the cloud: the cloud ends {:.2} m beyond the underside's end at x {end:.2} m (vehicle frame; at least {GROUND_BEYOND_M} m of ground beyond it expected)",
-                beyond.max(0.0)
-            )));
+            out.push(NotMeasured {
+                quantity,
+                reason: format!(
+                    "the {name} overhang may extend beyond the cloud: the cloud ends {:.2} m beyond the underside's end at x {end:.2} m (vehicle frame; at least {GROUND_BEYOND_M} m of ground beyond it expected)",
+                    beyond.max(0.0)
+                ),
+            });
         }
     }
-    Ok(())
+    out
+}
+
+/// Clear the findings the scan does not support (`not_covered`), and give every finding that is
+/// absent its reason.
+fn not_measured(findings: &mut Findings, mut not_covered: Vec<NotMeasured>) -> Vec<NotMeasured> {
+    for n in &not_covered {
+        match n.quantity {
+            Quantity::Approach => findings.approach = None,
+            Quantity::Departure => findings.departure = None,
+            Quantity::Breakover => findings.breakover = None,
+            Quantity::GroundClearance => findings.clearance = None,
+        }
+    }
+    let absent = [
+        (
+            Quantity::Approach,
+            findings.approach.is_none(),
+            "no body points ahead of the front tyres (nothing in the zone)",
+        ),
+        (
+            Quantity::Departure,
+            findings.departure.is_none(),
+            "no body points behind the rear tyres (nothing in the zone)",
+        ),
+        (
+            Quantity::Breakover,
+            findings.breakover.is_none(),
+            "no body points between the axles",
+        ),
+        (
+            Quantity::GroundClearance,
+            findings.clearance.is_none(),
+            "no body points between the axles",
+        ),
+    ];
+    for (quantity, is_absent, reason) in absent {
+        if is_absent && !not_covered.iter().any(|n| n.quantity == quantity) {
+            not_covered.push(NotMeasured {
+                quantity,
+                reason: reason.to_owned(),
+            });
+        }
+    }
+    not_covered
 }
 
 /// Drop the envelope samples that are not connected to the vehicle: walking out from each axle,
@@ -1175,6 +1348,7 @@ fn find_angles(
     rear: Axle,
     zone: Zone,
     frame: &VehicleFrame,
+    inputs: uncertainty::Inputs,
 ) -> Findings {
     let (front_limit, rear_limit) = zone_limits(front, rear, zone);
     let finding = |s: &EnvelopeSample, angle_rad: f64, parts_rad: Option<(f64, f64)>| {
@@ -1185,6 +1359,7 @@ fn find_angles(
             witness_in_vehicle: w,
             witness_in_cloud: frame.cloud_from_vehicle(w),
             support: s.support,
+            uncertainty: Uncertainty::default(),
         }
     };
     let keep_min = |best: &mut Option<AngleFinding>, cand: AngleFinding| {
@@ -1227,8 +1402,20 @@ fn find_angles(
                 height_m: s.z_m,
                 witness_in_vehicle: w,
                 witness_in_cloud: frame.cloud_from_vehicle(w),
+                uncertainty: uncertainty::of_clearance(inputs),
             });
         }
+    }
+    // The uncertainties of the limiting samples only (the minimum's, not every sample's).
+    let xz = |f: &AngleFinding| [f.witness_in_vehicle[0], f.witness_in_vehicle[2]];
+    if let Some(f) = &mut out.approach {
+        f.uncertainty = uncertainty::of_overhang(xz(f), &front, true, inputs);
+    }
+    if let Some(f) = &mut out.departure {
+        f.uncertainty = uncertainty::of_overhang(xz(f), &rear, false, inputs);
+    }
+    if let Some(f) = &mut out.breakover {
+        f.uncertainty = uncertainty::of_breakover(xz(f), (&front, &rear), inputs);
     }
     out
 }
@@ -1244,6 +1431,8 @@ fn tyres_out(fits: &[(TyrePosition, TyreFit)], frame: &VehicleFrame) -> Vec<Tyre
                 centre_in_cloud: frame.cloud_from_vehicle(c),
                 loaded_radius_m: f.loaded_radius_m,
                 free_radius_m: f.free_radius_m,
+                u_centre_x_m: f.covariance[0][0].sqrt(),
+                u_loaded_radius_m: f.covariance[1][1].sqrt(),
                 width_m: (f.outer_y - f.inner_y).abs(),
                 inner_face_y_m: f.inner_y,
                 residual_rms_m: f.residual_rms_m,
@@ -1325,26 +1514,17 @@ fn finding_warnings(
         ("approach", &r.approach, front_end),
         ("departure", &r.departure, rear_end),
     ] {
-        match f {
-            None => w.push(format!(
-                "{name}: no body points in the zone; angle not determined"
-            )),
-            // A scan that ends mid-underside has no face rising at its end: the band's points
-            // near the end are no higher than the witness.
-            Some(f)
-                if (f.witness_in_vehicle[0] - edge).abs() < 0.03
-                    && end_top < f.witness_in_vehicle[2] + 0.03 =>
-            {
-                w.push(format!(
-                    "{name}: the limiting point is at the end of the scanned body with no face rising there; \
-                     the vehicle may extend beyond the cloud"
-                ));
-            }
-            Some(_) => {}
+        // A scan that ends mid-underside has no face rising at its end: the band's points near
+        // the end are no higher than the witness.
+        if let Some(f) = f
+            && (f.witness_in_vehicle[0] - edge).abs() < 0.03
+            && end_top < f.witness_in_vehicle[2] + 0.03
+        {
+            w.push(format!(
+                "{name}: the limiting point is at the end of the scanned body with no face rising there; \
+                 the vehicle may extend beyond the cloud"
+            ));
         }
-    }
-    if r.breakover.is_none() {
-        w.push("breakover: no body points between the axles; angle not determined".into());
     }
     for (name, f) in [
         ("approach", &r.approach),
@@ -1382,6 +1562,7 @@ mod tests {
             outer_y: 0.0,
             residual_rms_m: 0.003,
             silhouette_points: 60,
+            covariance: [[1e-6, 0.0, 0.0], [0.0, 1e-6, 0.0], [0.0, 0.0, 1e-6]],
         }
     }
 
@@ -1396,7 +1577,7 @@ mod tests {
             (RearLeft, tyre(-1.496, 0.3201, 0.3471)),
             (RearRight, tyre(-1.495, 0.3176, 0.3477)),
         ];
-        let (front, rear) = axles(&misfit, &config);
+        let (front, rear) = axles(&misfit, &config, 0.003);
         assert!((front.x_m - 1.473).abs() < 1e-12, "{front:?}");
         assert!((front.loaded_radius_m - 0.3266).abs() < 1e-12);
         assert!(
@@ -1420,7 +1601,7 @@ mod tests {
             (RearLeft, tyre(-1.5, 0.30, 0.33)),
             (RearRight, tyre(-1.5, 0.33, 0.36)),
         ];
-        let (front, _) = axles(&both, &config);
+        let (front, _) = axles(&both, &config, 0.003);
         assert!((front.loaded_radius_m - 0.315).abs() < 1e-12);
     }
 
@@ -1439,6 +1620,8 @@ mod tests {
             x_m,
             loaded_radius_m: 0.33,
             free_radius_m: 0.34,
+            u_x_m: 0.0,
+            u_loaded_radius_m: 0.0,
         };
         let (front, rear) = (axle(1.5), axle(-1.5));
         // Body from 1 cm outside each tyre to 0.9 m beyond it, 2 cm steps; between the axles a

@@ -29,7 +29,7 @@ use std::collections::HashMap;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-use super::geom::{Circle, V3, fit_circle, median};
+use super::geom::{Circle, V3, circle_covariance, fit_circle, median};
 
 /// Grid cell for seed clustering (metres).
 const SEED_CELL_M: f64 = 0.05;
@@ -203,6 +203,10 @@ pub(crate) struct TyreFit {
     pub outer_y: f64,
     pub residual_rms_m: f64,
     pub silhouette_points: usize,
+    /// Covariance of the fit's `(centre x, centre height, free radius)`, m^2
+    /// ([`super::geom::circle_covariance`] with the larger of the fit's RMS residual and the
+    /// noise sigma).
+    pub covariance: [[f64; 3]; 3],
 }
 
 /// Parameters for [`fit_tyre`].
@@ -250,7 +254,7 @@ pub(crate) fn fit_tyre(points: &[V3], seed: &Seed, params: TyreParams) -> Option
     let mut circle = ground_constrained_ransac(&edges, &footprint, params)?;
     // Least squares on the RANSAC inliers above the bulge zone of the fitted centre height (a
     // loaded tyre is flattened and bulges near the road), trimmed; repeated as the circle moves.
-    let mut used = 0;
+    let mut used = Vec::new();
     let mut rms = f64::NAN;
     for _ in 0..3 {
         let low = 0.3 * circle.v.max(0.1);
@@ -269,9 +273,10 @@ pub(crate) fn fit_tyre(points: &[V3], seed: &Seed, params: TyreParams) -> Option
             break;
         }
     }
-    if !(0.1..=1.2).contains(&circle.r) || circle.v <= 0.05 || used < 10 {
+    if !(0.1..=1.2).contains(&circle.r) || circle.v <= 0.05 || used.len() < 10 {
         return None;
     }
+    let covariance = circle_covariance(&used, circle, rms.max(params.noise_m))?;
     let (inner_y, outer_y) = lateral_faces(points, seed, circle, params);
     Some(TyreFit {
         centre_x: circle.u,
@@ -281,7 +286,8 @@ pub(crate) fn fit_tyre(points: &[V3], seed: &Seed, params: TyreParams) -> Option
         inner_y,
         outer_y,
         residual_rms_m: rms,
-        silhouette_points: used,
+        silhouette_points: used.len(),
+        covariance,
     })
 }
 
@@ -470,8 +476,8 @@ fn circle_through(a: [f64; 2], b: [f64; 2], c: [f64; 2]) -> Option<Circle> {
 }
 
 /// Circle fit, then refit without residuals beyond 3 sigma (robust MAD), twice.
-/// Returns the circle, points used and their RMS residual.
-fn trimmed_circle(points: &[[f64; 2]], noise_m: f64) -> Option<(Circle, usize, f64)> {
+/// Returns the circle, the points used and their RMS residual.
+fn trimmed_circle(points: &[[f64; 2]], noise_m: f64) -> Option<(Circle, Vec<[f64; 2]>, f64)> {
     let mut pts = points.to_vec();
     let mut c = fit_circle(&pts)?;
     for _ in 0..3 {
@@ -496,7 +502,7 @@ fn trimmed_circle(points: &[[f64; 2]], noise_m: f64) -> Option<(Circle, usize, f
         .sum::<f64>()
         / pts.len() as f64)
         .sqrt();
-    Some((c, pts.len(), rms))
+    Some((c, pts, rms))
 }
 
 /// Inner and outer face (y) of the tyre: 1 % / 99 % quantiles of y of points inside the disc.

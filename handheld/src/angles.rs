@@ -10,8 +10,8 @@ use std::path::PathBuf;
 
 use anyhow::{Context, bail};
 use onboard::angles::{
-    AngleFinding, AnglesConfig, AnglesResult, Band, ExclusionBox, Zone, compute_angles,
-    side_view_svg,
+    AngleFinding, AnglesConfig, AnglesResult, Band, ExclusionBox, Quantity, Uncertainty, Zone,
+    compute_angles, side_view_svg,
 };
 use onboard::cloud::{ParseLimits, ReadStats, read_cloud_with};
 use serde_json::{Value, json};
@@ -76,25 +76,28 @@ pub fn run(args: &AnglesArgs, out: &mut impl Write) -> anyhow::Result<()> {
         write_table(out, args, &stats, &result)?;
     }
     missing_angles(&result).map_or(Ok(()), |missing| {
-        bail!(
-            "{}: {missing} could not be determined",
-            args.cloud.display()
-        )
+        bail!("{}: not measured: {missing}", args.cloud.display())
     })
 }
 
-/// The names of the angles a result lacks (`None`: all three were found).
+/// The angles a result lacks, each with its reason (`None`: all three were measured).
 pub fn missing_angles(r: &AnglesResult) -> Option<String> {
-    let missing: Vec<&str> = [
-        ("approach", r.approach.is_some()),
-        ("breakover", r.breakover.is_some()),
-        ("departure", r.departure.is_some()),
+    let missing: Vec<String> = [
+        (Quantity::Approach, r.approach.is_some()),
+        (Quantity::Breakover, r.breakover.is_some()),
+        (Quantity::Departure, r.departure.is_some()),
     ]
     .into_iter()
     .filter(|(_, found)| !found)
-    .map(|(name, _)| name)
+    .map(|(q, _)| {
+        format!(
+            "{} ({})",
+            q.name(),
+            r.not_measured_reason(q).unwrap_or("no reason given")
+        )
+    })
     .collect();
-    (!missing.is_empty()).then(|| missing.join(", "))
+    (!missing.is_empty()).then(|| missing.join("; "))
 }
 
 fn config_from(args: &AnglesArgs) -> anyhow::Result<AnglesConfig> {
@@ -174,6 +177,36 @@ fn deg(f: Option<&AngleFinding>) -> Value {
     f.map_or(Value::Null, |f| json!(round(f.angle_rad.to_degrees(), 4)))
 }
 
+/// The expanded uncertainty U (k = 2) of an angle, degrees (`null` when not measured).
+fn u_deg(f: Option<&AngleFinding>) -> Value {
+    f.map_or(Value::Null, |f| {
+        json!(round(f.uncertainty.expanded.to_degrees(), 4))
+    })
+}
+
+/// An uncertainty budget: U and the standard uncertainties of each source, in `unit` (degrees
+/// for angles, metres for the clearance).
+fn budget(u: &Uncertainty, to_unit: impl Fn(f64) -> f64) -> Value {
+    json!({
+        "expanded_k2": round(to_unit(u.expanded), 5),
+        "witness_height": round(to_unit(u.witness_height), 5),
+        "witness_position": round(to_unit(u.witness_position), 5),
+        "tyre_radius": round(to_unit(u.tyre_radius), 5),
+        "axle_position": round(to_unit(u.axle_position), 5),
+        "ground": round(to_unit(u.ground), 5),
+        "trajectory": round(to_unit(u.trajectory), 5),
+    })
+}
+
+/// `{quantity: reason}` for every quantity the calculator did not measure.
+pub fn not_measured_json(r: &AnglesResult) -> Value {
+    let mut m = serde_json::Map::new();
+    for n in &r.not_measured {
+        m.insert(n.quantity.name().to_owned(), json!(n.reason));
+    }
+    Value::Object(m)
+}
+
 fn round(v: f64, digits: i32) -> f64 {
     let k = 10f64.powi(digits);
     (v * k).round() / k
@@ -190,6 +223,7 @@ fn witness(f: Option<&AngleFinding>) -> Value {
             "in_vehicle_m": v3(f.witness_in_vehicle),
             "in_cloud_m": v3(f.witness_in_cloud),
             "support_points": f.support,
+            "uncertainty_deg": budget(&f.uncertainty, f64::to_degrees),
         });
         if let Some((front, rear)) = f.parts_rad {
             w["front_tangent_deg"] = json!(round(front.to_degrees(), 4));
@@ -201,6 +235,32 @@ fn witness(f: Option<&AngleFinding>) -> Value {
 
 fn to_json(args: &AnglesArgs, stats: &ReadStats, r: &AnglesResult) -> Value {
     let p = r.points;
+    let mut v = json!({
+        "file": args.cloud.display().to_string(),
+        "format": format!("{} {}", stats.format, stats.encoding),
+    });
+    v.as_object_mut().expect("an object").extend(result_json(r));
+    v["points"] = json!({
+        "read": stats.points_in_file,
+        "dropped": stats.dropped_non_finite + stats.dropped_invalid + p.non_finite,
+        "flagged_invalid": stats.dropped_invalid,
+        "excluded": p.excluded,
+        "used": p.input - p.non_finite - p.excluded,
+        "ground": p.ground,
+        "tyre": p.tyre,
+        "body": p.body,
+        "body_in_band": p.body_in_band,
+        "outliers_below_envelope": p.outliers_below_envelope,
+    });
+    v["reader_notes"] = json!(stats.notes);
+    v
+}
+
+/// The calculator's result as JSON fields: each angle in degrees with its expanded uncertainty
+/// (`*_u_deg`, k = 2), `null` and a reason under `not_measured` when it was not measured; the
+/// witnesses with their uncertainty budgets, the tyres, the vehicle frame and the warnings.
+/// Shared by `passangle angles --json` and `passangle replay --json`.
+pub fn result_json(r: &AnglesResult) -> serde_json::Map<String, Value> {
     let tyres: Vec<Value> = r
         .tyres
         .iter()
@@ -211,20 +271,25 @@ fn to_json(args: &AnglesArgs, stats: &ReadStats, r: &AnglesResult) -> Value {
                 "centre_in_cloud_m": v3(t.centre_in_cloud),
                 "loaded_radius_m": round(t.loaded_radius_m, 4),
                 "free_radius_m": round(t.free_radius_m, 4),
+                "loaded_radius_u_m": round(t.u_loaded_radius_m, 5),
+                "centre_x_u_m": round(t.u_centre_x_m, 5),
                 "width_m": round(t.width_m, 4),
                 "fit_residual_m": round(t.residual_rms_m, 5),
                 "fit_points": t.fit_points,
             })
         })
         .collect();
-    json!({
-        "file": args.cloud.display().to_string(),
-        "format": format!("{} {}", stats.format, stats.encoding),
+    let v = json!({
         "zone": match r.zone { Zone::Tyre => "tyre", Zone::Axle => "axle" },
         "approach_deg": deg(r.approach.as_ref()),
+        "approach_u_deg": u_deg(r.approach.as_ref()),
         "departure_deg": deg(r.departure.as_ref()),
+        "departure_u_deg": u_deg(r.departure.as_ref()),
         "breakover_deg": deg(r.breakover.as_ref()),
+        "breakover_u_deg": u_deg(r.breakover.as_ref()),
         "ground_clearance_m": r.ground_clearance.as_ref().map(|c| round(c.height_m, 4)),
+        "ground_clearance_u_m": r.ground_clearance.as_ref().map(|c| round(c.uncertainty.expanded, 5)),
+        "not_measured": not_measured_json(r),
         "wheelbase_m": round(r.wheelbase_m, 4),
         "track_m": r.track_m.map(|t| round(t, 4)),
         "inner_track_m": r.inner_track_m.map(|t| round(t, 4)),
@@ -236,19 +301,8 @@ fn to_json(args: &AnglesArgs, stats: &ReadStats, r: &AnglesResult) -> Value {
             "ground_clearance": r.ground_clearance.as_ref().map(|c| json!({
                 "in_vehicle_m": v3(c.witness_in_vehicle),
                 "in_cloud_m": v3(c.witness_in_cloud),
+                "uncertainty_m": budget(&c.uncertainty, |v| v),
             })),
-        },
-        "points": {
-            "read": stats.points_in_file,
-            "dropped": stats.dropped_non_finite + stats.dropped_invalid + p.non_finite,
-            "flagged_invalid": stats.dropped_invalid,
-            "excluded": p.excluded,
-            "used": p.input - p.non_finite - p.excluded,
-            "ground": p.ground,
-            "tyre": p.tyre,
-            "body": p.body,
-            "body_in_band": p.body_in_band,
-            "outliers_below_envelope": p.outliers_below_envelope,
         },
         "frame": {
             "origin_in_cloud_m": v3(r.frame.origin_in_cloud),
@@ -262,8 +316,11 @@ fn to_json(args: &AnglesArgs, stats: &ReadStats, r: &AnglesResult) -> Value {
         "envelope_bin_m": r.bin_m,
         "band_y_m": [finite_or_null(r.band_y_m.0), finite_or_null(r.band_y_m.1)],
         "warnings": r.warnings,
-        "reader_notes": stats.notes,
-    })
+    });
+    match v {
+        Value::Object(m) => m,
+        _ => unreachable!("json! of an object literal is an object"),
+    }
 }
 
 fn finite_or_null(v: f64) -> Value {
@@ -328,36 +385,50 @@ fn write_table(
     writeln!(out)?;
     writeln!(
         out,
-        "  angle        degrees   witness x, y, z (m, vehicle frame)   support"
+        "  angle        degrees   U (k=2)   witness x, y, z (m, vehicle frame)   support"
     )?;
-    for (name, f) in [
-        ("approach", &r.approach),
-        ("departure", &r.departure),
-        ("breakover", &r.breakover),
+    for (q, f) in [
+        (Quantity::Approach, &r.approach),
+        (Quantity::Departure, &r.departure),
+        (Quantity::Breakover, &r.breakover),
     ] {
+        let name = q.name();
         match f {
             Some(f) => {
                 let w = f.witness_in_vehicle;
                 writeln!(
                     out,
-                    "  {name:<10} {:>8.2}   {:>7.3} {:>7.3} {:>7.3}               {:>6}",
+                    "  {name:<10} {:>8.2}   {:>7.2}   {:>7.3} {:>7.3} {:>7.3}               {:>6}",
                     f.angle_rad.to_degrees(),
+                    f.uncertainty.expanded.to_degrees(),
                     w[0],
                     w[1],
                     w[2],
                     f.support
                 )?;
             }
-            None => writeln!(out, "  {name:<10}      n/a   (no body points in the zone)")?,
+            None => writeln!(
+                out,
+                "  {name:<10} not measured: {}",
+                r.not_measured_reason(q).unwrap_or("no reason given")
+            )?,
         }
     }
-    if let Some(c) = &r.ground_clearance {
-        let w = c.witness_in_vehicle;
-        writeln!(
+    match &r.ground_clearance {
+        Some(c) => {
+            let w = c.witness_in_vehicle;
+            writeln!(
+                out,
+                "  clearance  {:>7.3} m  {:>5.3} m   {:>7.3} {:>7.3} {:>7.3}",
+                c.height_m, c.uncertainty.expanded, w[0], w[1], w[2]
+            )?;
+        }
+        None => writeln!(
             out,
-            "  clearance  {:>7.3} m  {:>7.3} {:>7.3} {:>7.3}",
-            c.height_m, w[0], w[1], w[2]
-        )?;
+            "  clearance  not measured: {}",
+            r.not_measured_reason(Quantity::GroundClearance)
+                .unwrap_or("no reason given")
+        )?,
     }
     writeln!(out)?;
     write!(out, "wheelbase {:.3} m", r.wheelbase_m)?;

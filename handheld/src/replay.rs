@@ -10,13 +10,15 @@
 //! firing: an offset of 0.4 mm at 0.3 m/s, left uncorrected.
 //!
 //! Writes the cloud as binary PLY (`--out`, default `RUN_DIR/replay-cloud.ply`) and prints the
-//! trajectory length, the pipeline's counters and the angles (degrees at this boundary only).
+//! trajectory length, the pipeline's counters and the angles with their expanded uncertainties
+//! (degrees at this boundary only), or with `--json` the run's whole result as one JSON object
+//! (the fields of `passangle angles --json` plus the replay's counters and notes).
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
-use onboard::angles::{AnglesConfig, compute_angles};
+use onboard::angles::{AnglesConfig, Quantity, compute_angles};
 use onboard::cloud::{PlyEncoding, write_ply};
 use onboard::pipeline::{BuiltCloud, PipelineConfig};
 use onboard::process::{ProcessConfig, build_run};
@@ -38,6 +40,9 @@ pub struct ReplayArgs {
     /// front) or `-x`.
     #[arg(long, default_value = "-x", allow_hyphen_values = true)]
     pub front: String,
+    /// Print the run's result as one JSON object instead of text.
+    #[arg(long)]
+    pub json: bool,
 }
 
 /// Run the command.
@@ -52,11 +57,9 @@ pub fn run(args: &ReplayArgs, out: &mut impl Write) -> anyhow::Result<()> {
         None => PipelineConfig::default(),
     };
     let recording = Recording::open(&args.run_dir)?;
+    let mut notes = Vec::new();
     if recording.incomplete {
-        writeln!(
-            out,
-            "note: the run is marked INCOMPLETE; replaying what was recorded"
-        )?;
+        notes.push("the run is marked INCOMPLETE; replaying what was recorded".to_owned());
     }
     let config = ProcessConfig {
         pipeline,
@@ -64,25 +67,26 @@ pub fn run(args: &ReplayArgs, out: &mut impl Write) -> anyhow::Result<()> {
     };
     let (built, counts) = build_run(&args.run_dir, &config).map_err(anyhow::Error::msg)?;
     if counts.lidar_cut_short {
-        writeln!(
-            out,
-            "note: lidar.pcap ends inside its last record (a crash while recording); the packets \
+        notes.push(
+            "lidar.pcap ends inside its last record (a crash while recording); the packets \
              before it were used"
-        )?;
+                .to_owned(),
+        );
     }
     if counts.odometry_cut_short {
-        writeln!(
-            out,
-            "note: odometry.csv ends with a cut-short line (skipped)"
-        )?;
+        notes.push("odometry.csv ends with a cut-short line (skipped)".to_owned());
     }
     if counts.lidar_malformed > 0 || counts.out_of_order > 0 || counts.mcu_clock_resets > 0 {
-        writeln!(
-            out,
-            "note: {} malformed lidar packets skipped, {} items out of time order skipped, \
+        notes.push(format!(
+            "{} malformed lidar packets skipped, {} items out of time order skipped, \
              {} MCU clock resets",
             counts.lidar_malformed, counts.out_of_order, counts.mcu_clock_resets
-        )?;
+        ));
+    }
+    if !args.json {
+        for note in &notes {
+            writeln!(out, "note: {note}")?;
+        }
     }
     let path = args
         .out
@@ -96,13 +100,16 @@ pub fn run(args: &ReplayArgs, out: &mut impl Write) -> anyhow::Result<()> {
         PlyEncoding::BinaryLittleEndian,
     )
     .with_context(|| format!("writing {}", path.display()))?;
-    report(&built, &path, &args.front, out)
+    let x_sigma_per_m = built.x_sigma_per_m(&config.pipeline.fusion);
+    report(&built, &path, args, x_sigma_per_m, &notes, out)
 }
 
 fn report(
     built: &BuiltCloud,
     path: &Path,
-    front: &str,
+    args: &ReplayArgs,
+    x_sigma_per_m: f64,
+    notes: &[String],
     out: &mut impl Write,
 ) -> anyhow::Result<()> {
     let s = &built.stats;
@@ -110,6 +117,51 @@ fn report(
         let t = p.world_from_robot.translation;
         (t[0] * t[0] + t[1] * t[1] + t[2] * t[2]).sqrt()
     });
+    let config = AnglesConfig {
+        front_is_positive_x: match args.front.as_str() {
+            "+x" => true,
+            "-x" => false,
+            other => bail!("--front {other}: expected +x or -x"),
+        },
+        // The robot's path: what the scan did not cover is not measured.
+        scan_path_in_cloud: built
+            .trajectory
+            .iter()
+            .map(|t| t.world_from_robot.translation)
+            .collect(),
+        trajectory_x_sigma_per_m: x_sigma_per_m,
+        ..AnglesConfig::default()
+    };
+    // The cloud is written either way; the command fails when the angles were not all measured,
+    // so scripts see a non-zero exit.
+    let r = compute_angles(&built.points_in_world, &config)
+        .with_context(|| format!("{}: computing the angles", path.display()));
+    if args.json {
+        let mut v = serde_json::json!({
+            "run_dir": args.run_dir.display().to_string(),
+            "cloud": path.display().to_string(),
+            "cloud_points": built.points_in_world.len(),
+            "lidar_frames": s.frames,
+            "depth_frames": s.depth_frames,
+            "wheel_messages": s.wheel_messages,
+            "travelled_m": (travelled * 1e4).round() / 1e4,
+            "trajectory_x_sigma_per_m": x_sigma_per_m,
+            "notes": notes,
+        });
+        match &r {
+            Ok(r) => v
+                .as_object_mut()
+                .expect("an object")
+                .extend(crate::angles::result_json(r)),
+            Err(e) => v["error"] = serde_json::json!(format!("{e:#}")),
+        }
+        writeln!(out, "{}", serde_json::to_string_pretty(&v)?)?;
+        let r = r?;
+        if let Some(missing) = crate::angles::missing_angles(&r) {
+            bail!("{}: not measured: {missing}", path.display());
+        }
+        return Ok(());
+    }
     writeln!(
         out,
         "{} lidar frames, {} depth frames ({} tracked), {} wheel messages; travelled {travelled:.3} m",
@@ -126,36 +178,29 @@ fn report(
         built.points_in_world.len(),
         path.display()
     )?;
-    let config = AnglesConfig {
-        front_is_positive_x: match front {
-            "+x" => true,
-            "-x" => false,
-            other => bail!("--front {other}: expected +x or -x"),
-        },
-        // The robot's path: a scan that did not cover the vehicle is refused, not measured.
-        scan_path_in_cloud: built
-            .trajectory
-            .iter()
-            .map(|t| t.world_from_robot.translation)
-            .collect(),
-        ..AnglesConfig::default()
-    };
-    // The cloud is written either way; the command fails when the angles were not all measured,
-    // so scripts see a non-zero exit.
-    let r = compute_angles(&built.points_in_world, &config)
-        .with_context(|| format!("{}: computing the angles", path.display()))?;
-    for (name, a) in [
-        ("approach", &r.approach),
-        ("breakover", &r.breakover),
-        ("departure", &r.departure),
+    let r = r?;
+    for (q, a) in [
+        (Quantity::Approach, &r.approach),
+        (Quantity::Breakover, &r.breakover),
+        (Quantity::Departure, &r.departure),
     ] {
+        let name = q.name();
         match a {
-            Some(a) => writeln!(out, "{name:<10} {:6.2} deg", a.angle_rad.to_degrees())?,
-            None => writeln!(out, "{name:<10} not found")?,
+            Some(a) => writeln!(
+                out,
+                "{name:<10} {:6.2} deg  U {:.2} deg (k = 2)",
+                a.angle_rad.to_degrees(),
+                a.uncertainty.expanded.to_degrees()
+            )?,
+            None => writeln!(
+                out,
+                "{name:<10} not measured: {}",
+                r.not_measured_reason(q).unwrap_or("no reason given")
+            )?,
         }
     }
     if let Some(missing) = crate::angles::missing_angles(&r) {
-        bail!("{}: {missing} could not be determined", path.display());
+        bail!("{}: not measured: {missing}", path.display());
     }
     Ok(())
 }

@@ -169,11 +169,12 @@ fn an_undetermined_angle_prints_the_table_and_fails() {
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(!out.status.success(), "{stdout}");
     assert!(
-        stdout.contains("approach        n/a") && stdout.contains("departure     16.97"),
+        stdout.contains("approach   not measured: no body points ahead of the front tyres")
+            && stdout.contains("departure     16.97"),
         "{stdout}"
     );
     assert!(
-        stderr.contains("box.ply: approach could not be determined"),
+        stderr.contains("box.ply: not measured: approach (no body points ahead of the front tyres"),
         "{stderr}"
     );
     std::fs::remove_dir_all(&dir).ok();

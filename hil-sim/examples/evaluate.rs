@@ -3,11 +3,13 @@
 //! per set.
 //!
 //! Run: `cargo run --release -p hil-sim --example evaluate -- [--set tuning|held-out|both]
-//! [--protocol FILE] [--jobs N] [--only TEXT] [--oracle]` (defaults: both sets,
-//! `hil-sim/evaluation.toml`, two worker threads; `--only` keeps the runs whose vehicle or world
+//! [--protocol FILE] [--jobs N] [--only TEXT] [--oracle] [--detail]` (defaults: both sets,
+//! `hil-sim/evaluation.toml`, two worker threads; `--only` keeps the runs whose `vehicle/world/seed`
 //! contains TEXT; `--oracle` replaces the pipeline by the true poses: every simulated return
 //! placed with the exact pose of its firing, one centroid per 5 mm voxel as the pipeline's output,
-//! the true path as the scan's path, so the tables show the calculator alone on the same runs).
+//! the true path as the scan's path, so the tables show the calculator alone on the same runs;
+//! `--detail` adds, per run, each witness and its uncertainty budget against the truth's witness,
+//! the fitted axles against the true tyre and, for the pipeline, the trajectory's largest errors).
 //!
 //! Per run (all seeded; the same command prints the same tables): the protocol's template
 //! scenario with the run's vehicle, world and seed, the robot starting 1 m ahead of the vehicle's
@@ -22,7 +24,8 @@
 //! Output: per set, a row per run with the true angles, the three errors (measured - true,
 //! degrees; `-` where the calculator gave none), the mean and largest |error| of the run, how many
 //! of its angles lie within 0.5 degree, and, for a run with a missing angle, the calculator's
-//! reason; then the set's summary (per angle: mean and largest |error|, within 0.5 degree;
+//! reason; then the set's summary (per angle: mean and largest |error|, within 0.5 degree, how
+//! often the true value lies within the calculator's expanded uncertainty U, the median U;
 //! runs with every angle within 0.5 degree; runs without angles). Timing goes to stderr only.
 
 use std::path::{Path, PathBuf};
@@ -90,10 +93,14 @@ struct Outcome {
     truth_deg: [f64; 3],
     /// Measured - true, degrees (`None`: no angle).
     error_deg: [Option<f64>; 3],
+    /// The calculator's expanded uncertainty U (k = 2), degrees.
+    u_deg: [Option<f64>; 3],
     /// Why angles are missing (the calculator's error or which angle it did not find).
     missing: Option<String>,
     cpu_s: f64,
     frames: usize,
+    /// With `--detail`: the witnesses against the truth's, and the trajectory's largest errors.
+    detail: Vec<String>,
 }
 
 fn entries(dir: &Path, groups: &[Group]) -> Vec<Entry> {
@@ -251,9 +258,10 @@ fn run(
     ]
     .map(f64::to_degrees);
     let scene = scenario.scene();
-    let (cloud, path, frames, cpu_s) = if oracle {
+    let mut detail = Vec::new();
+    let (cloud, path, frames, cpu_s, x_sigma_per_m) = if oracle {
         let (cloud, path, packets) = oracle_cloud(&scenario, &scene);
-        (cloud, path, packets, 0.0)
+        (cloud, path, packets, 0.0, 0.0)
     } else {
         let lidar = scenario.decoded_lidar_frames(&scene);
         let wheel = scenario.wheel_odometry(0.2);
@@ -271,42 +279,153 @@ fn run(
             .iter()
             .map(|tp| t0.apply(tp.world_from_robot.translation))
             .collect();
-        (cloud, path, lidar.len(), cpu_s)
+        detail.push(trajectory_errors(&built, &t0, &motion));
+        let x_sigma_per_m = built.x_sigma_per_m(&PipelineConfig::default().fusion);
+        (cloud, path, lidar.len(), cpu_s, x_sigma_per_m)
     };
     let config = AnglesConfig {
         scan_path_in_cloud: path,
+        trajectory_x_sigma_per_m: x_sigma_per_m,
         ..AnglesConfig::default()
     };
-    let (error_deg, missing) = match compute_angles(&cloud, &config) {
+    let (error_deg, u_deg, missing) = match compute_angles(&cloud, &config) {
         Ok(r) => {
+            let names = ["approach", "breakover", "departure"];
+            detail.extend(witness_detail(&r, &truth, &scenario.vehicle));
             let measured = [&r.approach, &r.breakover, &r.departure]
                 .map(|a| a.as_ref().map(|a| a.angle_rad.to_degrees()));
-            let names = ["approach", "breakover", "departure"];
             let absent: Vec<&str> = (0..3)
                 .filter(|&k| measured[k].is_none())
                 .map(|k| names[k])
                 .collect();
             let missing = (!absent.is_empty()).then(|| {
-                format!(
-                    "no {} found; warnings: {}",
-                    absent.join(", "),
-                    r.warnings.join("; ")
-                )
+                let reasons: Vec<String> = r
+                    .not_measured
+                    .iter()
+                    .map(|n| format!("{} not measured: {}", n.quantity.name(), n.reason))
+                    .collect();
+                reasons.join("; ")
             });
             (
                 [0, 1, 2].map(|k| measured[k].map(|m| m - truth_deg[k])),
+                [&r.approach, &r.breakover, &r.departure]
+                    .map(|a| a.as_ref().map(|a| a.uncertainty.expanded.to_degrees())),
                 missing,
             )
         }
-        Err(e) => ([None; 3], Some(e.to_string())),
+        Err(e) => ([None; 3], [None; 3], Some(e.to_string())),
     };
     Ok(Outcome {
         truth_deg,
         error_deg,
+        u_deg,
         missing,
         cpu_s,
         frames,
+        detail,
     })
+}
+
+/// `--detail`: each angle's witness and uncertainty budget against the truth's witness, the axles
+/// against the true tyre, the wheelbase and the ground.
+fn witness_detail(
+    r: &onboard::angles::AnglesResult,
+    truth: &hil_sim::truth::TrueAngles,
+    vehicle: &Vehicle,
+) -> Vec<String> {
+    let mut out = Vec::new();
+    let names = ["approach", "breakover", "departure"];
+    let true_witness = [&truth.approach, &truth.breakover, &truth.departure];
+    for (k, f) in [&r.approach, &r.breakover, &r.departure].iter().enumerate() {
+        let shown = true_witness[k].witness.as_ref().map_or_else(
+            || "none".to_owned(),
+            |w| format!("x {:+.3} z {:.3} ({})", w.x_m, w.z_m, w.source),
+        );
+        let found = f.as_ref().map_or_else(
+            || "none".to_owned(),
+            |f| {
+                let w = f.witness_in_cloud;
+                let u = &f.uncertainty;
+                format!(
+                    "x {:+.3} z {:.3} support {}, U {:.2} deg (u: height {:.2}, position {:.2}, radius {:.2}, axle {:.2}, ground {:.2}, trajectory {:.2})",
+                    w[0],
+                    w[2],
+                    f.support,
+                    u.expanded.to_degrees(),
+                    u.witness_height.to_degrees(),
+                    u.witness_position.to_degrees(),
+                    u.tyre_radius.to_degrees(),
+                    u.axle_position.to_degrees(),
+                    u.ground.to_degrees(),
+                    u.trajectory.to_degrees()
+                )
+            },
+        );
+        out.push(format!("{}: witness {found}; true {shown}", names[k]));
+    }
+    let tyre = &vehicle.tyre;
+    for (name, a) in [("front", &r.front_axle), ("rear", &r.rear_axle)] {
+        out.push(format!(
+            "{name} axle: x {:+.3}, loaded radius {:.3} (true {:.3}), free radius {:.3} (true {:.3})",
+            a.x_m,
+            a.loaded_radius_m,
+            tyre.radius_m,
+            a.free_radius_m,
+            tyre.tread_radius()
+        ));
+    }
+    out.push(format!(
+        "wheelbase {:.3} (true {:.3}); ground sigma {:.1} mm, tilt {:.2} deg",
+        r.wheelbase_m,
+        vehicle.wheelbase_m,
+        r.ground.noise_sigma_m * 1e3,
+        r.ground.tilt_rad.to_degrees()
+    ));
+    out
+}
+
+/// The trajectory's largest errors against the truth (vehicle frame): x, y, z (cm) and pitch,
+/// roll (degrees).
+fn trajectory_errors(built: &BuiltCloud, t0: &Pose, motion: &impl Trajectory) -> String {
+    let mut worst = [0.0_f64; 5];
+    let mut worst_frame = String::new();
+    let mut tilted = 0;
+    for tp in &built.trajectory {
+        let est = t0.compose(&tp.world_from_robot);
+        let truth = pose_of(&motion.pose_at(tp.stamp_s).to_isometry());
+        let (e, t) = (rpy_of(&est.rotation), rpy_of(&truth.rotation));
+        let errs = [
+            100.0 * (est.translation[0] - truth.translation[0]),
+            100.0 * (est.translation[1] - truth.translation[1]),
+            100.0 * (est.translation[2] - truth.translation[2]),
+            (e[1] - t[1]).to_degrees(),
+            (e[0] - t[0]).to_degrees(),
+        ];
+        if errs[3].abs().max(errs[4].abs()) > 0.5 {
+            tilted += 1;
+        }
+        if errs[3].abs() > worst[3].abs() {
+            worst_frame = format!(
+                "t {:.1} s, chosen {:?}, laser degenerate {:?}, refinement rejected {:?}",
+                tp.stamp_s, tp.chosen, tp.laser_degenerate, tp.refine_rejected
+            );
+        }
+        for (w, x) in worst.iter_mut().zip(errs) {
+            if x.abs() > w.abs() {
+                *w = x;
+            }
+        }
+    }
+    format!(
+        "trajectory worst: x {:+.1} cm, y {:+.1} cm, z {:+.1} cm, pitch {:+.2} deg, roll {:+.2} deg; {tilted} of {} frames off by more than 0.5 deg in pitch or roll ({} without ground); worst pitch at {worst_frame}",
+        worst[0],
+        worst[1],
+        worst[2],
+        worst[3],
+        worst[4],
+        built.trajectory.len(),
+        built.stats.frames_without_ground
+    )
 }
 
 fn fmt_err(e: Option<f64>) -> String {
@@ -322,6 +441,8 @@ fn print_set(name: &str, entries: &[Entry], outcomes: &[anyhow::Result<Outcome>]
     );
     println!("|---|---|---|---|---|---|---|---|---|---|---|");
     let mut per_angle: [Vec<f64>; 3] = [Vec::new(), Vec::new(), Vec::new()];
+    // Per angle: (|error|, U) of every measured angle.
+    let mut with_u: [Vec<(f64, f64)>; 3] = [Vec::new(), Vec::new(), Vec::new()];
     let (mut runs_all_ok, mut runs_without, mut angles_total) = (0, Vec::new(), 0);
     for (e, o) in entries.iter().zip(outcomes) {
         let (v, w) = (e.vehicle_name(), e.world_name());
@@ -339,6 +460,9 @@ fn print_set(name: &str, entries: &[Entry], outcomes: &[anyhow::Result<Outcome>]
                 for (k, err) in o.error_deg.iter().enumerate() {
                     if let Some(x) = err {
                         per_angle[k].push(x.abs());
+                        if let Some(u) = o.u_deg[k] {
+                            with_u[k].push((x.abs(), u));
+                        }
                     }
                 }
                 angles_total += 3;
@@ -408,6 +532,37 @@ fn print_set(name: &str, entries: &[Entry], outcomes: &[anyhow::Result<Outcome>]
             entries.len()
         ))
     );
+    let covered = |v: &[(f64, f64)]| v.iter().filter(|(e, u)| e <= u).count();
+    let median_u = |v: &[(f64, f64)]| {
+        let mut us: Vec<f64> = v.iter().map(|(_, u)| *u).collect();
+        us.sort_by(f64::total_cmp);
+        us.get(us.len() / 2)
+            .map_or_else(|| "-".to_owned(), |u| format!("{u:.2}"))
+    };
+    println!(
+        "| true value within +-U | {} |",
+        with_u
+            .iter()
+            .map(|v| format!("{} of {}", covered(v), v.len()))
+            .collect::<Vec<_>>()
+            .join(" | ")
+    );
+    println!(
+        "| median U deg | {} |",
+        with_u
+            .iter()
+            .map(|v| median_u(v))
+            .collect::<Vec<_>>()
+            .join(" | ")
+    );
+    let all_u: Vec<(f64, f64)> = with_u.iter().flatten().copied().collect();
+    println!(
+        "\n{name}: the true value lies within +-U (k = 2) for {} of {} measured angles ({:.0} %), median U {} deg",
+        covered(&all_u),
+        all_u.len(),
+        100.0 * covered(&all_u) as f64 / all_u.len().max(1) as f64,
+        median_u(&all_u)
+    );
     let within_all: usize = per_angle
         .iter()
         .map(|v| v.iter().filter(|x| **x <= 0.5).count())
@@ -419,6 +574,19 @@ fn print_set(name: &str, entries: &[Entry], outcomes: &[anyhow::Result<Outcome>]
     );
     for r in &runs_without {
         println!("- {r}");
+    }
+    println!();
+}
+
+/// `--detail`'s lines of every run.
+fn print_detail(list: &[Entry], outcomes: &[anyhow::Result<Outcome>]) {
+    for (e, o) in list.iter().zip(outcomes) {
+        if let Ok(o) = o {
+            println!("{}/{}/{}:", e.vehicle_name(), e.world_name(), e.seed);
+            for line in &o.detail {
+                println!("  {line}");
+            }
+        }
     }
     println!();
 }
@@ -435,12 +603,16 @@ struct Args {
     /// Worker threads (each run is single-threaded and seeded, so the tables do not depend on it).
     #[arg(long, default_value_t = 2)]
     jobs: usize,
-    /// Only runs whose vehicle or world name contains this.
+    /// Only runs whose `vehicle/world/seed` contains this (`van`, `hall-a`, `suv_unibody/hall-a/1`).
     #[arg(long)]
     only: Option<String>,
     /// The calculator alone: true poses instead of the pipeline.
     #[arg(long)]
     oracle: bool,
+    /// After each table, every run's witnesses against the truth's and, for the pipeline, the
+    /// trajectory's largest errors.
+    #[arg(long)]
+    detail: bool,
 }
 
 fn main() -> anyhow::Result<()> {
@@ -481,7 +653,7 @@ fn main() -> anyhow::Result<()> {
         let mut list = entries(dir, groups);
         if let Some(o) = &args.only {
             list.retain(|e| {
-                e.vehicle_name().contains(o.as_str()) || e.world_name().contains(o.as_str())
+                format!("{}/{}/{}", e.vehicle_name(), e.world_name(), e.seed).contains(o.as_str())
             });
         }
         let results: Mutex<Vec<Option<anyhow::Result<Outcome>>>> =
@@ -535,6 +707,9 @@ fn main() -> anyhow::Result<()> {
             .map(|r| r.unwrap_or_else(|| Err(anyhow::anyhow!("not run"))))
             .collect();
         print_set(name, &list, &outcomes);
+        if args.detail {
+            print_detail(&list, &outcomes);
+        }
     }
     Ok(())
 }

@@ -178,9 +178,14 @@ impl PipelineConfig {
                 self.fusion.rotation_gap_decay
             )));
         }
-        if !(0.0..=1.0).contains(&self.ground.early_stop_fraction) {
+        if !(self.ground.confidence > 0.0 && self.ground.confidence < 1.0) {
             return Err(PipelineError::InvalidConfig(
-                "ground.early-stop-fraction must lie in 0..=1".into(),
+                "ground.confidence must lie strictly between 0 and 1".into(),
+            ));
+        }
+        if self.ground.max_iterations == 0 {
+            return Err(PipelineError::InvalidConfig(
+                "ground.max-iterations must be at least 1".into(),
             ));
         }
         if self.features.window_half_width == 0 || self.visual.pixel_stride == 0 {
@@ -244,9 +249,11 @@ pub struct GroundConfig {
     pub enabled: bool,
     /// Inlier distance to the plane, metres (paper: 0.03).
     pub distance_threshold_m: f64,
-    /// Stop once the inliers exceed this fraction of the frame (paper: 50 %).
-    pub early_stop_fraction: f64,
-    /// Hypotheses tried at most.
+    /// Probability that the search draws three ground points at least once: the hypotheses
+    /// tried follow from it and the best plane's inlier fraction ([`super::ground`]). Replaces
+    /// the paper's fixed stop at 50 % inliers, which under a car in a hall is never reached.
+    pub confidence: f64,
+    /// Hypotheses tried at most (bounds the CPU per frame).
     pub max_iterations: u32,
     /// Largest angle between the plane normal and the robot's z axis, radians.
     pub max_tilt_rad: f64,
@@ -261,8 +268,8 @@ impl Default for GroundConfig {
         Self {
             enabled: true,
             distance_threshold_m: 0.03,
-            early_stop_fraction: 0.5,
-            max_iterations: 60,
+            confidence: 0.9999,
+            max_iterations: 1000,
             max_tilt_rad: 0.35,
             min_depth_below_lidar_m: 0.05,
             seed: 7,

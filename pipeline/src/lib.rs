@@ -205,6 +205,40 @@ pub struct BuiltCloud {
     pub stats: PipelineStats,
 }
 
+/// The scan-to-map refinement's error along the path per metre travelled, where it determines
+/// x. An assumption of the order the tuning set's runs show (the trajectories' largest x errors,
+/// 1.3-5.4 cm over 4.6-8.3 m of path), not a measured property of the real robot.
+pub const MAP_X_SIGMA_PER_M: f64 = 0.005;
+
+impl BuiltCloud {
+    /// The trajectory's standard uncertainty along the path per metre travelled, for the angle
+    /// calculator's budget: over the frames where the refinement did not determine x, the
+    /// wheels' stated speed error relative to the run's mean speed; elsewhere
+    /// [`MAP_X_SIGMA_PER_M`]. Approximate: a per-frame mix of two stated errors, not a fit.
+    pub fn x_sigma_per_m(&self, fusion: &config::FusionConfig) -> f64 {
+        let (Some(first), Some(last)) = (self.trajectory.first(), self.trajectory.last()) else {
+            return MAP_X_SIGMA_PER_M;
+        };
+        let t = last.world_from_robot.translation;
+        let s = first.world_from_robot.translation;
+        let metres = (t[0] - s[0]).hypot(t[1] - s[1]);
+        let seconds = last.stamp_s - first.stamp_s;
+        let n = self.trajectory.len() as f64;
+        let by_wheels = self
+            .trajectory
+            .iter()
+            .filter(|tp| tp.refine_rejected[3])
+            .count() as f64
+            / n;
+        let wheel_per_m = if metres > 0.1 && seconds > 0.0 {
+            fusion.wheel_speed_sigma_mps / (metres / seconds)
+        } else {
+            MAP_X_SIGMA_PER_M
+        };
+        (by_wheels * wheel_per_m.powi(2) + (1.0 - by_wheels) * MAP_X_SIGMA_PER_M.powi(2)).sqrt()
+    }
+}
+
 /// Bad input to the pipeline.
 #[derive(Debug, Error, PartialEq)]
 pub enum PipelineError {
