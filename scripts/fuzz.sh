@@ -32,6 +32,7 @@ for t in "${targets[@]}"; do
         recording_readers) cp "$hostile"/*.csv "$corpus"/ ;;
         e57_cloud) cp "$hostile"/*.e57 "$corpus"/ ;;
         las_cloud) cp "$hostile"/*.las "$hostile"/*.laz "$corpus"/ ;;
+        signature_sidecar) cp "$hostile"/sidecar-*.sig "$corpus"/ ;;
     esac
     echo "==> $t for $seconds s"
     log=target/fuzz-corpus/$t.log

@@ -6,6 +6,9 @@ mod export;
 mod field;
 mod lidar;
 mod replay;
+mod verify;
+
+use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
 
@@ -38,19 +41,25 @@ enum Command {
     /// Write a recorded run as MCAP with Foxglove schemas (lidar frames, fused cloud, transforms,
     /// depth images, odometry).
     Export(export::ExportArgs),
+    /// Check a signed record (result.json, a run directory...) against the robot's public key,
+    /// offline; say what was changed if it fails (exit 3 changed, 4 not the robot's key, 5 not
+    /// signed).
+    Verify(verify::VerifyArgs),
 }
 
-fn main() -> anyhow::Result<()> {
+fn main() -> anyhow::Result<ExitCode> {
     let cli = Cli::parse();
+    let done = |r: anyhow::Result<()>| r.map(|()| ExitCode::SUCCESS);
     match cli.command {
-        Command::Lidar(args) => lidar::run(&args, &mut std::io::stdout().lock()),
-        Command::Angles(args) => angles::run(&args, &mut std::io::stdout().lock()),
-        Command::Pair(args) => field::pair(&args, &mut std::io::stdout().lock()),
-        Command::Measure(args) => field::measure(&args, &mut std::io::stdout().lock()),
-        Command::Status(args) => field::status(&args, &mut std::io::stdout().lock()),
-        Command::Abort(args) => field::abort(&args, &mut std::io::stdout().lock()),
-        Command::Fetch(args) => field::fetch(&args, &mut std::io::stdout().lock()),
-        Command::Replay(args) => replay::run(&args, &mut std::io::stdout().lock()),
-        Command::Export(args) => export::run(&args, &mut std::io::stdout().lock()),
+        Command::Lidar(args) => done(lidar::run(&args, &mut std::io::stdout().lock())),
+        Command::Angles(args) => done(angles::run(&args, &mut std::io::stdout().lock())),
+        Command::Pair(args) => done(field::pair(&args, &mut std::io::stdout().lock())),
+        Command::Measure(args) => done(field::measure(&args, &mut std::io::stdout().lock())),
+        Command::Status(args) => done(field::status(&args, &mut std::io::stdout().lock())),
+        Command::Abort(args) => done(field::abort(&args, &mut std::io::stdout().lock())),
+        Command::Fetch(args) => done(field::fetch(&args, &mut std::io::stdout().lock())),
+        Command::Replay(args) => done(replay::run(&args, &mut std::io::stdout().lock())),
+        Command::Export(args) => done(export::run(&args, &mut std::io::stdout().lock())),
+        Command::Verify(args) => verify::run(&args, &mut std::io::stdout().lock()),
     }
 }

@@ -369,8 +369,17 @@ pub(crate) struct Prepared {
     pub(crate) time_limit: Duration,
 }
 
-/// Loads the scenario, computes its truth and writes the robot's config and key under
-/// `options.run_root`.
+/// The simulated robot's device key seed for a demo seed (never a real robot's: those come from
+/// the OS's random source, `passangle-onboard device-key --generate`).
+pub fn device_seed(seed: u64) -> [u8; onboard::signing::SEED_LEN] {
+    use rand::{RngCore, SeedableRng};
+    let mut out = [0u8; onboard::signing::SEED_LEN];
+    rand_chacha::ChaCha20Rng::seed_from_u64(seed ^ 0xde71_ce0c_5e1f_0000).fill_bytes(&mut out);
+    out
+}
+
+/// Loads the scenario, computes its truth and writes the robot's config, pairing key and device
+/// key under `options.run_root`.
 // `{:?}` quotes paths for TOML.
 #[allow(clippy::unnecessary_debug_formatting)]
 pub(crate) fn prepare(options: &DemoOptions) -> anyhow::Result<Prepared> {
@@ -387,10 +396,16 @@ pub(crate) fn prepare(options: &DemoOptions) -> anyhow::Result<Prepared> {
         onboard::config::write_key(&key_file, &key)?;
     }
     let key = onboard::config::read_key(&key_file)?;
+    // The simulated robot signs its records like a real one, with a key drawn from the seed so
+    // that two runs of a scenario give the same signatures (a real robot's comes from the OS).
+    let device_key_file = etc.join("device.key");
+    let _ = std::fs::remove_file(&device_key_file);
+    onboard::config::write_device_key(&device_key_file, &device_seed(options.seed))?;
     let text = format!(
-        "[recording]\nroot = {:?}\n[radio]\nport = \"sim\"\nkey-file = {:?}\n[mcu]\nport = \"sim\"\n[camera]\nsource = \"none\"\n[processing]\nenter-at-front = {}\n{DEMO_PIPELINE}",
+        "[recording]\nroot = {:?}\n[radio]\nport = \"sim\"\nkey-file = {:?}\n[mcu]\nport = \"sim\"\n[camera]\nsource = \"none\"\n[signing]\nkey-file = {:?}\n[processing]\nenter-at-front = {}\n{DEMO_PIPELINE}",
         options.run_root.join("runs"),
         key_file,
+        device_key_file,
         run_spec.heading_deg.rem_euclid(360.0) > 90.0
             && run_spec.heading_deg.rem_euclid(360.0) < 270.0,
     );

@@ -9,6 +9,11 @@
 //! paired handheld ([`crate::link::keys`]). Every radio session is a fresh Noise handshake keyed
 //! with one of them, so nothing needs to persist between runs to refuse a replay
 //! (docs/security.md).
+//!
+//! Signing: the robot's device key (`signing.key-file`) is a 32-byte Ed25519 seed stored the same
+//! way, 64 hex digits in a file only its owner reads (`passangle-onboard device-key --generate`
+//! writes it). When the key is configured, the service signs every whole file of a run with it
+//! and refuses to start if the file is missing, malformed or open to others.
 
 use std::fs;
 use std::io;
@@ -79,6 +84,20 @@ pub struct OnboardConfig {
     /// Cloud building and angles (`[processing]`, with the pipeline under `[processing.pipeline]`).
     #[serde(default)]
     pub processing: crate::process::ProcessConfig,
+    /// Signed records.
+    #[serde(default)]
+    pub signing: SigningConfig,
+}
+
+/// `[signing]`.
+#[derive(Debug, Clone, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case", deny_unknown_fields, default)]
+pub struct SigningConfig {
+    /// The robot's Ed25519 device key (64 hex digits, mode 0600), e.g.
+    /// `/etc/passangle/device.key`. Unset: records are not signed, and the service says so in
+    /// its log at start and with every run. Set: it must be a valid key file, or the service
+    /// does not start.
+    pub key_file: Option<PathBuf>,
 }
 
 /// `[recording]`.
@@ -592,9 +611,12 @@ impl OnboardConfig {
     /// start). It must exist, be a regular file owned by root or by the user running the check
     /// (run it as the service user), grant nothing to others and at most read to the group
     /// (modes 0600, 0640, 0400, 0440), and hold at least one well-formed key.
+    ///
+    /// The device key (`signing.key-file`), when set, is held to the same rules and must hold
+    /// one key of 64 hex digits.
     pub fn file_problems(&self) -> Vec<ConfigError> {
         let path = &self.radio.key_file;
-        check_secret_file(path, "radio.key-file")
+        let mut problems: Vec<ConfigError> = check_secret_file(path, "radio.key-file")
             .and_then(|()| {
                 crate::link::keys::read(path)
                     .map(drop)
@@ -606,8 +628,55 @@ impl OnboardConfig {
             })
             .err()
             .into_iter()
-            .collect()
+            .collect();
+        if let Some(path) = &self.signing.key_file {
+            problems.extend(read_device_key(path).err());
+        }
+        problems
     }
+
+    /// The device key, if `signing.key-file` is set (checked as [`Self::file_problems`] does).
+    pub fn device_key(&self) -> Result<Option<signing::DeviceKey>, ConfigError> {
+        self.signing
+            .key_file
+            .as_deref()
+            .map(read_device_key)
+            .transpose()
+    }
+}
+
+/// Reads the robot's device key (`signing.key-file`): a file that [`check_secret_file`] accepts,
+/// holding a 32-byte seed as 64 hex digits. Every error names `signing.key-file` and the file.
+pub fn read_device_key(path: &Path) -> Result<signing::DeviceKey, ConfigError> {
+    const KEY: &str = "signing.key-file";
+    check_secret_file(path, KEY)?;
+    let invalid = |problem: String| ConfigError::Invalid {
+        path: path.to_owned(),
+        key: KEY.to_owned(),
+        problem,
+    };
+    // A seed file is 65 bytes; anything much larger is not one, and is not read whole.
+    let len = fs::metadata(path).map_or(0, |m| m.len());
+    if len > 256 {
+        return Err(invalid(format!(
+            "is {len} bytes: a device key is 64 hex digits (`passangle-onboard device-key \
+             --generate`)"
+        )));
+    }
+    let text = fs::read_to_string(path).map_err(|e| invalid(e.to_string()))?;
+    let seed = signing::from_hex::<{ signing::SEED_LEN }>(text.trim()).ok_or_else(|| {
+        invalid(format!(
+            "expected {} hex digits (a key written by `passangle-onboard device-key --generate`)",
+            2 * signing::SEED_LEN
+        ))
+    })?;
+    Ok(signing::DeviceKey::from_seed(&seed))
+}
+
+/// Writes a new device key seed (64 hex digits) readable by its owner only (mode 0600); refuses
+/// to overwrite.
+pub fn write_device_key(path: &Path, seed: &[u8; signing::SEED_LEN]) -> Result<(), ConfigError> {
+    write_secret_hex(path, seed)
 }
 
 /// The longest drive `run.max-distance-m` may allow, m (a car park's length, far beyond any
@@ -726,9 +795,14 @@ fn parse_key(hex: &str) -> Option<Key> {
 
 /// Writes a new key file readable by its owner only (mode 0600); refuses to overwrite.
 pub fn write_key(path: &Path, key: &Key) -> Result<(), ConfigError> {
+    write_secret_hex(path, &key.0)
+}
+
+/// Writes `secret` as hex and a newline to a new file of mode 0600; refuses to overwrite.
+fn write_secret_hex(path: &Path, secret: &[u8]) -> Result<(), ConfigError> {
     use std::io::Write;
     use std::os::unix::fs::OpenOptionsExt;
-    let hex: String = key.0.iter().fold(String::new(), |mut s, b| {
+    let hex: String = secret.iter().fold(String::new(), |mut s, b| {
         use std::fmt::Write as _;
         let _ = write!(s, "{b:02x}");
         s
@@ -894,6 +968,67 @@ mod tests {
         fs::create_dir(&key).unwrap();
         let p = problems(&config_path);
         assert!(p[0].contains("is not a regular file"), "{p:#?}");
+        fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn the_device_key_is_checked_when_configured() {
+        use std::os::unix::fs::PermissionsExt;
+        let dir = std::env::temp_dir().join(format!("passangle-devkey-{}", std::process::id()));
+        let _ = fs::remove_dir_all(&dir);
+        fs::create_dir_all(&dir).unwrap();
+        let pairing = dir.join("pairing.key");
+        crate::link::keys::add(&pairing, &Key([7; KEY_LEN]), "handheld 1").unwrap();
+        let device = dir.join("device.key");
+        let base = MINIMAL.replace(
+            "[mcu]",
+            &format!("key-file = \"{}\"\n[mcu]", pairing.display()),
+        );
+        let config_path = dir.join("onboard.toml");
+        let problems = |text: &str| -> Vec<String> {
+            fs::write(&config_path, text).unwrap();
+            OnboardConfig::check_file(&config_path)
+                .1
+                .iter()
+                .map(ToString::to_string)
+                .collect()
+        };
+        // Not configured: nothing to check, nothing signed.
+        assert_eq!(problems(&base), Vec::<String>::new());
+        let c = OnboardConfig::parse(&base, &config_path).unwrap();
+        assert!(c.device_key().unwrap().is_none());
+        let signed = format!("{base}[signing]\nkey-file = \"{}\"\n", device.display());
+        let p = problems(&signed);
+        assert!(
+            p.len() == 1 && p[0].contains("`signing.key-file` the file does not exist"),
+            "{p:#?}"
+        );
+        write_device_key(&device, &[9; signing::SEED_LEN]).unwrap();
+        assert_eq!(problems(&signed), Vec::<String>::new());
+        let c = OnboardConfig::parse(&signed, &config_path).unwrap();
+        assert_eq!(
+            c.device_key().unwrap().unwrap().public(),
+            signing::DeviceKey::from_seed(&[9; signing::SEED_LEN]).public()
+        );
+        assert!(
+            write_device_key(&device, &[1; signing::SEED_LEN]).is_err(),
+            "no overwrite"
+        );
+        fs::set_permissions(&device, fs::Permissions::from_mode(0o604)).unwrap();
+        let p = problems(&signed);
+        assert!(
+            p.len() == 1 && p[0].contains("`signing.key-file` mode 0604 is too open"),
+            "{p:#?}"
+        );
+        fs::set_permissions(&device, fs::Permissions::from_mode(0o600)).unwrap();
+        fs::write(&device, "0123\n").unwrap();
+        let p = problems(&signed);
+        assert!(
+            p.len() == 1
+                && p[0].contains("`signing.key-file`")
+                && p[0].contains("expected 64 hex digits"),
+            "{p:#?}"
+        );
         fs::remove_dir_all(&dir).unwrap();
     }
 

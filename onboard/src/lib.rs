@@ -19,4 +19,6 @@ pub mod process;
 pub mod recorder;
 pub mod run;
 pub mod service;
+pub mod signed;
+pub use signing;
 pub mod vlp16;

@@ -13,6 +13,8 @@
 //!   cloud.ply           the fused cloud, vehicle frame, metres (binary PLY)
 //!   side_view.svg       the side-view report
 //!   DELIVERED           the handheld acknowledged the result
+//!   *.sig               with a device key (`signing.key-file`): the signature of each whole file
+//!                       above but the markers and depth frames (`onboard::signed`)
 //! ```
 //!
 //! Every stamp in the streams is the host's wall clock (`wall_us`, microseconds since the Unix
@@ -38,6 +40,7 @@ use protocol::radio::{MeasurementResult, ResultWarnings, StartMeasurement, Zone}
 use serde::{Deserialize, Serialize};
 
 use crate::pcap::PcapWriter;
+use crate::signed::{Signer, write_signed};
 
 /// Name of the marker of an unfinished run.
 pub const INCOMPLETE: &str = "INCOMPLETE";
@@ -331,6 +334,7 @@ pub struct RunRecorder {
     depth_frames: u32,
     errors: Vec<RecorderError>,
     reported: usize,
+    signer: Signer,
 }
 
 fn open_stream(path: &Path) -> io::Result<BufWriter<File>> {
@@ -343,13 +347,33 @@ fn open_stream(path: &Path) -> io::Result<BufWriter<File>> {
 
 impl RunRecorder {
     /// Creates `<root>/run-NNNNNN` with its `INCOMPLETE` marker, `meta.json`, `config.toml` and
-    /// the stream files. Fails only if the directory itself cannot be made.
+    /// the stream files. Fails only if the directory itself cannot be made. Nothing is signed.
     pub fn begin(
         root: &Path,
         run_id: u32,
         params: &StartMeasurement,
         started_unix_us: u64,
         config_toml: &str,
+    ) -> Result<Self, RecorderError> {
+        Self::begin_signed(
+            root,
+            run_id,
+            params,
+            started_unix_us,
+            config_toml,
+            Signer::none(),
+        )
+    }
+
+    /// [`Self::begin`], signing every whole file the recorder writes (`meta.json`,
+    /// `config.toml`, `result.json` and whatever [`Self::save_file`] saves) with `signer`.
+    pub fn begin_signed(
+        root: &Path,
+        run_id: u32,
+        params: &StartMeasurement,
+        started_unix_us: u64,
+        config_toml: &str,
+        signer: Signer,
     ) -> Result<Self, RecorderError> {
         let dir = root.join(run_dir_name(run_id));
         fs::create_dir_all(dir.join("depth")).map_err(|e| RecorderError::io(&dir, e))?;
@@ -421,6 +445,7 @@ impl RunRecorder {
             depth_frames: 0,
             errors,
             reported: 0,
+            signer,
         };
         rec.save_file("config.toml", config_toml.as_bytes());
         rec.save_meta();
@@ -498,9 +523,10 @@ impl RunRecorder {
         self.depth_index.write(&mut self.errors, Write::flush);
     }
 
-    /// Saves a whole file of the run atomically (errors are recorded, not returned).
+    /// Saves a whole file of the run atomically, with its signature when the recorder signs
+    /// (errors are recorded, not returned).
     pub fn save_file(&mut self, name: &str, bytes: &[u8]) {
-        if let Err(e) = write_atomic(&self.dir.join(name), bytes) {
+        if let Err(e) = write_signed(&self.dir.join(name), bytes, &self.signer) {
             self.errors.push(e);
         }
     }
@@ -811,6 +837,79 @@ mod tests {
                 .to_string_lossy()
                 .ends_with(".tmp"))
         );
+        fs::remove_dir_all(&root).unwrap();
+    }
+
+    #[test]
+    fn a_signed_run_signs_its_whole_files_and_a_changed_digit_is_named() {
+        let root = tmp("signed");
+        let key = signing::DeviceKey::from_seed(&[3; signing::SEED_LEN]);
+        let public = key.public();
+        let mut r = RunRecorder::begin_signed(
+            &root,
+            1,
+            &params(),
+            1_700_000_000_000_000,
+            "x = 1\n",
+            Signer::new(key),
+        )
+        .unwrap();
+        let record = ResultRecord::from_wire(&MeasurementResult {
+            run_id: 1,
+            vehicle_id: Text::truncated("ABC-123"),
+            approach_rad: 0.5,
+            departure_rad: 0.4,
+            breakover_rad: 0.3,
+            ground_clearance_m: 0.2,
+            wheelbase_m: 2.7,
+            track_m: 1.5,
+            approach_support: 1,
+            departure_support: 2,
+            breakover_support: 3,
+            tyre_fit_rms_m: 0.01,
+            warnings: ResultWarnings::EMPTY,
+            cloud_points: 99,
+            preview_chunks: 0,
+        });
+        r.save_result(&record);
+        assert!(r.finish(RecordedOutcome::Completed).is_empty());
+        let dir = root.join("run-000001");
+        let verify = |name: &str| {
+            let sig = fs::read(dir.join(format!("{name}.sig"))).unwrap();
+            signing::Sidecar::parse(&sig)
+                .unwrap()
+                .verify(&fs::read(dir.join(name)).unwrap(), &[public])
+                .unwrap()
+        };
+        for name in ["result.json", "meta.json", "config.toml"] {
+            assert_eq!(
+                verify(name),
+                signing::Verdict::Verified { key: public },
+                "{name}"
+            );
+        }
+        // One digit of the approach angle, changed in place: named by its pointer.
+        let text = fs::read_to_string(dir.join("result.json")).unwrap();
+        let line = text
+            .lines()
+            .find(|l| l.contains("\"approach_deg\""))
+            .unwrap();
+        let digit = line.rfind(|c: char| c.is_ascii_digit()).unwrap();
+        let mut changed = line.to_owned();
+        let d = changed.as_bytes()[digit];
+        changed.replace_range(digit..=digit, if d == b'1' { "2" } else { "1" });
+        fs::write(dir.join("result.json"), text.replacen(line, &changed, 1)).unwrap();
+        let signing::Verdict::Changed { changes, .. } = verify("result.json") else {
+            panic!("a changed digit verified");
+        };
+        assert_eq!(changes, [signing::Change::Value("/approach_deg".into())]);
+        // The changed record still reads: the signature is beside it, not in it.
+        let read = Recording::open_run(&root, 1)
+            .unwrap()
+            .result
+            .unwrap()
+            .approach_deg;
+        assert!((read - record.approach_deg).abs() > 1e-6);
         fs::remove_dir_all(&root).unwrap();
     }
 

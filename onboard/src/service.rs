@@ -36,6 +36,7 @@ use crate::link::reliable::LinkConfig;
 use crate::link::session::Entropy;
 use crate::recorder::{self, RecordedOutcome, Recording, ResultRecord, RunRecorder};
 use crate::run::{Action, Observations, Outcome, RunMachine};
+use crate::signed::{self, Signer};
 use crate::vlp16::Vlp16Packet;
 
 /// Period of the main loop.
@@ -85,6 +86,8 @@ pub struct ProcessInput {
     pub travelled_m: f32,
     /// The drive ended early.
     pub short_run: bool,
+    /// Signs `cloud.ply` and `side_view.svg` (`signing.key-file`).
+    pub signer: Signer,
 }
 
 /// What processing a run produces.
@@ -187,7 +190,7 @@ fn finish_live(
         seconds = started.elapsed().as_secs_f64(),
         "live processing finished"
     );
-    complete(outcome, &input.run_dir, preview, tx);
+    complete(outcome, input, preview, tx);
 }
 
 impl LiveWorker {
@@ -383,10 +386,11 @@ struct Ready {
 /// the result is reported before the files are written.
 fn complete(
     outcome: Result<Processed, String>,
-    run_dir: &std::path::Path,
+    input: &ProcessInput,
     preview: config::PreviewConfig,
     tx: &SyncSender<WorkerMsg>,
 ) {
+    let run_dir = &input.run_dir;
     let processed = match outcome {
         Ok(p) => p,
         Err(e) => {
@@ -411,14 +415,17 @@ fn complete(
         crate::cloud::PlyEncoding::BinaryLittleEndian,
     ) {
         Ok(()) => {
-            if let Err(e) = recorder::write_atomic(&run_dir.join("cloud.ply"), &ply) {
+            if let Err(e) = signed::write_signed(&run_dir.join("cloud.ply"), &ply, &input.signer) {
                 errors.push(e.to_string());
             }
         }
         Err(e) => errors.push(format!("cloud.ply: {e}")),
     }
-    if let Err(e) = recorder::write_atomic(&run_dir.join("side_view.svg"), processed.svg.as_bytes())
-    {
+    if let Err(e) = signed::write_signed(
+        &run_dir.join("side_view.svg"),
+        processed.svg.as_bytes(),
+        &input.signer,
+    ) {
         errors.push(e.to_string());
     }
     let _ = tx.send(WorkerMsg::Saved(errors));
@@ -645,6 +652,8 @@ pub struct Startup {
 pub struct Service {
     config: OnboardConfig,
     config_text: String,
+    /// Signs each run's whole files (`signing.key-file`; none: not signed).
+    signer: Signer,
     execution: Execution,
     radio: OnboardRadio,
     io_worker: IoWorker,
@@ -749,6 +758,17 @@ impl Service {
         shared: SharedStats,
         startup: Startup,
     ) -> Result<Self, ServiceError> {
+        // The device key is checked before anything else starts: when it is configured, a run
+        // that could not be signed is not recorded at all.
+        let signer = if let Some(key) = config.device_key()? {
+            tracing::info!(key_id = %key.public().id(), public_key = %key.public(), "signing run records");
+            Signer::new(key)
+        } else {
+            tracing::warn!(
+                "signing.key-file is not set: run records are not signed (docs/security.md)"
+            );
+            Signer::none()
+        };
         let keys: Vec<_> = crate::link::keys::read(&config.radio.key_file)?
             .into_iter()
             .map(|e| {
@@ -819,6 +839,7 @@ impl Service {
             next_watchdog_us: 0,
             next_flush_us: 0,
             last_phase: Phase::Idle,
+            signer,
             config,
             config_text,
         };
@@ -1381,15 +1402,17 @@ impl Service {
                     self.live = self.processor.start_live().and_then(|live| {
                         LiveWorker::spawn(run_id, live, self.config.preview, execution)
                     });
-                    match RunRecorder::begin(
+                    match RunRecorder::begin_signed(
                         &self.config.recording.root,
                         run_id,
                         &params,
                         self.wall_of(now),
                         &self.config_text,
+                        self.signer.clone(),
                     ) {
                         Ok(r) => {
-                            tracing::info!(run_id, dir = %r.dir().display(), "recording");
+                            let signed = self.signer.key().is_some();
+                            tracing::info!(run_id, dir = %r.dir().display(), signed, "recording");
                             self.recorder = Some(r);
                         }
                         Err(e) => {
@@ -1465,6 +1488,7 @@ impl Service {
             params,
             travelled_m,
             short_run,
+            signer: self.signer.clone(),
         };
         let preview = self.config.preview;
         match self.live.take() {
@@ -1494,7 +1518,7 @@ impl Service {
         }
         let (tx, rx) = sync_channel(2);
         if self.execution == Execution::Inline {
-            complete(self.processor.process(&input), &input.run_dir, preview, &tx);
+            complete(self.processor.process(&input), &input, preview, &tx);
             self.worker = Some(Worker {
                 run_id,
                 rx,
@@ -1506,7 +1530,7 @@ impl Service {
         let spawned = thread::Builder::new()
             .name(format!("process-run-{run_id}"))
             .spawn(move || {
-                complete(processor.process(&input), &input.run_dir, preview, &tx);
+                complete(processor.process(&input), &input, preview, &tx);
             });
         match spawned {
             Ok(_) => {

@@ -1,6 +1,6 @@
 //! Hostile files against every reader of untrusted bytes: the pcap reader and UDP unwrapping, the
-//! PLY / PCD (incl. LZF `binary_compressed`) / XYZ / E57 / LAS / LAZ cloud readers and the
-//! recording's odometry reader. Each committed file in `tests/hostile/` must give an error, not a panic; then
+//! PLY / PCD (incl. LZF `binary_compressed`) / XYZ / E57 / LAS / LAZ cloud readers, the
+//! recording's odometry reader and the signed records' sidecars (`FILE.sig`). Each committed file in `tests/hostile/` must give an error, not a panic; then
 //! thousands of deterministic mutations of it and of valid seeds must not panic either.
 //!
 //! Memory is measured, not assumed: a counting global allocator records the peak heap of each
@@ -8,7 +8,9 @@
 //! - pcap: one record buffer ([`MAX_RECORD_LEN`]) plus 64 KiB, whatever the file claims;
 //! - clouds: 4 x the file (the text readers' lossy UTF-8 copy and line splitting) plus
 //!   24 B x `max_points` plus `max_decoded_bytes` plus 64 KiB;
-//! - odometry: 128 B per byte of text (one report and one field slice per byte at worst).
+//! - odometry: 128 B per byte of text (one report and one field slice per byte at worst);
+//! - sidecars: 8 x the file plus 64 KiB to parse (its strings, twice, and the part list), and
+//!   verifying a file against one: 32 x that file plus 64 KiB (its JSON tree and parts).
 //!
 //! The hostile files are refused before any allocation their headers ask for, so their bound is
 //! the file-size term alone. The test keeps to one `#[test]` so no other test thread allocates
@@ -29,6 +31,7 @@ use onboard::cloud::{
 };
 use onboard::pcap::{MAX_RECORD_LEN, PcapError, PcapReader, udp_in_frame};
 use onboard::recorder::parse_odometry_csv;
+use onboard::signing::{DeviceKey, Kind, Sidecar, Verdict, sign_bytes};
 
 struct Counting;
 
@@ -290,6 +293,7 @@ fn hostile_files_are_refused_within_their_memory_bounds() {
     issue_files(&mut report);
     lzf_bombs(&mut report);
     mutations(&mut report);
+    sidecars(&mut report);
     for line in &report {
         eprintln!("{line}");
     }
@@ -554,4 +558,100 @@ fn mutations(report: &mut Vec<String>) {
         "{cases} mutations: no panic; largest cloud-parse peak {} B (file {} B)",
         worst.0, worst.1
     ));
+}
+
+fn sidecar_bound(len: usize) -> usize {
+    8 * len + (64 << 10)
+}
+
+fn verify_bound(len: usize) -> usize {
+    32 * len + (64 << 10)
+}
+
+/// Hostile sidecars (`sidecar-*.sig`) are errors or never verify; mutations of a real sidecar
+/// and of the record it signs never panic, never verify a changed record, and stay in bounds.
+fn sidecars(report: &mut Vec<String>) {
+    let record = br#"{
+  "run_id": 7,
+  "vehicle_id": "AB-123",
+  "approach_deg": 25.003555,
+  "warnings": [
+    "short-run"
+  ],
+  "cloud_points": 1110755
+}
+"#;
+    let key = DeviceKey::from_seed(&[0x5a; 32]);
+    let public = key.public();
+    let valid = sign_bytes(&key, "result.json", Kind::Json, record).to_json();
+    let mut names: Vec<String> = std::fs::read_dir(hostile_dir())
+        .expect("the hostile corpus")
+        .filter_map(|e| e.ok()?.file_name().into_string().ok())
+        .filter(|n| {
+            n.starts_with("sidecar-") && Path::new(n).extension().is_some_and(|e| e == "sig")
+        })
+        .collect();
+    names.sort();
+    assert!(names.len() >= 5, "{names:?}");
+    for name in &names {
+        let bytes = hostile(name);
+        let (r, peak) = measured(|| {
+            Sidecar::parse(&bytes).map(|s| {
+                let own = s.public_key;
+                (s.verify(record, &[own]), s.verify(b"{}", &[own]))
+            })
+        });
+        let r = r.unwrap_or_else(|p| panic!("{name} panicked: {p}"));
+        if let Ok((a, b)) = &r {
+            for v in [a, b] {
+                assert!(
+                    !matches!(v, Ok(Verdict::Verified { .. })),
+                    "{name} verified something: {v:?}"
+                );
+            }
+        }
+        assert!(peak <= sidecar_bound(bytes.len()) + verify_bound(record.len()));
+        report.push(format!("{name}: {r:?}, peak {peak} B"));
+    }
+    let mut rng = Rng(0x51de_ca45);
+    let mut cases = 0usize;
+    for _ in 0..3_000 {
+        let m = mutate(&valid, &mut rng);
+        let (r, peak) = measured(|| Sidecar::parse(&m).map(|s| s.verify(record, &[public])));
+        let r = r.unwrap_or_else(|p| panic!("sidecar mutation panicked: {p}\n{m:?}"));
+        assert!(peak <= sidecar_bound(m.len()) + verify_bound(record.len()));
+        cases += 1;
+        // Only a mutation that left every signed byte alone (whitespace, hex case) verifies.
+        if let Ok(Ok(Verdict::Verified { .. })) = r {
+            let s = Sidecar::parse(&m).expect("parsed above");
+            assert_eq!(s, Sidecar::parse(&valid).expect("valid"));
+        }
+    }
+    let sidecar = Sidecar::parse(&valid).expect("valid");
+    for _ in 0..3_000 {
+        let m = mutate(record, &mut rng);
+        let (r, peak) = measured(|| sidecar.verify(&m, &[public]));
+        let r = r.unwrap_or_else(|p| panic!("record mutation panicked: {p}\n{m:?}"));
+        assert!(
+            peak <= verify_bound(m.len()),
+            "record mutation: peak {peak}\n{m:?}"
+        );
+        if m != record {
+            assert!(
+                matches!(r, Ok(Verdict::Changed { .. })),
+                "a changed record verified: {m:?}"
+            );
+        }
+        cases += 1;
+    }
+    // A record nested far beyond serde_json's recursion limit: unreadable, not a stack overflow.
+    let deep = [b"[".repeat(100_000), b"]".repeat(100_000)].concat();
+    let (r, peak) = measured(|| sidecar.verify(&deep, &[public]));
+    let r = r.unwrap_or_else(|p| panic!("deep record panicked: {p}"));
+    assert!(
+        matches!(&r, Ok(Verdict::Changed { changes, .. }) if changes.len() == 1),
+        "{r:?}"
+    );
+    assert!(peak <= verify_bound(deep.len()));
+    report.push(format!("{cases} sidecar and record mutations: no panic"));
 }

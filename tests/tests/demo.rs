@@ -227,5 +227,53 @@ fn lockstep_runs_are_byte_identical() {
     for ((name, x), (_, y)) in a.iter().zip(b) {
         assert!(x == y, "{name} differs between two runs");
     }
+    check_signed(a);
     let _ = std::fs::remove_dir_all(&root);
+}
+
+/// The simulated robot signs its run like a real one: every whole file has a sidecar that
+/// verifies with the key drawn from the demo's seed, and one changed digit of the approach angle
+/// is named by its pointer.
+fn check_signed(files: &[(String, Vec<u8>)]) {
+    use onboard::signing::{Change, DeviceKey, Sidecar, Verdict};
+    let public = DeviceKey::from_seed(&demo::device_seed(1)).public();
+    let file = |name: &str| {
+        &files
+            .iter()
+            .find(|f| f.0 == name)
+            .unwrap_or_else(|| panic!("no {name} in the run"))
+            .1
+    };
+    for name in [
+        "config.toml",
+        "meta.json",
+        "result.json",
+        "cloud.ply",
+        "side_view.svg",
+    ] {
+        let sidecar = Sidecar::parse(file(&format!("{name}.sig"))).unwrap();
+        assert_eq!(
+            sidecar.verify(file(name), &[public]),
+            Ok(Verdict::Verified { key: public }),
+            "{name}"
+        );
+    }
+    let result = String::from_utf8(file("result.json").clone()).unwrap();
+    let line = result
+        .lines()
+        .find(|l| l.contains("\"approach_deg\""))
+        .unwrap();
+    let at = line.rfind(|c: char| c.is_ascii_digit()).unwrap();
+    let mut changed = line.to_owned();
+    let digit = if &changed[at..=at] == "1" { "2" } else { "1" };
+    changed.replace_range(at..=at, digit);
+    let forged = result.replacen(line, &changed, 1);
+    let sidecar = Sidecar::parse(file("result.json.sig")).unwrap();
+    assert_eq!(
+        sidecar.verify(forged.as_bytes(), &[public]),
+        Ok(Verdict::Changed {
+            key: public,
+            changes: vec![Change::Value("/approach_deg".into())]
+        })
+    );
 }

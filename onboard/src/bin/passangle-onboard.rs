@@ -3,10 +3,12 @@
 //! ```text
 //! passangle-onboard run --config /etc/passangle/onboard.toml
 //! passangle-onboard check-config /etc/passangle/onboard.toml
+//! passangle-onboard device-key --generate /etc/passangle/device.key
+//! passangle-onboard device-key --public /etc/passangle/device.key
 //! ```
 //!
 //! Exit codes follow sysexits: 64 usage, 65 bad config data, 66 missing input, 69 a device is
-//! unavailable, 70 internal error.
+//! unavailable, 70 internal error, 73 a key file cannot be created (it exists, or no directory).
 
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -54,14 +56,31 @@ enum Command {
         #[arg(long)]
         revoke: Option<String>,
     },
+    /// Make the robot's Ed25519 device key (`signing.key-file`), or print its public key: the
+    /// key a lab gives `passangle verify` to check the robot's signed records.
+    DeviceKey {
+        /// Write a new key to FILE (mode 0600; refuses to overwrite) and print its public key.
+        #[arg(
+            long,
+            value_name = "FILE",
+            conflicts_with = "public",
+            required_unless_present = "public"
+        )]
+        generate: Option<PathBuf>,
+        /// Print the public key of the key in FILE.
+        #[arg(long, value_name = "FILE")]
+        public: Option<PathBuf>,
+    },
 }
 
 /// sysexits(3) codes.
 mod exit {
+    pub const USAGE: u8 = 64;
     pub const DATAERR: u8 = 65;
     pub const NOINPUT: u8 = 66;
     pub const UNAVAILABLE: u8 = 69;
     pub const SOFTWARE: u8 = 70;
+    pub const CANTCREAT: u8 = 73;
 }
 
 struct SdNotify;
@@ -105,6 +124,13 @@ fn main() -> ExitCode {
                 ExitCode::from(code)
             }
         },
+        Command::DeviceKey { generate, public } => match device_key(generate, public) {
+            Ok(()) => ExitCode::SUCCESS,
+            Err((code, e)) => {
+                eprintln!("passangle-onboard device-key: {e:#}");
+                ExitCode::from(code)
+            }
+        },
         Command::Run { config } => match run(&config) {
             Ok(()) => ExitCode::SUCCESS,
             Err((code, e)) => {
@@ -139,6 +165,49 @@ fn keys(config_path: &Path, revoke: Option<&str>) -> Result<(), (u8, anyhow::Err
     for e in entries {
         println!("{:08x} {}", e.id, e.label);
     }
+    Ok(())
+}
+
+/// `device-key`: makes a device key from the OS's random source, or reads one; prints the
+/// public key and its id.
+fn device_key(
+    generate: Option<PathBuf>,
+    public: Option<PathBuf>,
+) -> Result<(), (u8, anyhow::Error)> {
+    let key = if let Some(file) = generate {
+        let mut seed = [0u8; signing::SEED_LEN];
+        getrandom::fill(&mut seed).map_err(|e| {
+            (
+                exit::SOFTWARE,
+                anyhow::anyhow!("no random source for the key: {e}"),
+            )
+        })?;
+        onboard::config::write_device_key(&file, &seed)
+            .map_err(|e| (exit::CANTCREAT, anyhow::anyhow!("{e}")))?;
+        let key = signing::DeviceKey::from_seed(&seed);
+        eprintln!(
+            "wrote a new device key to {} (mode 0600); set signing.key-file to it and give the \
+             public key below to whoever checks the robot's records",
+            file.display()
+        );
+        key
+    } else if let Some(file) = public {
+        onboard::config::read_device_key(&file).map_err(|e| {
+            let code = if matches!(e, onboard::config::ConfigError::Io { .. }) {
+                exit::NOINPUT
+            } else {
+                exit::DATAERR
+            };
+            (code, anyhow::anyhow!("{e}"))
+        })?
+    } else {
+        return Err((
+            exit::USAGE,
+            anyhow::anyhow!("give --generate FILE or --public FILE"),
+        ));
+    };
+    let public = key.public();
+    println!("{public} key id {}", public.id());
     Ok(())
 }
 
@@ -185,6 +254,19 @@ fn check_config(file: &Path) -> ExitCode {
         c.camera.device.display()
     );
     println!("  recordings  {}", c.recording.root.display());
+    match c.device_key() {
+        Ok(Some(key)) => println!(
+            "  signing     key {} ({}), public key {}",
+            key.public().id(),
+            c.signing
+                .key_file
+                .as_deref()
+                .unwrap_or(Path::new(""))
+                .display(),
+            key.public()
+        ),
+        _ => println!("  signing     off: signing.key-file is not set, records are not signed"),
+    }
     println!(
         "  run         max {} m/s, {} m",
         c.run.max_speed_mps, c.run.max_distance_m
@@ -205,8 +287,9 @@ fn run(config_path: &Path) -> Result<(), (u8, anyhow::Error)> {
         .with_context(|| format!("reading {}", config_path.display()))
         .map_err(|e| (exit::NOINPUT, e))?;
     let config = OnboardConfig::parse(&text, config_path).map_err(|e| (exit::DATAERR, e.into()))?;
-    // The pairing keys are checked as `check-config` checks them (owner, mode, contents) before
-    // anything opens: a key file others can read is a key others may have copied.
+    // The pairing keys and the device key are checked as `check-config` checks them (owner,
+    // mode, contents) before anything opens: a key file others can read is a key others may have
+    // copied.
     if let Some(first) = config.file_problems().into_iter().next() {
         return Err((exit::DATAERR, first.into()));
     }

@@ -1,0 +1,244 @@
+//! `passangle verify` on a run directory the onboard recorder signed: a verified record exits 0,
+//! one changed digit of `approach_deg` exits 3 naming `/approach_deg`, another robot's key
+//! exits 4, a missing or garbage signature exits 5, and no trusted key is an error (1).
+#![allow(clippy::unwrap_used, missing_docs)]
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+use onboard::client::Measured;
+use onboard::recorder::{RecordedOutcome, ResultRecord, RunRecorder};
+use onboard::signed::{Signer, write_signed};
+use onboard::signing::{DeviceKey, PublicKey, SEED_LEN};
+use protocol::bounded::Text;
+use protocol::radio::{MeasurementResult, ResultWarnings, StartMeasurement, Zone};
+
+fn temp_root(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("passangle-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+fn wire() -> MeasurementResult {
+    MeasurementResult {
+        run_id: 1,
+        vehicle_id: Text::truncated("AB-123"),
+        approach_rad: 0.436,
+        departure_rad: 0.458,
+        breakover_rad: 0.349,
+        ground_clearance_m: 0.249,
+        wheelbase_m: 2.85,
+        track_m: 1.6,
+        approach_support: 1631,
+        departure_support: 276,
+        breakover_support: 566,
+        tyre_fit_rms_m: 0.004,
+        warnings: ResultWarnings::EMPTY,
+        cloud_points: 1_110_755,
+        preview_chunks: 3,
+    }
+}
+
+/// A finished run signed as the service signs it: the recorder's files and the processing
+/// thread's `cloud.ply` and `side_view.svg`.
+fn signed_run(root: &Path, key: DeviceKey) -> PathBuf {
+    let params = StartMeasurement {
+        vehicle_id: Text::truncated("AB-123"),
+        speed_mps: 0.2,
+        distance_m: 7.0,
+        zone: Zone::Tyre,
+    };
+    let signer = Signer::new(key);
+    let config = include_str!("../../onboard/onboard.example.toml");
+    let mut rec = RunRecorder::begin_signed(
+        root,
+        1,
+        &params,
+        1_790_000_000_000_000,
+        config,
+        signer.clone(),
+    )
+    .unwrap();
+    rec.save_result(&ResultRecord::from_wire(&wire()));
+    let dir = rec.dir().to_path_buf();
+    write_signed(&dir.join("cloud.ply"), &vec![7u8; 200_000], &signer).unwrap();
+    write_signed(
+        &dir.join("side_view.svg"),
+        b"<svg>\n<text>approach 25.0</text>\n</svg>\n",
+        &signer,
+    )
+    .unwrap();
+    assert!(rec.finish(RecordedOutcome::Completed).is_empty());
+    dir
+}
+
+fn passangle(args: &[&str], home: &Path) -> (i32, String) {
+    let out: Output = Command::new(env!("CARGO_BIN_EXE_passangle"))
+        .args(args)
+        .env("HOME", home)
+        .output()
+        .unwrap();
+    let text = format!(
+        "{}{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    (out.status.code().unwrap(), text)
+}
+
+/// A signed run under a fresh root: (root, run directory, the robot's public key).
+fn setup(name: &str) -> (PathBuf, PathBuf, PublicKey) {
+    let root = temp_root(name);
+    let key = DeviceKey::from_seed(&[0x11; SEED_LEN]);
+    let public = key.public();
+    let dir = signed_run(&root, key);
+    (root, dir, public)
+}
+
+#[test]
+fn verify_accepts_the_robots_records_with_a_key_from_the_user() {
+    let (root, dir, public) = setup("verify-ok");
+    let hex = public.to_hex();
+    let result = dir.join("result.json");
+    let result_s = result.to_str().unwrap();
+
+    // The whole run directory, then the one file.
+    let (code, text) = passangle(
+        &["verify", dir.to_str().unwrap(), "--public-key", &hex],
+        &root,
+    );
+    assert_eq!(code, 0, "{text}");
+    for name in [
+        "config.toml",
+        "meta.json",
+        "result.json",
+        "cloud.ply",
+        "side_view.svg",
+    ] {
+        assert!(
+            text.contains(&format!("OK: {}", dir.join(name).display())),
+            "{text}"
+        );
+    }
+    let (code, text) = passangle(&["verify", result_s, "--public-key", &hex], &root);
+    assert_eq!(code, 0, "{text}");
+    assert!(
+        text.contains(&format!("signed by {}", public.id())),
+        "{text}"
+    );
+
+    // The trust list, and the default trust file under $HOME.
+    let keys = root.join("robot-keys");
+    std::fs::write(&keys, format!("# the lab's robots\n{hex} robot 7\n")).unwrap();
+    let (code, text) = passangle(
+        &["verify", result_s, "--keys", keys.to_str().unwrap()],
+        &root,
+    );
+    assert_eq!(code, 0, "{text}");
+    let (code, text) = passangle(&["verify", result_s], &root);
+    assert_eq!(code, 1, "no key given, none in ~/.config: {text}");
+    assert!(text.contains("no trusted robot key"), "{text}");
+    std::fs::create_dir_all(root.join(".config/passangle")).unwrap();
+    std::fs::copy(&keys, root.join(".config/passangle/robot-keys")).unwrap();
+    let (code, text) = passangle(&["verify", result_s], &root);
+    assert_eq!(code, 0, "{text}");
+
+    // The handheld's copy (`passangle measure`/`fetch` saves it from the radio's result) has the
+    // robot's bytes, so the robot's signature verifies it.
+    let saved = onboard::client::save(
+        &root.join("handheld"),
+        &Measured {
+            result: wire(),
+            preview_mm: vec![[0, 0, 0]],
+            stop_to_result: None,
+            preview_time: None,
+        },
+    )
+    .unwrap();
+    let (code, text) = passangle(
+        &[
+            "verify",
+            saved.json.to_str().unwrap(),
+            "--sig",
+            &format!("{result_s}.sig"),
+            "--public-key",
+            &hex,
+        ],
+        &root,
+    );
+    assert_eq!(code, 0, "{text}");
+    std::fs::remove_dir_all(&root).unwrap();
+}
+
+#[test]
+fn verify_catches_a_changed_digit_and_names_it() {
+    let (root, dir, public) = setup("verify-changed");
+    let hex = public.to_hex();
+    let result = dir.join("result.json");
+    let result_s = result.to_str().unwrap();
+
+    // One digit of the approach angle.
+    let original = std::fs::read_to_string(&result).unwrap();
+    let line = original
+        .lines()
+        .find(|l| l.contains("\"approach_deg\""))
+        .unwrap();
+    let at = line.find(|c: char| c.is_ascii_digit()).unwrap();
+    let mut forged_line = line.to_owned();
+    let digit = forged_line.as_bytes()[at];
+    forged_line.replace_range(at..=at, if digit == b'3' { "4" } else { "3" });
+    std::fs::write(&result, original.replacen(line, &forged_line, 1)).unwrap();
+    let (code, text) = passangle(&["verify", result_s, "--public-key", &hex], &root);
+    assert_eq!(code, 3, "{text}");
+    assert!(text.contains("changed: /approach_deg"), "{text}");
+    assert_eq!(
+        text.lines().filter(|l| l.contains("changed:")).count(),
+        1,
+        "only the one value: {text}"
+    );
+    let (code, text) = passangle(
+        &["verify", dir.to_str().unwrap(), "--public-key", &hex],
+        &root,
+    );
+    assert_eq!(code, 3, "{text}");
+    assert!(
+        text.contains("OK: ") && text.contains("changed: /approach_deg"),
+        "{text}"
+    );
+    std::fs::write(&result, &original).unwrap();
+
+    // Another robot's key.
+    let other = DeviceKey::from_seed(&[0x22; SEED_LEN]).public().to_hex();
+    let (code, text) = passangle(&["verify", result_s, "--public-key", &other], &root);
+    assert_eq!(code, 4, "{text}");
+    assert!(text.contains("signature does not match this key"), "{text}");
+
+    // A sidecar whose manifest was edited to match a forged file: the signature no longer holds.
+    let sig = dir.join("result.json.sig");
+    let sig_text = std::fs::read_to_string(&sig).unwrap();
+    let forged_sig =
+        sig_text.replacen("\"name\": \"result.json\"", "\"name\": \"result2.json\"", 1);
+    assert_ne!(forged_sig, sig_text);
+    std::fs::write(&sig, &forged_sig).unwrap();
+    let (code, text) = passangle(&["verify", result_s, "--public-key", &hex], &root);
+    assert_eq!(code, 4, "{text}");
+
+    // Garbage, cut short, missing.
+    for bytes in [&b"\x00\xffnot json"[..], &sig_text.as_bytes()[..100]] {
+        std::fs::write(&sig, bytes).unwrap();
+        let (code, text) = passangle(&["verify", result_s, "--public-key", &hex], &root);
+        assert_eq!(code, 5, "{text}");
+        assert!(text.contains("no usable signature"), "{text}");
+    }
+    std::fs::remove_file(&sig).unwrap();
+    let (code, text) = passangle(&["verify", result_s, "--public-key", &hex], &root);
+    assert_eq!(code, 5, "{text}");
+    let (code, text) = passangle(
+        &["verify", dir.to_str().unwrap(), "--public-key", &hex],
+        &root,
+    );
+    assert_eq!(code, 5, "{text}");
+    assert!(text.contains("result.json: not signed"), "{text}");
+    std::fs::remove_dir_all(&root).unwrap();
+}

@@ -1,0 +1,95 @@
+//! Writing signed files: a file and its detached signature `FILE.sig` ([`signing`], which
+//! holds the format and the checks), both written atomically, the file first.
+//!
+//! A crash between the two leaves a file whose sidecar is missing or older than it; `passangle
+//! verify` then reports it as unsigned or changed, never as verified.
+
+use std::fmt;
+use std::path::Path;
+use std::sync::Arc;
+
+use signing::{DeviceKey, Kind};
+
+use crate::recorder::{RecorderError, write_atomic};
+
+/// The robot's device key, if records are signed (`signing.key-file`); cheap to clone and to
+/// hand to the threads that write a run's files.
+#[derive(Clone, Default)]
+pub struct Signer(Option<Arc<DeviceKey>>);
+
+impl Signer {
+    /// Signing with `key`.
+    pub fn new(key: DeviceKey) -> Self {
+        Self(Some(Arc::new(key)))
+    }
+
+    /// No signing.
+    pub fn none() -> Self {
+        Self(None)
+    }
+
+    /// The key, if any.
+    pub fn key(&self) -> Option<&DeviceKey> {
+        self.0.as_deref()
+    }
+}
+
+impl fmt::Debug for Signer {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self.key() {
+            Some(k) => write!(f, "Signer({})", k.public().id()),
+            None => f.write_str("Signer(none)"),
+        }
+    }
+}
+
+/// Two signers are equal when they sign with the same public key (or both do not sign).
+impl PartialEq for Signer {
+    fn eq(&self, other: &Self) -> bool {
+        self.key().map(DeviceKey::public) == other.key().map(DeviceKey::public)
+    }
+}
+
+/// Writes `bytes` to `path` atomically and, when `signer` has a key, its signature to
+/// `path.sig` (cut as the file name's [`Kind`]).
+pub fn write_signed(path: &Path, bytes: &[u8], signer: &Signer) -> Result<(), RecorderError> {
+    write_atomic(path, bytes)?;
+    let Some(key) = signer.key() else {
+        return Ok(());
+    };
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let sidecar = signing::sign_bytes(key, &name, Kind::for_name(&name), bytes);
+    write_atomic(
+        &path.with_file_name(signing::sidecar_name(&name)),
+        &sidecar.to_json(),
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_signed_file_and_its_sidecar_verify() {
+        let dir = std::env::temp_dir().join(format!("passangle-signed-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        let key = DeviceKey::from_seed(&[5; signing::SEED_LEN]);
+        let public = key.public();
+        let path = dir.join("result.json");
+        write_signed(&path, b"{\"a\": 1}\n", &Signer::new(key)).unwrap();
+        let sidecar =
+            signing::Sidecar::parse(&std::fs::read(dir.join("result.json.sig")).unwrap()).unwrap();
+        assert_eq!(sidecar.manifest.name, "result.json");
+        assert_eq!(
+            sidecar.verify(&std::fs::read(&path).unwrap(), &[public]),
+            Ok(signing::Verdict::Verified { key: public })
+        );
+        write_signed(&dir.join("plain.json"), b"{}", &Signer::none()).unwrap();
+        assert!(!dir.join("plain.json.sig").exists());
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+}
