@@ -360,29 +360,8 @@ fn write_source(
     Ok(())
 }
 
-fn write_table(
-    out: &mut impl Write,
-    args: &AnglesArgs,
-    stats: &ReadStats,
-    r: &AnglesResult,
-) -> std::io::Result<()> {
-    let p = r.points;
-    write_source(
-        out,
-        args,
-        stats,
-        p.non_finite + stats.dropped_non_finite,
-        p.excluded,
-    )?;
-    writeln!(
-        out,
-        "zone: {}",
-        match r.zone {
-            Zone::Tyre => "ahead of / behind the tyres (CFR/SAE)",
-            Zone::Axle => "ahead of / behind the axles (EU)",
-        }
-    )?;
-    writeln!(out)?;
+/// The table's rows of the angles and the clearance, each with U or why it was not measured.
+fn write_angle_rows(out: &mut impl Write, r: &AnglesResult) -> std::io::Result<()> {
     writeln!(
         out,
         "  angle        degrees   U (k=2)   witness x, y, z (m, vehicle frame)   support"
@@ -430,6 +409,33 @@ fn write_table(
                 .unwrap_or("no reason given")
         )?,
     }
+    Ok(())
+}
+
+fn write_table(
+    out: &mut impl Write,
+    args: &AnglesArgs,
+    stats: &ReadStats,
+    r: &AnglesResult,
+) -> std::io::Result<()> {
+    let p = r.points;
+    write_source(
+        out,
+        args,
+        stats,
+        p.non_finite + stats.dropped_non_finite,
+        p.excluded,
+    )?;
+    writeln!(
+        out,
+        "zone: {}",
+        match r.zone {
+            Zone::Tyre => "ahead of / behind the tyres (CFR/SAE)",
+            Zone::Axle => "ahead of / behind the axles (EU)",
+        }
+    )?;
+    writeln!(out)?;
+    write_angle_rows(out, r)?;
     writeln!(out)?;
     write!(out, "wheelbase {:.3} m", r.wheelbase_m)?;
     if let Some(t) = r.track_m {
