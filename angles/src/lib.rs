@@ -312,11 +312,22 @@ impl Quantity {
     }
 }
 
+/// Why a quantity was not measured, as a kind (the words are in [`NotMeasured::reason`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Absence {
+    /// No part of the vehicle in the quantity's zone.
+    NothingInZone,
+    /// The scan did not cover the quantity's part of the vehicle.
+    NotCovered,
+}
+
 /// A quantity that was not measured: the scan lacks what it needs. Reported instead of a number.
 #[derive(Debug, Clone, PartialEq)]
 pub struct NotMeasured {
     /// Which.
     pub quantity: Quantity,
+    /// Why, as a kind.
+    pub kind: Absence,
     /// What is missing, in words (names the part of the vehicle or the scan).
     pub reason: String,
 }
@@ -1149,10 +1160,12 @@ fn check_coverage(
         Ok(vec![
             NotMeasured {
                 quantity: Quantity::Breakover,
+                kind: Absence::NotCovered,
                 reason: reason.clone(),
             },
             NotMeasured {
                 quantity: Quantity::GroundClearance,
+                kind: Absence::NotCovered,
                 reason,
             },
         ])
@@ -1216,6 +1229,7 @@ fn check_coverage(
     if front_end > path_hi + PATH_REACH_M {
         out.push(NotMeasured {
             quantity: Quantity::Approach,
+            kind: Absence::NotCovered,
             reason: format!(
                 "the front overhang was not seen from below: {path}, the scanned underside reaches x {front_end:.2} m, more than {PATH_REACH_M} m beyond the path"
             ),
@@ -1224,6 +1238,7 @@ fn check_coverage(
     if rear_end < path_lo - PATH_REACH_M {
         out.push(NotMeasured {
             quantity: Quantity::Departure,
+            kind: Absence::NotCovered,
             reason: format!(
                 "the rear overhang was not seen from below: {path}, the scanned underside reaches x {rear_end:.2} m, more than {PATH_REACH_M} m beyond the path"
             ),
@@ -1255,6 +1270,7 @@ fn check_ground_beyond(
         if beyond < GROUND_BEYOND_M {
             out.push(NotMeasured {
                 quantity,
+                kind: Absence::NotCovered,
                 reason: format!(
                     "the {name} overhang may extend beyond the cloud: the cloud ends {:.2} m beyond the underside's end at x {end:.2} m (vehicle frame; at least {GROUND_BEYOND_M} m of ground beyond it expected)",
                     beyond.max(0.0)
@@ -1302,6 +1318,7 @@ fn not_measured(findings: &mut Findings, mut not_covered: Vec<NotMeasured>) -> V
         if is_absent && !not_covered.iter().any(|n| n.quantity == quantity) {
             not_covered.push(NotMeasured {
                 quantity,
+                kind: Absence::NothingInZone,
                 reason: reason.to_owned(),
             });
         }

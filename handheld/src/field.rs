@@ -228,32 +228,57 @@ fn deg(rad: f32) -> String {
 pub fn print_result(m: &Measured, out: &mut dyn Write) -> std::io::Result<()> {
     let r = &m.result;
     writeln!(out, "run {}  vehicle {:?}", r.run_id, r.vehicle_id.as_str())?;
-    writeln!(out, "  {:<18} {:>8} {:>9}", "angle", "degrees", "support")?;
     writeln!(
         out,
-        "  {:<18} {:>8} {:>9}",
-        "approach",
-        deg(r.approach_rad),
-        r.approach_support
+        "  {:<18} {:>8} {:>9} {:>9}",
+        "angle", "degrees", "U (k=2)", "support"
     )?;
+    let rows = [
+        (
+            "approach",
+            r.approach_rad,
+            r.approach_u_rad,
+            r.approach_support,
+            r.absent[0],
+        ),
+        (
+            "departure",
+            r.departure_rad,
+            r.departure_u_rad,
+            r.departure_support,
+            r.absent[1],
+        ),
+        (
+            "ramp breakover",
+            r.breakover_rad,
+            r.breakover_u_rad,
+            r.breakover_support,
+            r.absent[2],
+        ),
+    ];
+    for (name, rad, u_rad, support, absent) in rows {
+        match absent.reason() {
+            Some(why) => writeln!(out, "  {name:<18} not measured: {why}")?,
+            None => writeln!(
+                out,
+                "  {name:<18} {:>8} {:>9} {support:>9}",
+                deg(rad),
+                deg(u_rad)
+            )?,
+        }
+    }
+    match r.absent[3].reason() {
+        Some(why) => writeln!(out, "  ground clearance not measured: {why}")?,
+        None => writeln!(
+            out,
+            "  ground clearance {:.3} m (U {:.3} m)",
+            r.ground_clearance_m, r.ground_clearance_u_m
+        )?,
+    }
     writeln!(
         out,
-        "  {:<18} {:>8} {:>9}",
-        "departure",
-        deg(r.departure_rad),
-        r.departure_support
-    )?;
-    writeln!(
-        out,
-        "  {:<18} {:>8} {:>9}",
-        "ramp breakover",
-        deg(r.breakover_rad),
-        r.breakover_support
-    )?;
-    writeln!(
-        out,
-        "  ground clearance {:.3} m, wheelbase {:.3} m, track {:.3} m",
-        r.ground_clearance_m, r.wheelbase_m, r.track_m
+        "  wheelbase {:.3} m, track {:.3} m",
+        r.wheelbase_m, r.track_m
     )?;
     writeln!(
         out,

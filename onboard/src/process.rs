@@ -22,12 +22,13 @@ use std::path::Path;
 
 use protocol::bounded::Text;
 use protocol::mcu::Odometry;
-use protocol::radio::{MeasurementResult, ResultWarnings, Zone as WireZone};
+use protocol::radio::{Absence, MeasurementResult, ResultWarnings, Zone as WireZone};
 use serde::Deserialize;
 
 use crate::angles::{self, AnglesConfig, AnglesResult, Zone, compute_angles, side_view_svg};
 use crate::cloud::Cloud;
 use crate::mcu_clock::McuClockMap;
+use crate::pipeline::config::FusionConfig;
 use crate::pipeline::geom::V3;
 use crate::pipeline::{
     BuiltCloud, DepthImage, LidarFrame, Pipeline, PipelineConfig, WheelOdometry,
@@ -139,10 +140,10 @@ impl LiveRun for LivePipeline {
     fn finish(self: Box<Self>, input: &ProcessInput) -> Result<Processed, String> {
         let min_points = self.builder.min_cloud_points;
         let (built, counts) = self.builder.finish_built()?;
-        let (cloud, path) = cloud_and_path(built, min_points)?;
+        let (cloud, scan) = cloud_and_path(built, min_points, &self.config.pipeline.fusion)?;
         let mut p = angles_of(
             cloud,
-            path,
+            scan,
             counts,
             &self.config,
             input.params.zone,
@@ -427,7 +428,8 @@ impl RunBuilder {
     pub fn finish(self) -> Result<(Cloud, ReadCounts), String> {
         let min_points = self.min_cloud_points;
         let (built, counts) = self.finish_built()?;
-        Ok((cloud_and_path(built, min_points)?.0, counts))
+        let fusion = FusionConfig::default();
+        Ok((cloud_and_path(built, min_points, &fusion)?.0, counts))
     }
 
     /// Everything left through the pipeline; the pipeline's whole result (cloud, trajectory,
@@ -442,9 +444,14 @@ impl RunBuilder {
     }
 }
 
-/// The cloud (if it has at least `min_points`) and the robot's path in it (the positions of the
-/// trajectory), for the angle calculator's coverage check.
-fn cloud_and_path(built: BuiltCloud, min_points: usize) -> Result<(Cloud, Vec<V3>), String> {
+/// The cloud (if it has at least `min_points`) and what the angle calculator needs to know of
+/// the scan.
+fn cloud_and_path(
+    built: BuiltCloud,
+    min_points: usize,
+    fusion: &FusionConfig,
+) -> Result<(Cloud, Scan), String> {
+    let x_sigma_per_m = built.x_sigma_per_m(fusion);
     let path = built
         .trajectory
         .iter()
@@ -459,13 +466,31 @@ fn cloud_and_path(built: BuiltCloud, min_points: usize) -> Result<(Cloud, Vec<V3
     let cloud = Cloud {
         points_m: built.points_in_world,
     };
-    Ok((cloud, path))
+    Ok((
+        cloud,
+        Scan {
+            path,
+            x_sigma_per_m,
+        },
+    ))
+}
+
+/// What the angle calculator needs to know of a scan besides its cloud.
+struct Scan {
+    /// The robot's path in the cloud (the positions of the trajectory), for the coverage check.
+    path: Vec<V3>,
+    /// The trajectory's stated error along x per metre, for the uncertainty budget.
+    x_sigma_per_m: f64,
 }
 
 /// Reads a run directory and builds its fused cloud (vehicle-agnostic: no angles yet).
 pub fn build_cloud(dir: &Path, config: &ProcessConfig) -> Result<(Cloud, ReadCounts), String> {
     let (built, counts) = build_run(dir, config)?;
-    Ok((cloud_and_path(built, config.min_cloud_points)?.0, counts))
+    let fusion = &config.pipeline.fusion;
+    Ok((
+        cloud_and_path(built, config.min_cloud_points, fusion)?.0,
+        counts,
+    ))
 }
 
 /// Reads a run directory through a [`RunBuilder`]: the pipeline's whole result (cloud,
@@ -505,7 +530,7 @@ pub fn build_run(dir: &Path, config: &ProcessConfig) -> Result<(BuiltCloud, Read
 /// the caller).
 fn angles_of(
     cloud: Cloud,
-    scan_path_in_cloud: Vec<V3>,
+    scan: Scan,
     counts: ReadCounts,
     config: &ProcessConfig,
     zone: WireZone,
@@ -517,7 +542,8 @@ fn angles_of(
             WireZone::Tyre => Zone::Tyre,
             WireZone::Axle => Zone::Axle,
         },
-        scan_path_in_cloud,
+        scan_path_in_cloud: scan.path,
+        trajectory_x_sigma_per_m: scan.x_sigma_per_m,
         ..AnglesConfig::default()
     };
     let found =
@@ -554,25 +580,43 @@ pub fn process_run(
 ) -> Result<(Processed, ReadCounts), String> {
     let rec = Recording::open(dir).map_err(|e| e.to_string())?;
     let (built, counts) = build_run(dir, config)?;
-    let (cloud, path) = cloud_and_path(built, config.min_cloud_points)?;
-    let mut processed = angles_of(cloud, path, counts, config, zone, short_run)?;
+    let fusion = &config.pipeline.fusion;
+    let (cloud, scan) = cloud_and_path(built, config.min_cloud_points, fusion)?;
+    let mut processed = angles_of(cloud, scan, counts, config, zone, short_run)?;
     processed.result.vehicle_id = Text::truncated(&rec.meta.vehicle_id);
     processed.result.run_id = rec.meta.run_id;
     Ok((processed, counts))
 }
 
-/// The wire result of an angle computation (a missing angle is NaN, and flagged LOW_SUPPORT).
+/// The wire result of an angle computation: a quantity that was not measured is NaN with its
+/// [`Absence`], never a number.
 pub fn wire_result(a: &AnglesResult, cloud_points: usize) -> MeasurementResult {
     let mut warnings = ResultWarnings::EMPTY;
     let angle =
         |f: &Option<angles::AngleFinding>| f.as_ref().map_or(f32::NAN, |f| f.angle_rad as f32);
+    let u = |f: &Option<angles::AngleFinding>| {
+        f.as_ref()
+            .map_or(f32::NAN, |f| f.uncertainty.expanded as f32)
+    };
+    let absent = [
+        angles::Quantity::Approach,
+        angles::Quantity::Departure,
+        angles::Quantity::Breakover,
+        angles::Quantity::GroundClearance,
+    ]
+    .map(|q| {
+        a.not_measured
+            .iter()
+            .find(|n| n.quantity == q)
+            .map_or(Absence::Measured, |n| match n.kind {
+                angles::Absence::NothingInZone => Absence::NothingInZone,
+                angles::Absence::NotCovered => Absence::NotCovered,
+            })
+    });
     let support = |f: &Option<angles::AngleFinding>| {
         f.as_ref()
             .map_or(0, |f| f.support.min(usize::from(u16::MAX)) as u16)
     };
-    if a.approach.is_none() || a.departure.is_none() || a.breakover.is_none() {
-        warnings.insert(ResultWarnings::LOW_SUPPORT);
-    }
     if a.tyres.len() < 4 {
         warnings.insert(ResultWarnings::MISSING_TYRE);
     }
@@ -599,6 +643,14 @@ pub fn wire_result(a: &AnglesResult, cloud_points: usize) -> MeasurementResult {
             .ground_clearance
             .as_ref()
             .map_or(f32::NAN, |c| c.height_m as f32),
+        approach_u_rad: u(&a.approach),
+        departure_u_rad: u(&a.departure),
+        breakover_u_rad: u(&a.breakover),
+        ground_clearance_u_m: a
+            .ground_clearance
+            .as_ref()
+            .map_or(f32::NAN, |c| c.uncertainty.expanded as f32),
+        absent,
         wheelbase_m: a.wheelbase_m as f32,
         track_m: a.track_m.map_or(f32::NAN, |t| t as f32),
         approach_support: support(&a.approach),

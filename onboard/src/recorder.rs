@@ -29,6 +29,7 @@
 //! marker says so up front. A write error (disk full included) disables that stream, is counted
 //! and reported, and never stops the robot or the run.
 
+use std::collections::BTreeMap;
 use std::fs::{self, File, OpenOptions};
 use std::io::{self, BufWriter, Write};
 use std::net::SocketAddrV4;
@@ -36,7 +37,7 @@ use std::path::{Path, PathBuf};
 
 use protocol::bounded::Text;
 use protocol::mcu::Odometry;
-use protocol::radio::{MeasurementResult, ResultWarnings, StartMeasurement, Zone};
+use protocol::radio::{Absence, MeasurementResult, ResultWarnings, StartMeasurement, Zone};
 use serde::{Deserialize, Serialize};
 
 use crate::pcap::PcapWriter;
@@ -189,6 +190,31 @@ pub struct ResultRecord {
     /// Smallest ground clearance between the axles, m.
     #[serde(deserialize_with = "null_as_nan")]
     pub ground_clearance_m: f32,
+    /// Expanded uncertainty (k = 2) of the approach angle, rad (`null`: not measured).
+    #[serde(default = "nan", deserialize_with = "null_as_nan")]
+    pub approach_u_rad: f32,
+    /// Expanded uncertainty (k = 2) of the departure angle, rad.
+    #[serde(default = "nan", deserialize_with = "null_as_nan")]
+    pub departure_u_rad: f32,
+    /// Expanded uncertainty (k = 2) of the ramp breakover angle, rad.
+    #[serde(default = "nan", deserialize_with = "null_as_nan")]
+    pub breakover_u_rad: f32,
+    /// Expanded uncertainty (k = 2) of the approach angle, degrees (for people).
+    #[serde(default = "nan", deserialize_with = "null_as_nan")]
+    pub approach_u_deg: f32,
+    /// Expanded uncertainty (k = 2) of the departure angle, degrees.
+    #[serde(default = "nan", deserialize_with = "null_as_nan")]
+    pub departure_u_deg: f32,
+    /// Expanded uncertainty (k = 2) of the ramp breakover angle, degrees.
+    #[serde(default = "nan", deserialize_with = "null_as_nan")]
+    pub breakover_u_deg: f32,
+    /// Expanded uncertainty (k = 2) of the ground clearance, m.
+    #[serde(default = "nan", deserialize_with = "null_as_nan")]
+    pub ground_clearance_u_m: f32,
+    /// Each quantity that was not measured (`approach`, `departure`, `breakover`,
+    /// `ground_clearance`): why. Its value above is `null`.
+    #[serde(default)]
+    pub not_measured: BTreeMap<String, NotMeasuredRecord>,
     /// Wheelbase, m.
     #[serde(deserialize_with = "null_as_nan")]
     pub wheelbase_m: f32,
@@ -210,9 +236,50 @@ pub struct ResultRecord {
     pub cloud_points: u32,
 }
 
+/// Why a quantity of `result.json` was not measured.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct NotMeasuredRecord {
+    /// `nothing_in_zone` or `not_covered` ([`Absence`]).
+    pub kind: String,
+    /// In words: what is missing.
+    pub reason: String,
+}
+
+fn nan() -> f32 {
+    f32::NAN
+}
+
+/// The quantities of a result in the wire's [`MeasurementResult::absent`] order.
+pub const QUANTITIES: [&str; 4] = ["approach", "departure", "breakover", "ground_clearance"];
+
+fn absence_name(a: Absence) -> &'static str {
+    match a {
+        Absence::Measured => "measured",
+        Absence::NothingInZone => "nothing_in_zone",
+        Absence::NotCovered => "not_covered",
+    }
+}
+
 impl ResultRecord {
-    /// From the wire form.
+    /// From the wire form (the reasons in the wire's words; the service replaces them with the
+    /// calculator's own when it has them).
     pub fn from_wire(r: &MeasurementResult) -> Self {
+        let not_measured = QUANTITIES
+            .iter()
+            .zip(r.absent)
+            .filter_map(|(q, a)| {
+                a.reason().map(|reason| {
+                    (
+                        (*q).to_owned(),
+                        NotMeasuredRecord {
+                            kind: absence_name(a).to_owned(),
+                            reason: reason.to_owned(),
+                        },
+                    )
+                })
+            })
+            .collect();
         Self {
             run_id: r.run_id,
             vehicle_id: r.vehicle_id.as_str().to_owned(),
@@ -223,6 +290,14 @@ impl ResultRecord {
             departure_deg: r.departure_rad.to_degrees(),
             breakover_deg: r.breakover_rad.to_degrees(),
             ground_clearance_m: r.ground_clearance_m,
+            approach_u_rad: r.approach_u_rad,
+            departure_u_rad: r.departure_u_rad,
+            breakover_u_rad: r.breakover_u_rad,
+            approach_u_deg: r.approach_u_rad.to_degrees(),
+            departure_u_deg: r.departure_u_rad.to_degrees(),
+            breakover_u_deg: r.breakover_u_rad.to_degrees(),
+            ground_clearance_u_m: r.ground_clearance_u_m,
+            not_measured,
             wheelbase_m: r.wheelbase_m,
             track_m: r.track_m,
             approach_support: r.approach_support,
@@ -249,6 +324,18 @@ impl ResultRecord {
             departure_rad: self.departure_rad,
             breakover_rad: self.breakover_rad,
             ground_clearance_m: self.ground_clearance_m,
+            approach_u_rad: self.approach_u_rad,
+            departure_u_rad: self.departure_u_rad,
+            breakover_u_rad: self.breakover_u_rad,
+            ground_clearance_u_m: self.ground_clearance_u_m,
+            absent: QUANTITIES.map(|q| {
+                self.not_measured
+                    .get(q)
+                    .map_or(Absence::Measured, |n| match n.kind.as_str() {
+                        "nothing_in_zone" => Absence::NothingInZone,
+                        _ => Absence::NotCovered,
+                    })
+            }),
             wheelbase_m: self.wheelbase_m,
             track_m: self.track_m,
             approach_support: self.approach_support,
@@ -797,6 +884,16 @@ mod tests {
             departure_rad: 0.4,
             breakover_rad: 0.3,
             ground_clearance_m: 0.2,
+            approach_u_rad: 0.01,
+            departure_u_rad: 0.01,
+            breakover_u_rad: 0.01,
+            ground_clearance_u_m: 0.003,
+            absent: [
+                Absence::Measured,
+                Absence::Measured,
+                Absence::Measured,
+                Absence::Measured,
+            ],
             wheelbase_m: 2.7,
             track_m: 1.5,
             approach_support: 1,
@@ -861,6 +958,16 @@ mod tests {
             departure_rad: 0.4,
             breakover_rad: 0.3,
             ground_clearance_m: 0.2,
+            approach_u_rad: 0.01,
+            departure_u_rad: 0.01,
+            breakover_u_rad: 0.01,
+            ground_clearance_u_m: 0.003,
+            absent: [
+                Absence::Measured,
+                Absence::Measured,
+                Absence::Measured,
+                Absence::Measured,
+            ],
             wheelbase_m: 2.7,
             track_m: 1.5,
             approach_support: 1,
@@ -924,6 +1031,16 @@ mod tests {
             departure_rad: 0.45,
             breakover_rad: 0.33,
             ground_clearance_m: 0.25,
+            approach_u_rad: f32::NAN,
+            departure_u_rad: 0.01,
+            breakover_u_rad: 0.01,
+            ground_clearance_u_m: 0.003,
+            absent: [
+                Absence::NotCovered,
+                Absence::Measured,
+                Absence::Measured,
+                Absence::Measured,
+            ],
             wheelbase_m: 3.1,
             track_m: 1.6,
             approach_support: 0,

@@ -379,6 +379,9 @@ enum WorkerMsg {
 struct Ready {
     result: MeasurementResult,
     preview_mm: Vec<[i16; 3]>,
+    /// The calculator's own words for each quantity it did not measure (`result.json` keeps
+    /// them; the wire carries only the kind).
+    not_measured: Vec<(&'static str, String)>,
 }
 
 /// The end of every processing thread (live or from the recording): the heavy work after the
@@ -403,9 +406,20 @@ fn complete(
         preview.voxel_m,
         preview.max_points,
     );
+    let not_measured = processed
+        .angles
+        .as_ref()
+        .map(|a| {
+            a.not_measured
+                .iter()
+                .map(|n| (n.quantity.name(), n.reason.clone()))
+                .collect()
+        })
+        .unwrap_or_default();
     let _ = tx.send(WorkerMsg::Done(Ok(Ready {
         result: processed.result,
         preview_mm,
+        not_measured,
     })));
     let mut errors = Vec::new();
     let mut ply = Vec::new();
@@ -619,6 +633,7 @@ fn recorded_ready(rec: &Recording, preview: config::PreviewConfig) -> Option<Rea
     Some(Ready {
         result: result.to_wire(),
         preview_mm: preview::decimate(&points, preview.voxel_m, preview.max_points),
+        not_measured: Vec::new(),
     })
 }
 
@@ -1380,7 +1395,13 @@ impl Service {
             tracing::error!("cannot send the result: {e}");
         }
         if self.recorder.is_some() {
-            self.result_record = Some(ResultRecord::from_wire(&r.result));
+            let mut record = ResultRecord::from_wire(&r.result);
+            for (quantity, reason) in &r.not_measured {
+                if let Some(n) = record.not_measured.get_mut(*quantity) {
+                    n.reason.clone_from(reason);
+                }
+            }
+            self.result_record = Some(record);
         }
     }
 

@@ -4,8 +4,8 @@
 mod synth;
 
 use onboard::angles::{
-    AngleFinding, AnglesConfig, AnglesError, AnglesResult, ExclusionBox, TyrePosition, Zone,
-    compute_angles,
+    AngleFinding, AnglesConfig, AnglesError, AnglesResult, ExclusionBox, Quantity, TyrePosition,
+    Zone, compute_angles,
 };
 use synth::{Pose, Scan, Truth, Vehicle};
 
@@ -261,7 +261,7 @@ fn truth_matches_hand_checks() {
 }
 
 #[test]
-fn a_scan_that_stops_short_is_refused_and_a_hitch_end_is_not() {
+fn a_scan_that_stops_short_leaves_that_end_not_measured_and_a_hitch_end_is_not() {
     let v = synth::sedan();
     // Drop everything ahead of x = 2.0 m: the bumper's front face is never seen, nor the ground
     // beyond it.
@@ -269,13 +269,15 @@ fn a_scan_that_stops_short_is_refused_and_a_hitch_end_is_not() {
         .into_iter()
         .filter(|p| p[0] < 2.0)
         .collect();
-    let err = compute_angles(&cut, &AnglesConfig::default()).unwrap_err();
-    assert!(matches!(err, AnglesError::Incomplete(_)), "{err}");
+    let r = compute_angles(&cut, &AnglesConfig::default()).unwrap();
+    assert!(r.approach.is_none(), "{:?}", r.approach);
+    let why = r.not_measured_reason(Quantity::Approach).unwrap();
     assert!(
-        err.to_string()
-            .contains("approach: the front overhang may extend beyond the cloud"),
-        "{err}"
+        why.contains("the front overhang may extend beyond the cloud"),
+        "{why}"
     );
+    // The rest of the vehicle was scanned: the departure and the breakover are measured.
+    assert!(r.departure.is_some() && r.breakover.is_some());
     let hitch = run(
         &synth::pickup_with_hitch(),
         Scan::noiseless(0.005),
@@ -301,7 +303,7 @@ fn path(from_x: f64, to_x: f64, pose: Pose) -> Vec<[f64; 3]> {
 }
 
 #[test]
-fn a_scan_path_that_stops_short_of_an_end_or_an_axle_is_refused() {
+fn a_scan_path_that_stops_short_of_an_end_leaves_it_not_measured() {
     let v = synth::sedan();
     let t = synth::truth(&v, false);
     let cloud: Vec<[f64; 3]> = synth::sample(&v, Scan::noiseless(0.005))
@@ -325,19 +327,20 @@ fn a_scan_path_that_stops_short_of_an_end_or_an_axle_is_refused() {
     // Stopped 0.2 m short of the rear end: the steep rings see that far; still measured.
     assert!(with_path(front_end + 1.0, rear_end + 0.2).is_ok());
     // Stopped 1 m short of the rear end: the rear overhang was not seen from below.
-    let err = with_path(front_end + 1.0, rear_end + 1.0).unwrap_err();
-    assert!(matches!(err, AnglesError::Incomplete(_)), "{err}");
+    let r = with_path(front_end + 1.0, rear_end + 1.0).unwrap();
+    assert!(r.departure.is_none() && r.approach.is_some() && r.breakover.is_some());
+    let why = r.not_measured_reason(Quantity::Departure).unwrap();
     assert!(
-        err.to_string()
-            .contains("departure: the rear overhang was not seen from below"),
-        "{err}"
+        why.contains("the rear overhang was not seen from below"),
+        "{why}"
     );
     // Started 0.7 m behind the front end (entered from the side, say): the front overhang.
-    let err = with_path(front_end - 0.7, rear_end - 1.0).unwrap_err();
+    let r = with_path(front_end - 0.7, rear_end - 1.0).unwrap();
+    assert!(r.approach.is_none() && r.departure.is_some());
+    let why = r.not_measured_reason(Quantity::Approach).unwrap();
     assert!(
-        err.to_string()
-            .contains("approach: the front overhang was not seen from below"),
-        "{err}"
+        why.contains("the front overhang was not seen from below"),
+        "{why}"
     );
     // Stopped between the axles: the rear tyres were seen only from afar.
     let err = with_path(front_end + 1.0, 0.0).unwrap_err();
@@ -349,26 +352,34 @@ fn a_scan_path_that_stops_short_of_an_end_or_an_axle_is_refused() {
 }
 
 #[test]
-fn a_gap_in_the_underside_between_the_axles_is_refused() {
+fn a_gap_in_the_underside_between_the_axles_leaves_the_breakover_not_measured() {
     let v = synth::sedan();
     // No body points from x -0.3 to +0.3 m (a stretch the scan missed); the ground stays.
     let holed: Vec<[f64; 3]> = synth::sample(&v, Scan::noiseless(0.005))
         .into_iter()
         .filter(|p| p[2] < 0.03 || p[0].abs() > 0.3)
         .collect();
-    let err = compute_angles(&holed, &AnglesConfig::default()).unwrap_err();
-    assert!(matches!(err, AnglesError::Incomplete(_)), "{err}");
-    assert!(
-        err.to_string()
-            .contains("the underside between the axles is not covered from x -0.3"),
-        "{err}"
-    );
+    let r = compute_angles(&holed, &AnglesConfig::default()).unwrap();
+    assert!(r.breakover.is_none() && r.ground_clearance.is_none());
+    assert!(r.approach.is_some() && r.departure.is_some());
+    for q in [Quantity::Breakover, Quantity::GroundClearance] {
+        let why = r.not_measured_reason(q).unwrap();
+        assert!(
+            why.contains("the underside between the axles is not covered from x -0.3"),
+            "{why}"
+        );
+    }
     // A 0.2 m hole is within what the check tolerates.
     let small: Vec<[f64; 3]> = synth::sample(&v, Scan::noiseless(0.005))
         .into_iter()
         .filter(|p| p[2] < 0.03 || (p[0] - 0.5).abs() > 0.1)
         .collect();
-    assert!(compute_angles(&small, &AnglesConfig::default()).is_ok());
+    let r = compute_angles(&small, &AnglesConfig::default()).unwrap();
+    assert!(
+        r.breakover.is_some() && r.not_measured.is_empty(),
+        "{:?}",
+        r.not_measured
+    );
 }
 
 #[test]

@@ -72,7 +72,7 @@ pub use frame::{Deframer, Flags, Frame, Header};
 pub use message::{DecodeError, Message};
 
 /// Version of this protocol. Bump on any change to the bytes of any message.
-pub const PROTOCOL_VERSION: u8 = 3;
+pub const PROTOCOL_VERSION: u8 = 4;
 
 /// Message ids. Explicit, never derived from declaration order; never reused.
 pub mod ids {

@@ -150,7 +150,34 @@ bit_set! {
     }
 }
 
-/// The measurement result (radians inside; the handheld shows degrees).
+/// Why a quantity of a [`MeasurementResult`] was not measured; its value is NaN then, never a
+/// number the calculator did not measure.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, MaxSize)]
+pub enum Absence {
+    /// Measured: the value is a number.
+    #[default]
+    Measured,
+    /// No part of the vehicle lies in the quantity's zone.
+    NothingInZone,
+    /// The scan did not cover the quantity's part of the vehicle (an overhang not seen from
+    /// below, a gap in the underside between the axles).
+    NotCovered,
+}
+
+impl Absence {
+    /// The reason in words, for tables and `result.json`; `None` when measured.
+    pub fn reason(self) -> Option<&'static str> {
+        match self {
+            Absence::Measured => None,
+            Absence::NothingInZone => Some("no part of the vehicle in the zone"),
+            Absence::NotCovered => Some("the scan did not cover this part of the vehicle"),
+        }
+    }
+}
+
+/// The measurement result (radians inside; the handheld shows degrees). Every angle and the
+/// clearance carry their expanded uncertainty (k = 2); a quantity that was not measured is NaN
+/// with its [`Absence`].
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, MaxSize)]
 pub struct MeasurementResult {
     /// The run.
@@ -165,6 +192,16 @@ pub struct MeasurementResult {
     pub breakover_rad: f32,
     /// Smallest ground clearance between the axles, m.
     pub ground_clearance_m: f32,
+    /// Expanded uncertainty (k = 2) of the approach angle, rad.
+    pub approach_u_rad: f32,
+    /// Expanded uncertainty (k = 2) of the departure angle, rad.
+    pub departure_u_rad: f32,
+    /// Expanded uncertainty (k = 2) of the ramp breakover angle, rad.
+    pub breakover_u_rad: f32,
+    /// Expanded uncertainty (k = 2) of the ground clearance, m.
+    pub ground_clearance_u_m: f32,
+    /// Why approach, departure, breakover and ground clearance (in that order) were not measured.
+    pub absent: [Absence; 4],
     /// Wheelbase from the tyre fits, m.
     pub wheelbase_m: f32,
     /// Track from the tyre fits, m.

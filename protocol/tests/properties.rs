@@ -16,6 +16,14 @@ fn f() -> impl Strategy<Value = f32> {
     -1.0e4f32..1.0e4
 }
 
+fn absence() -> impl Strategy<Value = radio::Absence> {
+    prop_oneof![
+        Just(radio::Absence::Measured),
+        Just(radio::Absence::NothingInZone),
+        Just(radio::Absence::NotCovered),
+    ]
+}
+
 fn text<const N: usize>() -> impl Strategy<Value = Text<N>> {
     "[a-zA-Z0-9 \u{e9}\u{4e2d}-]{0,40}".prop_map(|s| Text::truncated(&s))
 }
@@ -172,6 +180,41 @@ fn to_onboard() -> impl Strategy<Value = ToOnboard> {
     ]
 }
 
+fn measurement_result() -> impl Strategy<Value = radio::MeasurementResult> {
+    (
+        any::<u32>(),
+        text::<32>(),
+        proptest::array::uniform6(f()),
+        any::<[u16; 4]>(),
+        any::<u32>(),
+        proptest::array::uniform4(absence()),
+    )
+        .prop_map(|(run_id, vehicle_id, a, s, cloud_points, absent)| {
+            radio::MeasurementResult {
+                run_id,
+                vehicle_id,
+                approach_rad: a[0],
+                departure_rad: a[1],
+                breakover_rad: a[2],
+                ground_clearance_m: a[3],
+                approach_u_rad: a[4],
+                departure_u_rad: a[5],
+                breakover_u_rad: a[1],
+                ground_clearance_u_m: a[2],
+                absent,
+                wheelbase_m: a[4],
+                track_m: a[5],
+                approach_support: s[0],
+                departure_support: s[1],
+                breakover_support: s[2],
+                tyre_fit_rms_m: a[0],
+                warnings: ResultWarnings(s[3]),
+                cloud_points,
+                preview_chunks: s[3],
+            }
+        })
+}
+
 fn to_handheld() -> impl Strategy<Value = ToHandheld> {
     prop_oneof![
         (
@@ -191,33 +234,7 @@ fn to_handheld() -> impl Strategy<Value = ToHandheld> {
                 }
                 .into()
             }),
-        (
-            any::<u32>(),
-            text::<32>(),
-            proptest::array::uniform6(f()),
-            any::<[u16; 4]>(),
-            any::<u32>()
-        )
-            .prop_map(|(run_id, vehicle_id, a, s, cloud_points)| {
-                radio::MeasurementResult {
-                    run_id,
-                    vehicle_id,
-                    approach_rad: a[0],
-                    departure_rad: a[1],
-                    breakover_rad: a[2],
-                    ground_clearance_m: a[3],
-                    wheelbase_m: a[4],
-                    track_m: a[5],
-                    approach_support: s[0],
-                    departure_support: s[1],
-                    breakover_support: s[2],
-                    tyre_fit_rms_m: a[0],
-                    warnings: ResultWarnings(s[3]),
-                    cloud_points,
-                    preview_chunks: s[3],
-                }
-                .into()
-            }),
+        measurement_result().prop_map(Into::into),
         (
             any::<u32>(),
             any::<u16>(),
