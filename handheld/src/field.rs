@@ -308,6 +308,20 @@ fn save_and_print(m: &Measured, dir: &Path, out: &mut dyn Write) -> anyhow::Resu
         files.ply.display(),
         files.svg.display()
     )?;
+    // Saved either way; the command fails when a quantity was not measured, as `angles` and
+    // `replay` do, so scripts see a non-zero exit.
+    let missing: Vec<String> = ["approach", "departure", "breakover", "ground clearance"]
+        .iter()
+        .zip(m.result.absent)
+        .filter_map(|(name, a)| a.reason().map(|why| format!("{name} ({why})")))
+        .collect();
+    if !missing.is_empty() {
+        anyhow::bail!(
+            "run {}: not measured: {}",
+            m.result.run_id,
+            missing.join("; ")
+        );
+    }
     Ok(())
 }
 

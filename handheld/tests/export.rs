@@ -30,6 +30,37 @@ fn temp_root(name: &str) -> PathBuf {
     dir
 }
 
+/// The result the recorded run ends with.
+fn result_record() -> ResultRecord {
+    ResultRecord {
+        run_id: 1,
+        vehicle_id: "export test".into(),
+        approach_rad: 0.3,
+        departure_rad: 0.3,
+        breakover_rad: 0.2,
+        approach_deg: 17.19,
+        departure_deg: 17.19,
+        breakover_deg: 11.46,
+        ground_clearance_m: 0.15,
+        approach_u_rad: 0.007,
+        departure_u_rad: 0.007,
+        breakover_u_rad: 0.009,
+        approach_u_deg: 0.4,
+        departure_u_deg: 0.4,
+        breakover_u_deg: 0.5,
+        ground_clearance_u_m: 0.004,
+        not_measured: BTreeMap::new(),
+        wheelbase_m: 2.7,
+        track_m: 1.5,
+        approach_support: 10,
+        departure_support: 10,
+        breakover_support: 10,
+        tyre_fit_rms_m: 0.002,
+        warnings: Vec::new(),
+        cloud_points: 1000,
+    }
+}
+
 /// Records 1.2 s of the sedan scenario; returns the run directory.
 fn record_run(root: &Path) -> PathBuf {
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../hil-sim/scenarios/sedan-pass.toml");
@@ -104,33 +135,7 @@ fn record_run(root: &Path) -> PathBuf {
     )
     .unwrap();
     rec.save_file("cloud.ply", &ply);
-    rec.save_result(&ResultRecord {
-        run_id: 1,
-        vehicle_id: "export test".into(),
-        approach_rad: 0.3,
-        departure_rad: 0.3,
-        breakover_rad: 0.2,
-        approach_deg: 17.19,
-        departure_deg: 17.19,
-        breakover_deg: 11.46,
-        ground_clearance_m: 0.15,
-        approach_u_rad: 0.007,
-        departure_u_rad: 0.007,
-        breakover_u_rad: 0.009,
-        approach_u_deg: 0.4,
-        departure_u_deg: 0.4,
-        breakover_u_deg: 0.5,
-        ground_clearance_u_m: 0.004,
-        not_measured: BTreeMap::new(),
-        wheelbase_m: 2.7,
-        track_m: 1.5,
-        approach_support: 10,
-        departure_support: 10,
-        breakover_support: 10,
-        tyre_fit_rms_m: 0.002,
-        warnings: Vec::new(),
-        cloud_points: 1000,
-    });
+    rec.save_result(&result_record());
     let dir = rec.dir().to_owned();
     assert!(rec.finish(RecordedOutcome::Completed).is_empty());
     dir
