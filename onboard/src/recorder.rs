@@ -839,6 +839,37 @@ mod tests {
         }
     }
 
+    /// A measured result of run 1, vehicle ABC-123, with `warnings`.
+    fn abc_result(warnings: ResultWarnings) -> MeasurementResult {
+        MeasurementResult {
+            run_id: 1,
+            vehicle_id: Text::truncated("ABC-123"),
+            approach_rad: 0.5,
+            departure_rad: 0.4,
+            breakover_rad: 0.3,
+            ground_clearance_m: 0.2,
+            approach_u_rad: 0.01,
+            departure_u_rad: 0.01,
+            breakover_u_rad: 0.01,
+            ground_clearance_u_m: 0.003,
+            absent: [
+                Absence::Measured,
+                Absence::Measured,
+                Absence::Measured,
+                Absence::Measured,
+            ],
+            wheelbase_m: 2.7,
+            track_m: 1.5,
+            approach_support: 1,
+            departure_support: 2,
+            breakover_support: 3,
+            tyre_fit_rms_m: 0.01,
+            warnings,
+            cloud_points: 99,
+            preview_chunks: 0,
+        }
+    }
+
     fn odo(t: u64) -> Odometry {
         Odometry {
             stamp_us: t,
@@ -877,33 +908,7 @@ mod tests {
             depth_scale_m: 0.001,
         };
         r.depth_frame(5, 4, 2, &[1, 2, 3, 4, 5, 6, 7, 0], &k);
-        let wire = MeasurementResult {
-            run_id: 1,
-            vehicle_id: Text::truncated("ABC-123"),
-            approach_rad: 0.5,
-            departure_rad: 0.4,
-            breakover_rad: 0.3,
-            ground_clearance_m: 0.2,
-            approach_u_rad: 0.01,
-            departure_u_rad: 0.01,
-            breakover_u_rad: 0.01,
-            ground_clearance_u_m: 0.003,
-            absent: [
-                Absence::Measured,
-                Absence::Measured,
-                Absence::Measured,
-                Absence::Measured,
-            ],
-            wheelbase_m: 2.7,
-            track_m: 1.5,
-            approach_support: 1,
-            departure_support: 2,
-            breakover_support: 3,
-            tyre_fit_rms_m: 0.01,
-            warnings: ResultWarnings::SHORT_RUN,
-            cloud_points: 99,
-            preview_chunks: 0,
-        };
+        let wire = abc_result(ResultWarnings::SHORT_RUN);
         r.save_result(&ResultRecord::from_wire(&wire));
         assert!(root.join("run-000001").join(INCOMPLETE).exists());
         assert!(r.finish(RecordedOutcome::Completed).is_empty());
@@ -951,33 +956,7 @@ mod tests {
             Signer::new(key),
         )
         .unwrap();
-        let record = ResultRecord::from_wire(&MeasurementResult {
-            run_id: 1,
-            vehicle_id: Text::truncated("ABC-123"),
-            approach_rad: 0.5,
-            departure_rad: 0.4,
-            breakover_rad: 0.3,
-            ground_clearance_m: 0.2,
-            approach_u_rad: 0.01,
-            departure_u_rad: 0.01,
-            breakover_u_rad: 0.01,
-            ground_clearance_u_m: 0.003,
-            absent: [
-                Absence::Measured,
-                Absence::Measured,
-                Absence::Measured,
-                Absence::Measured,
-            ],
-            wheelbase_m: 2.7,
-            track_m: 1.5,
-            approach_support: 1,
-            departure_support: 2,
-            breakover_support: 3,
-            tyre_fit_rms_m: 0.01,
-            warnings: ResultWarnings::EMPTY,
-            cloud_points: 99,
-            preview_chunks: 0,
-        });
+        let record = ResultRecord::from_wire(&abc_result(ResultWarnings::EMPTY));
         r.save_result(&record);
         assert!(r.finish(RecordedOutcome::Completed).is_empty());
         let dir = root.join("run-000001");
@@ -1055,9 +1034,15 @@ mod tests {
         assert!(r.finish(RecordedOutcome::Completed).is_empty());
         let text = fs::read_to_string(root.join("run-000001/result.json")).unwrap();
         assert!(text.contains("\"approach_rad\": null"), "{text}");
+        assert!(text.contains("\"approach_u_deg\": null"), "{text}");
+        assert!(
+            text.contains("\"approach\": {\n      \"kind\": \"not_covered\""),
+            "{text}"
+        );
         let rec = Recording::open_run(&root, 1).expect("a NaN angle leaves the run readable");
         let back = rec.result.unwrap().to_wire();
         assert!(back.approach_rad.is_nan());
+        assert_eq!(back.absent, wire.absent, "why it was not measured round-trips");
         assert_eq!(back.departure_rad.to_bits(), wire.departure_rad.to_bits());
         assert_eq!(back.cloud_points, wire.cloud_points);
         fs::remove_dir_all(&root).unwrap();
