@@ -286,7 +286,7 @@ pub struct Clearance {
     pub uncertainty: Uncertainty,
 }
 
-/// A result the calculator does not give, and why.
+/// A quantity the calculator measures.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Quantity {
     /// The approach angle.

@@ -1042,7 +1042,10 @@ mod tests {
         let rec = Recording::open_run(&root, 1).expect("a NaN angle leaves the run readable");
         let back = rec.result.unwrap().to_wire();
         assert!(back.approach_rad.is_nan());
-        assert_eq!(back.absent, wire.absent, "why it was not measured round-trips");
+        assert_eq!(
+            back.absent, wire.absent,
+            "why it was not measured round-trips"
+        );
         assert_eq!(back.departure_rad.to_bits(), wire.departure_rad.to_bits());
         assert_eq!(back.cloud_points, wire.cloud_points);
         fs::remove_dir_all(&root).unwrap();

@@ -464,3 +464,34 @@ fn outputs_match_the_golden_digests() {
         path.display()
     );
 }
+
+#[test]
+fn the_stated_x_error_mixes_the_wheels_and_the_map_by_frames() {
+    // 61 frames over 6 s, 1.8 m at 0.3 m/s.
+    let built = |rejected: bool| BuiltCloud {
+        points_in_world: Vec::new(),
+        trajectory: (0..=60)
+            .map(|i| TrajectoryPoint {
+                stamp_s: 0.1 * f64::from(i),
+                world_from_robot: Pose {
+                    translation: [0.03 * f64::from(i), 0.0, 0.0],
+                    ..Pose::IDENTITY
+                },
+                chosen: [Source::Wheel; 6],
+                laser_degenerate: [false; 6],
+                refine_rejected: [false, false, false, rejected, false, false],
+            })
+            .collect(),
+        stats: PipelineStats::default(),
+    };
+    let fusion = config::FusionConfig::default();
+    // Every frame's x from the wheels: their speed error over the speed (0.003 / 0.3).
+    let wheels = built(true).x_sigma_per_m(&fusion);
+    assert!(
+        (wheels - fusion.wheel_speed_sigma_mps / 0.3).abs() < 1e-9,
+        "{wheels}"
+    );
+    // Every frame's x from the map.
+    let map = built(false).x_sigma_per_m(&fusion);
+    assert!((map - MAP_X_SIGMA_PER_M).abs() < 1e-12, "{map}");
+}
