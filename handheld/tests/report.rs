@@ -250,6 +250,7 @@ fn report_fills_every_section_and_renders_in_chromium() {
 
     without_key_or_lab(&dir, &lab, id);
     screenshot(&html_path, &root);
+    tampered(&dir, &public.to_hex());
     std::fs::remove_dir_all(&root).unwrap();
 }
 
@@ -278,6 +279,26 @@ fn without_key_or_lab(dir: &Path, lab: &Path, id: &str) {
     ]);
     assert_ne!(code, 0);
     assert!(text.contains("colour"), "{text}");
+}
+
+/// A changed digit of result.json: the report still renders and names the file as changed.
+fn tampered(dir: &Path, key: &str) {
+    let result = dir.join("result.json");
+    let text = std::fs::read_to_string(&result).unwrap();
+    let forged = text.replacen("\"run_id\": 1", "\"run_id\": 2", 1);
+    assert_ne!(forged, text);
+    std::fs::write(&result, forged).unwrap();
+    let (code, text) = passangle(&["report", dir.to_str().unwrap(), "--public-key", key]);
+    assert_eq!(code, 0, "{text}");
+    let html = std::fs::read_to_string(dir.join("report.html")).unwrap();
+    assert!(
+        html.contains("1 file(s) FAILED"),
+        "the summary names the failure"
+    );
+    assert!(
+        html.contains("CHANGED after"),
+        "result.json is named as changed"
+    );
 }
 
 /// Renders the report in headless Chromium and checks the screenshot is a real picture.
