@@ -58,6 +58,22 @@ if ! "$pyvenv/bin/python" -c 'import mcap' 2>/dev/null; then
 fi
 [[ -x "$pyvenv/bin/python" ]] && export PASSANGLE_PYTHON="$PWD/$pyvenv/bin/python"
 
+step "headless Chromium for the lab report's browser check"
+# handheld/tests/report.rs renders `passangle report`'s HTML in headless Chromium and fails without
+# it unless PASSANGLE_SKIP_BROWSER=1.
+have_chromium() { command -v chromium >/dev/null || command -v chromium-browser >/dev/null; }
+if ! have_chromium && [[ $(id -u) == 0 ]] && command -v apt-get >/dev/null; then
+    echo "installing chromium (Debian)"
+    (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium) >/dev/null \
+        || echo "NOTE: could not install chromium" >&2
+fi
+# Where it could be installed (root with apt-get, as CI) a missing browser fails the test; elsewhere
+# say so visibly and skip it.
+if ! have_chromium && ! { [[ $(id -u) == 0 ]] && command -v apt-get >/dev/null; }; then
+    echo "NOTE: no chromium on PATH and no apt-get as root: the report's browser check is SKIPPED." >&2
+    export PASSANGLE_SKIP_BROWSER=1
+fi
+
 step "host tests: cargo test --workspace"
 # The real VLP-16 captures live beside the checkout (../shared/data/vlp16, never copied in). Their
 # tests fail loudly when the folder is missing; here, where a clean clone may not have it, say so

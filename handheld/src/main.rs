@@ -6,6 +6,7 @@ mod export;
 mod field;
 mod lidar;
 mod replay;
+mod report;
 mod verify;
 
 use std::process::ExitCode;
@@ -45,6 +46,9 @@ enum Command {
     /// offline; say what was changed if it fails (exit 3 changed, 4 not the robot's key, 5 not
     /// signed).
     Verify(verify::VerifyArgs),
+    /// Write a recorded run's lab report: one self-contained HTML file (prints to PDF) with the
+    /// results and U, the witnesses, tyres, floor, lab and vehicle details and every file's hash.
+    Report(report::ReportArgs),
 }
 
 fn main() -> anyhow::Result<ExitCode> {
@@ -61,5 +65,6 @@ fn main() -> anyhow::Result<ExitCode> {
         Command::Replay(args) => done(replay::run(&args, &mut std::io::stdout().lock())),
         Command::Export(args) => done(export::run(&args, &mut std::io::stdout().lock())),
         Command::Verify(args) => verify::run(&args, &mut std::io::stdout().lock()),
+        Command::Report(args) => done(report::run(&args, &mut std::io::stdout().lock())),
     }
 }

@@ -29,7 +29,7 @@ pub const UNSIGNED: u8 = 5;
 
 /// The whole files a robot with a device key signs in every run directory: in a directory,
 /// one of these without its `.sig` is reported as unsigned.
-const SIGNED_IN_A_RUN: [&str; 5] = [
+pub const SIGNED_IN_A_RUN: [&str; 5] = [
     "config.toml",
     "meta.json",
     "result.json",
@@ -98,9 +98,9 @@ pub fn read_keys_file(path: &Path) -> anyhow::Result<Vec<PublicKey>> {
     Ok(keys)
 }
 
-fn trusted_keys(args: &VerifyArgs) -> anyhow::Result<Vec<PublicKey>> {
-    let mut keys = args
-        .public_keys
+/// The keys given with `--public-key` (64 hex digits each) and in `--keys FILE`.
+pub fn given_keys(public_keys: &[String], keys: Option<&Path>) -> anyhow::Result<Vec<PublicKey>> {
+    let mut trusted = public_keys
         .iter()
         .map(|k| {
             PublicKey::from_hex(k).with_context(|| {
@@ -108,9 +108,15 @@ fn trusted_keys(args: &VerifyArgs) -> anyhow::Result<Vec<PublicKey>> {
             })
         })
         .collect::<anyhow::Result<Vec<_>>>()?;
-    if let Some(file) = &args.keys {
-        keys.extend(read_keys_file(file)?);
-    } else if keys.is_empty() {
+    if let Some(file) = keys {
+        trusted.extend(read_keys_file(file)?);
+    }
+    Ok(trusted)
+}
+
+fn trusted_keys(args: &VerifyArgs) -> anyhow::Result<Vec<PublicKey>> {
+    let mut keys = given_keys(&args.public_keys, args.keys.as_deref())?;
+    if keys.is_empty() {
         match default_keys_file().filter(|f| f.exists()) {
             Some(file) => keys.extend(read_keys_file(&file)?),
             None => anyhow::bail!(
@@ -124,7 +130,7 @@ fn trusted_keys(args: &VerifyArgs) -> anyhow::Result<Vec<PublicKey>> {
 }
 
 /// Reads a sidecar without reading more than a sidecar may be.
-fn read_sidecar(path: &Path) -> Result<Sidecar, String> {
+pub fn read_sidecar(path: &Path) -> Result<Sidecar, String> {
     let mut bytes = Vec::new();
     std::fs::File::open(path)
         .and_then(|f| {
@@ -135,6 +141,59 @@ fn read_sidecar(path: &Path) -> Result<Sidecar, String> {
     Sidecar::parse(&bytes).map_err(|e| format!("{}: {e}", path.display()))
 }
 
+/// What a file's signature says about it.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Check {
+    /// The file is what the key with this id signed.
+    Verified {
+        /// The signer's key id.
+        key_id: String,
+    },
+    /// A trusted key signed the file, which was changed since.
+    Changed {
+        /// The signer's key id.
+        key_id: String,
+        /// The name the file was signed as.
+        signed_as: String,
+        /// What was changed (JSON pointers and the like).
+        changes: Vec<String>,
+    },
+    /// The signature is not by a trusted key, or does not hold.
+    Untrusted(String),
+    /// No usable signature (missing, too large, not a signature file).
+    Unsigned(String),
+}
+
+impl Check {
+    /// The exit code of `passangle verify` for this outcome.
+    pub fn code(&self) -> u8 {
+        match self {
+            Check::Verified { .. } => OK,
+            Check::Changed { .. } => CHANGED,
+            Check::Untrusted(_) => UNTRUSTED,
+            Check::Unsigned(_) => UNSIGNED,
+        }
+    }
+}
+
+/// Checks one file against its sidecar.
+pub fn check_file(file: &Path, sig: &Path, trusted: &[PublicKey]) -> anyhow::Result<Check> {
+    let sidecar = match read_sidecar(sig) {
+        Ok(s) => s,
+        Err(e) => return Ok(Check::Unsigned(e)),
+    };
+    let bytes = std::fs::read(file).with_context(|| format!("reading {}", file.display()))?;
+    Ok(match sidecar.verify(&bytes, trusted) {
+        Ok(Verdict::Verified { key }) => Check::Verified { key_id: key.id() },
+        Ok(Verdict::Changed { key, changes }) => Check::Changed {
+            key_id: key.id(),
+            signed_as: sidecar.manifest.name.clone(),
+            changes: changes.iter().map(ToString::to_string).collect(),
+        },
+        Err(e) => Check::Untrusted(e.to_string()),
+    })
+}
+
 /// Verifies one file against its sidecar; prints the outcome; returns the exit code.
 fn verify_file(
     file: &Path,
@@ -143,25 +202,17 @@ fn verify_file(
     out: &mut dyn Write,
 ) -> anyhow::Result<u8> {
     let shown = file.display();
-    let sidecar = match read_sidecar(sig) {
-        Ok(s) => s,
-        Err(e) => {
-            writeln!(out, "FAILED: {shown}: no usable signature: {e}")?;
-            return Ok(UNSIGNED);
-        }
-    };
-    let bytes = std::fs::read(file).with_context(|| format!("reading {shown}"))?;
-    match sidecar.verify(&bytes, trusted) {
-        Ok(Verdict::Verified { key }) => {
-            writeln!(out, "OK: {shown} signed by {}", key.id())?;
-            Ok(OK)
-        }
-        Ok(Verdict::Changed { key, changes }) => {
+    let check = check_file(file, sig, trusted)?;
+    match &check {
+        Check::Verified { key_id } => writeln!(out, "OK: {shown} signed by {key_id}")?,
+        Check::Changed {
+            key_id,
+            signed_as,
+            changes,
+        } => {
             writeln!(
                 out,
-                "FAILED: {shown} was changed after {} signed it (as {}):",
-                key.id(),
-                sidecar.manifest.name
+                "FAILED: {shown} was changed after {key_id} signed it (as {signed_as}):"
             )?;
             for c in changes.iter().take(MAX_LISTED) {
                 writeln!(out, "  {c}")?;
@@ -169,13 +220,11 @@ fn verify_file(
             if changes.len() > MAX_LISTED {
                 writeln!(out, "  and {} more", changes.len() - MAX_LISTED)?;
             }
-            Ok(CHANGED)
         }
-        Err(e) => {
-            writeln!(out, "FAILED: {shown}: {e}")?;
-            Ok(UNTRUSTED)
-        }
+        Check::Untrusted(e) => writeln!(out, "FAILED: {shown}: {e}")?,
+        Check::Unsigned(e) => writeln!(out, "FAILED: {shown}: no usable signature: {e}")?,
     }
+    Ok(check.code())
 }
 
 /// `passangle verify`.
