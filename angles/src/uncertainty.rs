@@ -79,7 +79,9 @@ pub(crate) struct Inputs {
 /// Step of the central differences (metres).
 const STEP_M: f64 = 1e-4;
 
-/// Central difference of `f` at `x` (`None` if either side is undefined).
+/// Central difference of `f` at `x`; 0 where either side is undefined (a witness within
+/// `STEP_M` of the tyre's side-view disc, where no tangent plane reaches it from one side, so the
+/// input has no first-order effect there).
 fn slope(f: impl Fn(f64) -> Option<f64>, x: f64) -> f64 {
     match (f(x + STEP_M), f(x - STEP_M)) {
         (Some(a), Some(b)) => (a - b) / (2.0 * STEP_M),

@@ -399,7 +399,7 @@ pub enum SidecarError {
     Json(String),
     /// A `format` this version does not read.
     Format(u32),
-    /// An `algorithm` other than `ed25519`.
+    /// An `algorithm` other than Ed25519, the only signature scheme a sidecar may name.
     Algorithm(String),
     /// A field that is not the hex it must be.
     Hex(&'static str),
