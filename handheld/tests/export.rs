@@ -4,6 +4,9 @@
 //! reader (when `python3` with `mcap` is installed; otherwise the test says so loudly).
 #![allow(clippy::unwrap_used, missing_docs)]
 
+mod common;
+
+use common::temp_root;
 use std::collections::BTreeMap;
 use std::io::BufWriter;
 use std::path::{Path, PathBuf};
@@ -22,13 +25,6 @@ use serde_json::Value;
 
 const BASE_US: u64 = 1_790_000_000_000_000;
 const DEPTH_FRAMES: u64 = 4;
-
-fn temp_root(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("passangle-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
 
 /// The result the recorded run ends with.
 fn result_record() -> ResultRecord {

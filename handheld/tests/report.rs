@@ -4,9 +4,12 @@
 //! balanced; then a screenshot in headless Chromium (required unless PASSANGLE_SKIP_BROWSER=1).
 #![allow(clippy::unwrap_used, missing_docs)]
 
+mod common;
+
 #[path = "../../onboard/tests/synth/mod.rs"]
 mod synth;
 
+use common::temp_root;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
@@ -17,13 +20,6 @@ use onboard::signed::{Signer, write_signed};
 use onboard::signing::{DeviceKey, SEED_LEN};
 use protocol::bounded::Text;
 use protocol::radio::{Absence, MeasurementResult, ResultWarnings, StartMeasurement, Zone};
-
-fn temp_root(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("passangle-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
 
 /// A sedan scanned at 1 cm with 3 mm noise, turned so its front faces the cloud's -x (the robot
 /// entered under the front bumper: `processing.enter-at-front = true`, as in the example config).

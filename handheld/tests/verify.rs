@@ -3,6 +3,9 @@
 //! exits 4, a missing or garbage signature exits 5, and no trusted key is an error (1).
 #![allow(clippy::unwrap_used, missing_docs)]
 
+mod common;
+
+use common::temp_root;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
@@ -12,13 +15,6 @@ use onboard::signed::{Signer, write_signed};
 use onboard::signing::{DeviceKey, PublicKey, SEED_LEN};
 use protocol::bounded::Text;
 use protocol::radio::{MeasurementResult, ResultWarnings, StartMeasurement, Zone};
-
-fn temp_root(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("passangle-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
 
 fn wire() -> MeasurementResult {
     MeasurementResult {
