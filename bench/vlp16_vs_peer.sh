@@ -37,7 +37,7 @@ PY
 
 pin=()
 if command -v taskset >/dev/null; then pin=(taskset -c 0); fi
-cargo build --release -q -p onboard --example bench_vlp16
+cargo build --release -q -p vlp16 --example bench_vlp16
 # Five interleaved rounds: other load on the machine hits both alike. Reported: the best pass
 # of all rounds per side and the median of the rounds' medians per side, and both ratios.
 field() { sed -n "s/.*[ ^]$1=\([^ ]*\).*/\1/p"; }

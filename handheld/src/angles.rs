@@ -1,19 +1,19 @@
 //! `passangle angles CLOUD`: the passing angles of any underside point cloud (PLY, PCD, XYZ/CSV,
 //! E57 from terrestrial scanners, LAS/LAZ).
 //!
-//! Reads the cloud through `onboard::cloud`, runs the pure calculator `onboard::angles`, and prints
+//! Reads the cloud through `cloud_io`, runs the pure calculator `angles`, and prints
 //! a table (default) or one JSON object (`--json`); `--report FILE.svg` writes the side view.
 //! Degrees appear only here, at the user boundary.
 
 use std::io::Write;
 use std::path::PathBuf;
 
-use anyhow::{Context, bail};
-use onboard::angles::{
+use angles::{
     AngleFinding, AnglesConfig, AnglesResult, Band, ExclusionBox, Quantity, Uncertainty, Zone,
     compute_angles, side_view_svg,
 };
-use onboard::cloud::{ParseLimits, ReadStats, read_cloud_with};
+use anyhow::{Context, bail};
+use cloud_io::{ParseLimits, ReadStats, read_cloud_with};
 use serde_json::{Value, json};
 
 /// Arguments of `passangle angles`.

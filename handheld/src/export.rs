@@ -33,17 +33,17 @@ use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
-use onboard::cloud::read_cloud;
+use cloud_io::read_cloud;
 use onboard::config::OnboardConfig;
-use onboard::pipeline::PipelineConfig;
-use onboard::pipeline::config::MountConfig;
-use onboard::pipeline::geom::{M3, Pose};
 use onboard::process::{ProcessConfig, build_run};
 use onboard::recorder::Recording;
-use onboard::vlp16::source::{PACKET_BUF_LEN, PacketKind, PacketSource, PcapSource};
-use onboard::vlp16::{DecoderConfig, Frame, FrameAssembler};
+use pipeline::PipelineConfig;
+use pipeline::config::MountConfig;
+use pipeline::geom::{M3, Pose};
 use protocol::mcu::Odometry;
 use serde_json::{Value, json};
+use vlp16::source::{PACKET_BUF_LEN, PacketKind, PacketSource, PcapSource};
+use vlp16::{DecoderConfig, Frame, FrameAssembler};
 
 /// Arguments of `passangle export`.
 #[derive(Debug, clap::Args)]

@@ -1,5 +1,5 @@
 //! The operator's commands over the radio link: `pair`, `measure`, `status`, `abort`, `fetch`.
-//! The link itself is `onboard::client` (shared with the simulator's demo).
+//! The link itself is `link::client` (shared with the simulator's demo).
 
 use std::io::{IsTerminal, Write};
 use std::path::{Path, PathBuf};
@@ -7,8 +7,8 @@ use std::time::Duration;
 
 use anyhow::Context;
 use clap::{Args, ValueEnum};
-use onboard::client::{Client, Measured, Observer};
-use onboard::service::Port;
+use link::Port;
+use link::client::{Client, Measured, Observer};
 use protocol::bounded::Text;
 use protocol::common::LogLine;
 use protocol::radio::{Progress, StartMeasurement, Zone};
@@ -124,7 +124,7 @@ pub fn pair(args: &PairArgs, out: &mut dyn Write) -> anyhow::Result<()> {
         .and_then(|mut f| std::io::Read::read_exact(&mut f, &mut key))
         .context("reading /dev/urandom")?;
     let key = protocol::auth::Key(key);
-    onboard::config::write_key(&args.key_file, &key)?;
+    link::keys::write_key(&args.key_file, &key)?;
     let id = protocol::auth::key_id(&key);
     writeln!(
         out,
@@ -133,7 +133,7 @@ pub fn pair(args: &PairArgs, out: &mut dyn Write) -> anyhow::Result<()> {
     )?;
     match &args.robot_keys {
         Some(robot) => {
-            onboard::link::keys::add(robot, &key, &args.label)?;
+            link::keys::add(robot, &key, &args.label)?;
             writeln!(
                 out,
                 "added key {id:08x} to the robot's key list {}; restart the service to use it.",
@@ -149,9 +149,7 @@ pub fn pair(args: &PairArgs, out: &mut dyn Write) -> anyhow::Result<()> {
 }
 
 fn open(link: &LinkArgs) -> anyhow::Result<Client> {
-    let key = onboard::link::keys::read(&link.key_file)?
-        .swap_remove(0)
-        .key;
+    let key = link::keys::read(&link.key_file)?.swap_remove(0).key;
     let port: Box<dyn Port> = Box::new(
         serialport::new(&link.port, link.baud)
             .timeout(Duration::from_millis(2))
@@ -300,7 +298,7 @@ pub fn print_result(m: &Measured, out: &mut dyn Write) -> std::io::Result<()> {
 fn save_and_print(m: &Measured, dir: &Path, out: &mut dyn Write) -> anyhow::Result<()> {
     print_result(m, out)?;
     let files =
-        onboard::client::save(dir, m).with_context(|| format!("saving into {}", dir.display()))?;
+        link::client::save(dir, m).with_context(|| format!("saving into {}", dir.display()))?;
     writeln!(
         out,
         "saved {}, {}, {}",

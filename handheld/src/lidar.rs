@@ -11,9 +11,9 @@ use std::io::Write;
 use std::path::PathBuf;
 
 use anyhow::{Context, bail};
-use onboard::vlp16::source::{PACKET_BUF_LEN, PacketKind, PacketSource, PcapSource, Ports};
-use onboard::vlp16::{DecodeStats, DecoderConfig, Frame, FrameAssembler};
 use serde_json::json;
+use vlp16::source::{PACKET_BUF_LEN, PacketKind, PacketSource, PcapSource, Ports};
+use vlp16::{DecodeStats, DecoderConfig, Frame, FrameAssembler};
 
 /// Arguments of `passangle lidar`.
 #[derive(Debug, clap::Args)]
@@ -78,7 +78,7 @@ struct FrameFigures {
 struct Summary {
     stats: DecodeStats,
     frames: Vec<FrameFigures>,
-    skips: onboard::vlp16::source::PcapSkips,
+    skips: vlp16::source::PcapSkips,
     truncated: Option<String>,
     last_position: Option<(u32, &'static str, String)>,
 }
@@ -429,8 +429,8 @@ fn write_csv(frame: &Frame, out: &mut impl Write) -> anyhow::Result<()> {
 mod tests {
     use std::net::{Ipv4Addr, SocketAddrV4};
 
-    use onboard::pcap::PcapWriter;
-    use onboard::vlp16::{BlockRepr, ChannelRepr, DataPacketRepr, Product, ReturnMode};
+    use vlp16::pcap::PcapWriter;
+    use vlp16::{BlockRepr, ChannelRepr, DataPacketRepr, Product, ReturnMode};
 
     use super::*;
 

@@ -1,5 +1,5 @@
 //! `passangle replay RUN_DIR`: rebuild a recorded run's point cloud offline with the onboard
-//! pipeline (`onboard::pipeline`), optionally with another pipeline config, then compute the angles.
+//! pipeline (`pipeline`), optionally with another pipeline config, then compute the angles.
 //!
 //! Reads the run directory of `onboard::recorder` (`lidar.pcap`, `odometry.csv`,
 //! `depth/index.csv` + `depth/NNNNNN.z16`) through `onboard::process::build_run`, the same
@@ -17,12 +17,12 @@
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
+use angles::{AnglesConfig, Quantity, compute_angles};
 use anyhow::{Context, bail};
-use onboard::angles::{AnglesConfig, Quantity, compute_angles};
-use onboard::cloud::{PlyEncoding, write_ply};
-use onboard::pipeline::{BuiltCloud, PipelineConfig};
+use cloud_io::{PlyEncoding, write_ply};
 use onboard::process::{ProcessConfig, build_run};
 use onboard::recorder::Recording;
+use pipeline::{BuiltCloud, PipelineConfig};
 
 /// Arguments of `passangle replay`.
 #[derive(Debug, clap::Args)]
@@ -96,7 +96,7 @@ pub fn run(args: &ReplayArgs, out: &mut impl Write) -> anyhow::Result<()> {
         std::fs::File::create(&path).with_context(|| format!("creating {}", path.display()))?;
     write_ply(
         std::io::BufWriter::new(file),
-        &onboard::cloud::Cloud::from(&built),
+        &onboard::frames::cloud_of(&built),
         PlyEncoding::BinaryLittleEndian,
     )
     .with_context(|| format!("writing {}", path.display()))?;

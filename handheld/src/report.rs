@@ -13,11 +13,11 @@
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
-use anyhow::Context;
-use onboard::angles::{
+use angles::{
     AngleFinding, AnglesConfig, AnglesResult, Quantity, Zone, compute_angles, side_view_svg,
 };
-use onboard::cloud::read_cloud;
+use anyhow::Context;
+use cloud_io::read_cloud;
 use onboard::recorder::{RecordedOutcome, Recording, ResultRecord, RunMeta};
 use serde::Deserialize;
 use sha2::{Digest, Sha256};

@@ -5,7 +5,7 @@
 use std::io::BufWriter;
 use std::process::Command;
 
-use onboard::cloud::{Cloud, PlyEncoding, write_ply};
+use cloud_io::{Cloud, PlyEncoding, write_ply};
 
 /// Ground, a flat floor at 0.2 m ending in a vertical bumper face at x = +-2 m, four rigid tyres
 /// (radius 0.3 m, centres at x = +-1.3 m, |y| = 0.75 m, width 0.2 m). 1 cm spacing.

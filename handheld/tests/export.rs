@@ -12,11 +12,11 @@ use std::io::BufWriter;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
+use cloud_io::{Cloud, PlyEncoding, write_ply};
 use hil_sim::scenario::Scenario;
 use hil_sim::trajectory::Trajectory;
 use hil_sim::vlp16::{Datagram, Vlp16Sim};
 use hil_sim::world::Scene;
-use onboard::cloud::{Cloud, PlyEncoding, write_ply};
 use onboard::recorder::{Intrinsics, RecordedOutcome, ResultRecord, RunRecorder};
 use protocol::bounded::Text;
 use protocol::mcu::Odometry;

@@ -11,9 +11,9 @@ use std::io::{BufWriter, Cursor};
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
+use angles::{AnglesConfig, AnglesResult, compute_angles};
+use cloud_io::{Cloud, PlyEncoding, read_cloud, write_e57, write_las, write_ply};
 use e57::{E57Writer, Quaternion, Record, RecordValue, Transform, Translation};
-use onboard::angles::{AnglesConfig, AnglesResult, compute_angles};
-use onboard::cloud::{Cloud, PlyEncoding, read_cloud, write_e57, write_las, write_ply};
 
 /// The LAS/LAZ resolution (scale): 1 micrometre. LAS stores integers, so a LAS copy is a
 /// perturbed copy, and the calculator's witness selection among near-tied points is not

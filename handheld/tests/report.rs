@@ -13,8 +13,8 @@ use common::temp_root;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use onboard::angles::{AnglesConfig, compute_angles};
-use onboard::cloud::{Cloud, PlyEncoding, write_ply};
+use angles::{AnglesConfig, compute_angles};
+use cloud_io::{Cloud, PlyEncoding, write_ply};
 use onboard::recorder::{RecordedOutcome, ResultRecord, RunRecorder};
 use onboard::signed::{Signer, write_signed};
 use onboard::signing::{DeviceKey, SEED_LEN};
@@ -105,7 +105,7 @@ fn signed_run(root: &Path, key: DeviceKey) -> PathBuf {
     write_signed(&dir.join("cloud.ply"), &ply, &signer).unwrap();
     write_signed(
         &dir.join("side_view.svg"),
-        onboard::angles::side_view_svg(&a).as_bytes(),
+        angles::side_view_svg(&a).as_bytes(),
         &signer,
     )
     .unwrap();

@@ -9,7 +9,7 @@ use common::temp_root;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
-use onboard::client::Measured;
+use link::client::Measured;
 use onboard::recorder::{RecordedOutcome, ResultRecord, RunRecorder};
 use onboard::signed::{Signer, write_signed};
 use onboard::signing::{DeviceKey, PublicKey, SEED_LEN};
@@ -147,7 +147,7 @@ fn verify_accepts_the_robots_records_with_a_key_from_the_user() {
 
     // The handheld's copy (`passangle measure`/`fetch` saves it from the radio's result) has the
     // robot's bytes, so the robot's signature verifies it.
-    let saved = onboard::client::save(
+    let saved = link::client::save(
         &root.join("handheld"),
         &Measured {
             result: wire(),

@@ -1,4 +1,4 @@
-//! Evidence for the point-cloud pipeline (`onboard::pipeline`, issue 7) on simulator runs with
+//! Evidence for the point-cloud pipeline (`pipeline`, issue 7) on simulator runs with
 //! ground truth: trajectory error, cloud error, angles against the geometry's truth, and time per
 //! lidar frame, for the configurations of the paper's Figure 14 ablation.
 //!
@@ -17,7 +17,7 @@
 //! `cargo run --release -p onboard --example accuracy_angles -- saved DIR`).
 //!
 //! Inputs per run (all from `hil_sim`, all seeded): the VLP-16 packets decoded by
-//! `onboard::vlp16::FrameAssembler`, the D435 depth frames (every 3rd, i.e. 10 Hz), and wheel
+//! `vlp16::FrameAssembler`, the D435 depth frames (every 3rd, i.e. 10 Hz), and wheel
 //! odometry at 100 Hz from the scenario's wheel distance (which includes the scenario's slip: the
 //! wheels overestimate the distance exactly as a slipping robot's would) with the scenario's
 //! `[wheel_odometry]` errors (`hil_sim::wheel_odometry`; none in the shipped scenarios, so exact
@@ -30,7 +30,7 @@
 //!   relative to the first frame), metres; drift: final translation error / distance travelled.
 //! - cloud error: distance of each built point to the nearest true surface (ground, tyres, body
 //!   prisms, parts): median and 95th percentile, metres.
-//! - angles: `onboard::angles::compute_angles` on the built cloud (moved into the vehicle frame by
+//! - angles: `angles::compute_angles` on the built cloud (moved into the vehicle frame by
 //!   the true start pose, with the estimated trajectory as the scan's path, as the robot would
 //!   give it) against `hil_sim::truth::true_angles`, degrees. The closing table gives per
 //!   scenario the angle errors' mean and sample standard deviation over the seeds and the ATE's
@@ -46,6 +46,8 @@ use anyhow::Context as _;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
+use angles::{AnglesConfig, compute_angles};
+use cloud_io::{Cloud, PlyEncoding, write_ply};
 use hil_sim::d435::D435Sim;
 use hil_sim::geometry::{Isometry, Vec3};
 use hil_sim::scenario::Scenario;
@@ -53,12 +55,8 @@ use hil_sim::trajectory::Trajectory;
 use hil_sim::truth::{TruthOptions, true_angles};
 use hil_sim::wheel_odometry::WheelNoise;
 use hil_sim::world::Scene;
-use onboard::angles::{AnglesConfig, compute_angles};
-use onboard::cloud::{Cloud, PlyEncoding, write_ply};
-use onboard::pipeline::geom::{Pose, rpy_of};
-use onboard::pipeline::{
-    BuiltCloud, DepthImage, LidarFrame, Pipeline, PipelineConfig, WheelOdometry,
-};
+use pipeline::geom::{Pose, rpy_of};
+use pipeline::{BuiltCloud, DepthImage, LidarFrame, Pipeline, PipelineConfig, WheelOdometry};
 
 /// One configuration of the ablation.
 struct Variant {

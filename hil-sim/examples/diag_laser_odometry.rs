@@ -1,4 +1,4 @@
-//! Diagnostic of the scan-to-scan laser odometry (`onboard::pipeline::laser_odometry`) in
+//! Diagnostic of the scan-to-scan laser odometry (`pipeline::laser_odometry`) in
 //! isolation, on simulator runs with ground truth: every lidar frame is deskewed with the TRUE
 //! velocity, its features are extracted exactly as the pipeline does, and it is registered against
 //! the previous frame from a prior; the registered increment is compared per component with the
@@ -48,17 +48,17 @@ use hil_sim::geometry::Isometry;
 use hil_sim::scenario::Scenario;
 use hil_sim::trajectory::Trajectory;
 use hil_sim::world::Scene;
-use onboard::pipeline::config::PipelineConfig;
-use onboard::pipeline::deskew::{self, Velocity};
-use onboard::pipeline::features::{self, RingPoint};
-use onboard::pipeline::geom::{Pose, V3, norm};
-use onboard::pipeline::ground;
-use onboard::pipeline::laser_odometry::{
+use pipeline::config::PipelineConfig;
+use pipeline::deskew::{self, Velocity};
+use pipeline::features::{self, RingPoint};
+use pipeline::geom::{Pose, V3, norm};
+use pipeline::ground;
+use pipeline::laser_odometry::{
     FeatureTarget, GROUND_TAG_BIT, Scan, register_two_step, residuals_at,
 };
-use onboard::pipeline::map::FeatureMap;
-use onboard::pipeline::registration::{JointProblem, register_joint};
-use onboard::pipeline::{Candidates, LidarFrame, step1_planes, tagged_index};
+use pipeline::map::FeatureMap;
+use pipeline::registration::{JointProblem, register_joint};
+use pipeline::{Candidates, LidarFrame, step1_planes, tagged_index};
 
 fn pose_of(iso: &Isometry) -> Pose {
     Pose {

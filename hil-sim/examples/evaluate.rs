@@ -14,10 +14,10 @@
 //! Per run (all seeded; the same command prints the same tables): the protocol's template
 //! scenario with the run's vehicle, world and seed, the robot starting 1 m ahead of the vehicle's
 //! front and driving to 1 m behind its rear; the simulated VLP-16 packets decoded by
-//! `onboard::vlp16::FrameAssembler`; wheel odometry at 100 Hz with the template's wheel errors; the
+//! `vlp16::FrameAssembler`; wheel odometry at 100 Hz with the template's wheel errors; the
 //! pipeline with its default settings, laser + wheel (the camera is off in the defaults); the built
 //! cloud moved into the vehicle frame by the true start pose (on the hall's floor) with the
-//! estimated trajectory as the scan's path; `onboard::angles::compute_angles` with its default
+//! estimated trajectory as the scan's path; `angles::compute_angles` with its default
 //! settings; `hil_sim::truth::true_angles` (49 CFR zone, flexible parts included). Nothing is
 //! tuned here: every setting is the crate's default.
 //!
@@ -32,15 +32,15 @@ use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 use std::time::Instant;
 
+use angles::{AnglesConfig, compute_angles};
 use anyhow::{Context as _, bail};
 use hil_sim::geometry::Isometry;
 use hil_sim::scenario::Scenario;
 use hil_sim::trajectory::Trajectory;
 use hil_sim::truth::{TruthOptions, true_angles};
 use hil_sim::vehicle::Vehicle;
-use onboard::angles::{AnglesConfig, compute_angles};
-use onboard::pipeline::geom::{Pose, rpy_of};
-use onboard::pipeline::{BuiltCloud, LidarFrame, Pipeline, PipelineConfig, WheelOdometry};
+use pipeline::geom::{Pose, rpy_of};
+use pipeline::{BuiltCloud, LidarFrame, Pipeline, PipelineConfig, WheelOdometry};
 use serde::Deserialize;
 
 /// The protocol file.
@@ -329,7 +329,7 @@ fn run(
 /// `--detail`: each angle's witness and uncertainty budget against the truth's witness, the axles
 /// against the true tyre, the wheelbase and the ground.
 fn witness_detail(
-    r: &onboard::angles::AnglesResult,
+    r: &angles::AnglesResult,
     truth: &hil_sim::truth::TrueAngles,
     vehicle: &Vehicle,
 ) -> Vec<String> {

@@ -18,6 +18,8 @@ use std::collections::HashMap;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
+use angles::{AnglesConfig, compute_angles};
+use cloud_io::{Cloud, PlyEncoding, write_ply};
 use hil_sim::d435::{D435Sim, Intrinsics};
 use hil_sim::geometry::Vec3;
 use hil_sim::scenario::Scenario;
@@ -25,8 +27,6 @@ use hil_sim::trajectory::Trajectory;
 use hil_sim::truth::{TruthOptions, true_angles};
 use hil_sim::vlp16::{FiringTruth, Vlp16Sim};
 use hil_sim::world::Scene;
-use onboard::angles::{AnglesConfig, compute_angles};
-use onboard::cloud::{Cloud, PlyEncoding, write_ply};
 
 fn lidar_cloud(scenario: &Scenario, scene: &Scene, every: u64) -> Vec<[f64; 3]> {
     let sim = Vlp16Sim::new(
@@ -219,7 +219,7 @@ fn main() -> anyhow::Result<()> {
         .collect();
     paths.sort();
     println!(
-        "true vs onboard::angles on oracle clouds (true poses), degrees: approach / breakover / departure"
+        "true vs angles on oracle clouds (true poses), degrees: approach / breakover / departure"
     );
     let runs: Vec<(&PathBuf, Option<u64>)> = paths
         .iter()
@@ -291,7 +291,7 @@ fn main() -> anyhow::Result<()> {
                     m[1] - t[1],
                     m[2] - t[2]
                 );
-                let witness = |a: &Option<onboard::angles::AngleFinding>| {
+                let witness = |a: &Option<angles::AngleFinding>| {
                     a.as_ref().map_or_else(
                         || "-".to_owned(),
                         |a| {

@@ -24,11 +24,11 @@ use std::sync::{Arc, Mutex};
 use std::thread;
 use std::time::{Duration, Instant};
 
+use angles::{self, AnglesResult};
 use anyhow::Context;
-use onboard::angles::{self, AnglesResult};
-use onboard::client::{Client, Measured, Observer};
+use link::client::{Client, Measured, Observer};
+use link::sim::{LossyPortPair, PipeConfig};
 use onboard::config::{CameraSource, FirmwareConfig, OnboardConfig};
-use onboard::link::sim::{LossyPortPair, PipeConfig};
 use onboard::process::PipelineProcessor;
 use onboard::service::{
     self, Io, LiveRun, NoNotify, ProcessInput, Processed, Processor, SensorItem, ServiceStats,
@@ -723,7 +723,7 @@ fn run_realtime(options: &DemoOptions, quiet: bool) -> anyhow::Result<DemoReport
         let mut client = Client::with_entropy(
             Box::new(handheld_port),
             key,
-            onboard::link::session::Entropy::from_test_seed(options.seed),
+            link::session::Entropy::from_test_seed(options.seed),
         );
         client.connect(Duration::from_secs(30))?;
         // Let the service see the firmware and the lidar before the checks.

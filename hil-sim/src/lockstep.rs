@@ -32,9 +32,9 @@ use std::sync::mpsc::SyncSender;
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
-use onboard::client::{Client, ClientClock, ClientError, Measured};
-use onboard::link::session::Entropy;
-use onboard::link::sim::{LossyPortPair, PipeConfig, PipeStats};
+use link::client::{Client, ClientClock, ClientError, Measured};
+use link::session::Entropy;
+use link::sim::{LossyPortPair, PipeConfig, PipeStats};
 use onboard::process::PipelineProcessor;
 use onboard::service::{
     self, DepthFrame, Execution, Io, LidarPacket, NoNotify, Service, ServiceError, ServiceStats,

@@ -244,11 +244,11 @@ pub fn derive_seed(seed: u64, tag: u64) -> u64 {
 
 impl Scenario {
     /// The run's lidar frames as the onboard pipeline takes them: the simulated VLP-16 packets
-    /// decoded by `onboard::vlp16::FrameAssembler`, complete frames only, stamped in simulation
+    /// decoded by `vlp16::FrameAssembler`, complete frames only, stamped in simulation
     /// time (the sensor clock minus the scenario's clock offset). For benches and diagnostics
-    /// that feed `onboard::pipeline` directly.
-    pub fn decoded_lidar_frames(&self, scene: &Scene) -> Vec<onboard::pipeline::LidarFrame> {
-        use onboard::vlp16::{DecoderConfig, FrameAssembler};
+    /// that feed `pipeline` directly.
+    pub fn decoded_lidar_frames(&self, scene: &Scene) -> Vec<pipeline::LidarFrame> {
+        use vlp16::{DecoderConfig, FrameAssembler};
 
         use crate::vlp16::{Datagram, Vlp16Sim};
         let motion = self.motion();
@@ -259,7 +259,7 @@ impl Scenario {
         };
         let offset_s = self.file.lidar.clock_offset_us as f64 * 1e-6;
         let mut frames = Vec::new();
-        let take = |a: &mut FrameAssembler, frames: &mut Vec<onboard::pipeline::LidarFrame>| {
+        let take = |a: &mut FrameAssembler, frames: &mut Vec<pipeline::LidarFrame>| {
             while let Some(f) = a.pop_frame() {
                 if f.is_complete() {
                     frames.push(onboard::frames::lidar_frame(
@@ -430,7 +430,7 @@ impl Scenario {
 
     /// The wheel odometry the firmware would report over the run (and `extra_s` beyond it) at
     /// 100 Hz, with the scenario's `[wheel_odometry]` errors, stamped in simulation time.
-    pub fn wheel_odometry(&self, extra_s: f64) -> Vec<onboard::pipeline::WheelOdometry> {
+    pub fn wheel_odometry(&self, extra_s: f64) -> Vec<pipeline::WheelOdometry> {
         crate::wheel_odometry::simulate(
             &self.run,
             &self.file.wheel_odometry,

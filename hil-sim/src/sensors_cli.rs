@@ -34,7 +34,7 @@ use hil_sim::truth::{TruthOptions, Zone, true_angles};
 use hil_sim::vehicle::Vehicle;
 use hil_sim::vlp16::{Datagram, Vlp16Sim};
 use hil_sim::world::{Floor, OnFloor};
-use onboard::pcap::PcapWriter;
+use vlp16::pcap::PcapWriter;
 
 /// pcap time of simulation time 0: 2026-01-01T00:00:00Z, seconds since the UNIX epoch.
 pub const PCAP_EPOCH_S: u64 = 1_767_225_600;

@@ -34,7 +34,7 @@ pub const TOLERANCE_RAD: f64 = 1e-9;
 
 /// Which points count for approach and departure: the calculator's own zone type (one name per
 /// concept), though the truth computes its angles independently of the calculator.
-pub use onboard::angles::Zone;
+pub use angles::Zone;
 
 /// Options of the true-angle computation.
 #[derive(Clone, Copy, Debug, PartialEq)]

@@ -1,6 +1,6 @@
 //! The simulated Velodyne VLP-16: firing timing, ray casting from the moving robot, range noise,
 //! quantisation, range limits, dropouts and reflectivity, emitted as byte-exact packets with
-//! `onboard::vlp16`'s packet `emit` (this crate has no encoder of its own).
+//! `vlp16`'s packet `emit` (this crate has no encoder of its own).
 //!
 //! # Timing (VLP-16 manual, single-return mode)
 //! Data packet `k` starts at `k * 12 * 110.592 us` of simulation time. Block `b` of it starts
@@ -47,12 +47,12 @@
 //! Packet `k` draws from `ChaCha8Rng::seed_from_u64(seed)` on stream `k`, so every packet is a pure
 //! function of (scenario, seed, k) and can be produced in any order, bit for bit.
 
-use onboard::vlp16::{
-    BlockRepr, ChannelRepr, DataPacketRepr, PositionPacketRepr, PpsStatus, Product, ReturnMode,
-};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::Deserialize;
+use vlp16::{
+    BlockRepr, ChannelRepr, DataPacketRepr, PositionPacketRepr, PpsStatus, Product, ReturnMode,
+};
 
 use crate::geometry::{Isometry, Rot3, Vec3};
 use crate::trajectory::Trajectory;
@@ -631,7 +631,7 @@ mod tests {
     use crate::geometry::Pose;
     use crate::trajectory::{StraightRun, Vibration};
     use crate::vehicle::tests::test_sedan;
-    use onboard::vlp16::Vlp16Packet;
+    use vlp16::Vlp16Packet;
 
     pub(crate) fn run() -> StraightRun {
         StraightRun {

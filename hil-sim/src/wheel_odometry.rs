@@ -21,7 +21,7 @@ use serde::Deserialize;
 
 use crate::d435::gaussian;
 use crate::trajectory::{StraightRun, Trajectory};
-use onboard::pipeline::WheelOdometry;
+use pipeline::WheelOdometry;
 
 /// The wheel odometry's error model (scenario table `[wheel_odometry]`, every key optional).
 #[derive(Clone, Copy, Debug, Deserialize, PartialEq)]

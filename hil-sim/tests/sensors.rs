@@ -13,8 +13,8 @@ use hil_sim::truth::{TruthOptions, closed_form_rad, true_angles};
 use hil_sim::vehicle::Vehicle;
 use hil_sim::vlp16::{FiringTruth, Vlp16Config, Vlp16Sim};
 use hil_sim::world::Scene;
-use onboard::pcap::{PcapReader, PcapWriter, udp_in_frame};
-use onboard::vlp16::{DecoderConfig, FrameAssembler, Point};
+use vlp16::pcap::{PcapReader, PcapWriter, udp_in_frame};
+use vlp16::{DecoderConfig, FrameAssembler, Point};
 
 fn crate_dir() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))

@@ -20,7 +20,7 @@
 #[path = "../tests/synth/mod.rs"]
 mod synth;
 
-use onboard::angles::{AnglesConfig, compute_angles};
+use angles::{AnglesConfig, compute_angles};
 
 /// The calculator's accuracy on synthetic vehicles or on saved clouds (see the module docs).
 #[derive(clap::Parser)]
@@ -130,8 +130,8 @@ mod saved {
     use std::collections::BTreeMap;
     use std::path::{Path, PathBuf};
 
-    use onboard::angles::{AngleFinding, AnglesConfig, AnglesResult, compute_angles};
-    use onboard::cloud::read_cloud;
+    use angles::{AngleFinding, AnglesConfig, AnglesResult, compute_angles};
+    use cloud_io::read_cloud;
 
     /// The vehicle of a saved cloud's file stem `NAME-SEED-VARIANT`: the part before the last
     /// all-digit `-` segment.

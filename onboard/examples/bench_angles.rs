@@ -11,8 +11,8 @@ mod synth;
 
 use std::time::{Duration, Instant};
 
-use onboard::angles::{AnglesConfig, compute_angles};
-use onboard::cloud::{Cloud, CloudFormat, PlyEncoding, parse_cloud, write_ply};
+use angles::{AnglesConfig, compute_angles};
+use cloud_io::{Cloud, CloudFormat, PlyEncoding, parse_cloud, write_ply};
 
 fn median(mut v: Vec<Duration>) -> Duration {
     v.sort();

@@ -1,4 +1,4 @@
-//! Speed of `onboard::pipeline::geom::VoxelIndex` queries on one core, printed as figures (no timed
+//! Speed of `pipeline::geom::VoxelIndex` queries on one core, printed as figures (no timed
 //! assertions), against two peers measured in the same run on the same points and queries:
 //! - `brute`: a linear scan over every point (the reference answer; every result of the index is
 //!   checked against it and mismatches are counted and printed);
@@ -27,7 +27,7 @@ use std::hash::{BuildHasherDefault, Hasher};
 use std::hint::black_box;
 use std::time::Instant;
 
-use onboard::pipeline::geom::{V3, VoxelIndex, dist2, voxel_of};
+use pipeline::geom::{V3, VoxelIndex, dist2, voxel_of};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 

@@ -37,10 +37,10 @@ fn main() -> Result<(), String> {
         t.elapsed().as_secs_f64()
     );
     let f = std::fs::File::create(&args.out).map_err(|e| format!("{out}: {e}"))?;
-    onboard::cloud::write_ply(
+    cloud_io::write_ply(
         std::io::BufWriter::new(f),
         &cloud,
-        onboard::cloud::PlyEncoding::BinaryLittleEndian,
+        cloud_io::PlyEncoding::BinaryLittleEndian,
     )
     .map_err(|e| format!("{out}: {e}"))
 }

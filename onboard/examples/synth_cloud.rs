@@ -13,7 +13,7 @@ use std::path::PathBuf;
 
 use clap::Parser;
 
-use onboard::cloud::{Cloud, PlyEncoding, write_ply};
+use cloud_io::{Cloud, PlyEncoding, write_ply};
 
 /// Write a synthetic vehicle's cloud as PLY and print its true angles.
 #[derive(Parser)]

@@ -7,7 +7,16 @@
 //! `cargo build --release -p onboard --features v4l2`). V4L2 reports neither intrinsics nor the depth
 //! scale: both come from `[camera]` in the config.
 
-use crate::service::DepthFrame;
+/// One depth frame (Z16).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct DepthFrame {
+    /// Width, pixels.
+    pub width: u16,
+    /// Height, pixels.
+    pub height: u16,
+    /// Row-major depth in units of the configured depth scale, 0 = no return.
+    pub depth: Vec<u16>,
+}
 
 /// Why a captured buffer is not a depth frame.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]

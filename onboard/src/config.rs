@@ -6,7 +6,7 @@
 //!
 //! Pairing: a pre-shared key is 32 random bytes stored as 64 hex digits in a file readable only by
 //! its owner (`passangle pair` writes it on the handheld). The robot's `key-file` lists one key per
-//! paired handheld ([`crate::link::keys`]). Every radio session is a fresh Noise handshake keyed
+//! paired handheld ([`link::keys`]). Every radio session is a fresh Noise handshake keyed
 //! with one of them, so nothing needs to persist between runs to refuse a replay
 //! (docs/security.md).
 //!
@@ -618,7 +618,7 @@ impl OnboardConfig {
         let path = &self.radio.key_file;
         let mut problems: Vec<ConfigError> = check_secret_file(path, "radio.key-file")
             .and_then(|()| {
-                crate::link::keys::read(path)
+                link::keys::read(path)
                     .map(drop)
                     .map_err(|e| ConfigError::Invalid {
                         path: path.clone(),
@@ -793,32 +793,19 @@ fn parse_key(hex: &str) -> Option<Key> {
     Some(Key(key))
 }
 
-/// Writes a new key file readable by its owner only (mode 0600); refuses to overwrite.
+/// Writes a new key file readable by its owner only (mode 0600); refuses to overwrite
+/// ([`link::keys::write_key`] with the configuration's error).
 pub fn write_key(path: &Path, key: &Key) -> Result<(), ConfigError> {
     write_secret_hex(path, &key.0)
 }
 
-/// Writes `secret` as hex and a newline to a new file of mode 0600; refuses to overwrite.
+/// Writes `secret` as hex and a newline to a new file of mode 0600; refuses to overwrite
+/// ([`link::keys::write_secret_hex`]).
 fn write_secret_hex(path: &Path, secret: &[u8]) -> Result<(), ConfigError> {
-    use std::io::Write;
-    use std::os::unix::fs::OpenOptionsExt;
-    let hex: String = secret.iter().fold(String::new(), |mut s, b| {
-        use std::fmt::Write as _;
-        let _ = write!(s, "{b:02x}");
-        s
-    });
-    let io_err = |source| ConfigError::Io {
+    link::keys::write_secret_hex(path, secret).map_err(|source| ConfigError::Io {
         path: path.to_owned(),
         source,
-    };
-    let mut f = fs::OpenOptions::new()
-        .write(true)
-        .create_new(true)
-        .mode(0o600)
-        .open(path)
-        .map_err(io_err)?;
-    f.write_all(format!("{hex}\n").as_bytes()).map_err(io_err)?;
-    f.sync_all().map_err(io_err)
+    })
 }
 
 #[cfg(test)]
@@ -949,7 +936,7 @@ mod tests {
             p[0].contains("`radio.key-file` the file does not exist"),
             "{p:#?}"
         );
-        crate::link::keys::add(&key, &Key([7; KEY_LEN]), "handheld 1").unwrap();
+        link::keys::add(&key, &Key([7; KEY_LEN]), "handheld 1").unwrap();
         assert_eq!(problems(&config_path), Vec::<String>::new());
         // World-readable.
         fs::set_permissions(&key, fs::Permissions::from_mode(0o644)).unwrap();
@@ -978,7 +965,7 @@ mod tests {
         let _ = fs::remove_dir_all(&dir);
         fs::create_dir_all(&dir).unwrap();
         let pairing = dir.join("pairing.key");
-        crate::link::keys::add(&pairing, &Key([7; KEY_LEN]), "handheld 1").unwrap();
+        link::keys::add(&pairing, &Key([7; KEY_LEN]), "handheld 1").unwrap();
         let device = dir.join("device.key");
         let base = MINIMAL.replace(
             "[mcu]",

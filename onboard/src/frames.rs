@@ -1,10 +1,10 @@
-//! Conversions between the sensor and file types of this crate and the pipeline's inputs and
-//! outputs, which live here because the `pipeline` crate knows neither the VLP-16 decoder nor the
-//! cloud files.
+//! Conversions between the sensor and file types (`vlp16`, `cloud_io`) and the pipeline's inputs
+//! and outputs, which live here because the `pipeline` crate knows neither the VLP-16 decoder nor
+//! the cloud files.
 
-use crate::cloud::Cloud;
-use crate::vlp16::Frame;
+use cloud_io::Cloud;
 use pipeline::{BuiltCloud, LidarFrame, LidarPoint};
+use vlp16::Frame;
 
 /// The pipeline's frame from a decoded VLP-16 frame whose first firing is at `stamp_s` on the
 /// common clock.
@@ -24,11 +24,10 @@ pub fn lidar_frame(frame: &Frame, stamp_s: f64) -> LidarFrame {
     }
 }
 
-impl From<&BuiltCloud> for Cloud {
-    /// The built cloud's points, for the writers and the angle calculator.
-    fn from(built: &BuiltCloud) -> Self {
-        Cloud {
-            points_m: built.points_in_world.clone(),
-        }
+/// The built cloud's points, for the writers and the angle calculator (a function, not a `From`
+/// impl: neither type is this crate's).
+pub fn cloud_of(built: &BuiltCloud) -> Cloud {
+    Cloud {
+        points_m: built.points_in_world.clone(),
     }
 }

@@ -1,24 +1,19 @@
-//! passangle onboard library: sensor decoding, links, the run recorder and the service around the
-//! point-cloud pipeline and the angle calculator (docs/architecture.md section 6).
+//! passangle onboard library: the configuration, the run state machine, the run recorder, the
+//! processing of a run and the service around them (docs/architecture.md section 6).
 //!
-//! The pipeline and the calculator are crates of their own (`pipeline`, `angles`) that depend on no
-//! IO crate; they are re-exported here so `onboard::pipeline` and `onboard::angles` name them. The
-//! rest is a pure function of its inputs except the thin IO adapters.
+//! The point-cloud pipeline and the calculator (`pipeline`, `angles`) are crates of their own that
+//! depend on no IO crate; so are the VLP-16 decoding and pcap files (`vlp16`), the cloud file
+//! formats (`cloud_io`) and the links with the handheld's client (`link`). Users depend on those
+//! crates directly. The rest is a pure function of its inputs except the thin IO adapters.
 
-pub use angles;
 pub mod camera;
-pub mod client;
-pub mod cloud;
 pub mod config;
 pub mod frames;
-pub mod link;
 pub mod mcu_clock;
-pub mod pcap;
-pub use pipeline;
 pub mod process;
 pub mod recorder;
 pub mod run;
+#[cfg(feature = "service")]
 pub mod service;
 pub mod signed;
 pub use signing;
-pub mod vlp16;

@@ -18,25 +18,112 @@
 //! The two feeds give the same cloud (tests/tests/live_processing.rs).
 
 use std::fs;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use protocol::bounded::Text;
 use protocol::mcu::Odometry;
-use protocol::radio::{Absence, MeasurementResult, ResultWarnings, Zone as WireZone};
+use protocol::radio::{
+    Absence, MeasurementResult, ResultWarnings, StartMeasurement, Zone as WireZone,
+};
 use serde::Deserialize;
 
-use crate::angles::{self, AnglesConfig, AnglesResult, Zone, compute_angles, side_view_svg};
-use crate::cloud::Cloud;
 use crate::mcu_clock::McuClockMap;
-use crate::pipeline::config::FusionConfig;
-use crate::pipeline::geom::V3;
-use crate::pipeline::{
-    BuiltCloud, DepthImage, LidarFrame, Pipeline, PipelineConfig, WheelOdometry,
-};
 use crate::recorder::{Intrinsics, Recording};
-use crate::service::{LiveRun, ProcessInput, Processed, Processor, SensorItem};
-use crate::vlp16::source::{PACKET_BUF_LEN, PacketKind, PacketSource, PcapSource};
-use crate::vlp16::{DecoderConfig, FrameAssembler};
+use crate::signed::Signer;
+use angles::{self, AnglesConfig, AnglesResult, Zone, compute_angles, side_view_svg};
+use cloud_io::Cloud;
+use pipeline::config::FusionConfig;
+use pipeline::geom::V3;
+use pipeline::{BuiltCloud, DepthImage, LidarFrame, Pipeline, PipelineConfig, WheelOdometry};
+use vlp16::source::{PACKET_BUF_LEN, PacketKind, PacketSource, PcapSource};
+use vlp16::{DecoderConfig, FrameAssembler};
+
+/// What processing a run gets.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ProcessInput {
+    /// The run directory (streams flushed).
+    pub run_dir: PathBuf,
+    /// The run.
+    pub run_id: u32,
+    /// Its parameters.
+    pub params: StartMeasurement,
+    /// Distance driven, m.
+    pub travelled_m: f32,
+    /// The drive ended early.
+    pub short_run: bool,
+    /// Signs `cloud.ply` and `side_view.svg` (`signing.key-file`).
+    pub signer: Signer,
+}
+
+/// What processing a run produces.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Processed {
+    /// The result (`preview_chunks` is set when offered).
+    pub result: MeasurementResult,
+    /// The cloud, vehicle frame, metres.
+    pub cloud: Cloud,
+    /// The side-view report.
+    pub svg: String,
+    /// The angle calculator's whole finding (witnesses, tyres, ground), where the processor
+    /// ran it: for reports and the simulator's checks; not sent or recorded.
+    pub angles: Option<Box<AnglesResult>>,
+}
+
+/// Builds the cloud and computes the angles of a recorded run (the service's default is
+/// [`PipelineProcessor`]).
+pub trait Processor: Send + Sync {
+    /// Processes one run from its recording; `Err` says why it failed, for the operator.
+    fn process(&self, input: &ProcessInput) -> Result<Processed, String>;
+
+    /// Starts processing a run while it is recorded (`None`: this processor works on recordings
+    /// only). The service feeds it on a worker thread with exactly what the recorder writes.
+    fn start_live(&self) -> Option<Box<dyn LiveRun>> {
+        None
+    }
+}
+
+/// One sensor item of a run, as the recorder writes it (the same values and stamps, so a live
+/// run and the replay of its recording see the same data).
+#[derive(Debug, Clone, PartialEq)]
+pub enum SensorItem {
+    /// A lidar UDP payload; `wall_ns` is rounded down to the recording's whole microseconds.
+    Lidar {
+        /// Host wall clock, ns since the Unix epoch.
+        wall_ns: u64,
+        /// The payload.
+        payload: Vec<u8>,
+        /// From the position port.
+        position: bool,
+    },
+    /// A wheel odometry report.
+    Odometry {
+        /// Host wall clock at reception, us since the Unix epoch.
+        wall_us: u64,
+        /// The report.
+        odometry: Odometry,
+    },
+    /// A depth frame (only those the recorder keeps: every `camera.record-every`-th).
+    Depth {
+        /// Host wall clock, us since the Unix epoch.
+        wall_us: u64,
+        /// Width, pixels.
+        width: u16,
+        /// Height, pixels.
+        height: u16,
+        /// Row-major Z16.
+        depth: Vec<u16>,
+        /// The camera's intrinsics from the config.
+        intrinsics: Intrinsics,
+    },
+}
+
+/// A run processed while it is recorded (see [`Processor::start_live`]).
+pub trait LiveRun: Send {
+    /// The next item, in arrival order.
+    fn push(&mut self, item: SensorItem);
+    /// The robot is at rest and the recording closed: the result.
+    fn finish(self: Box<Self>, input: &ProcessInput) -> Result<Processed, String>;
+}
 
 /// `[processing]` of the onboard config.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
@@ -196,7 +283,7 @@ enum Item {
 enum Timed {
     Wheel(u64, Odometry),
     Depth(u64, DepthImage),
-    Lidar(u64, crate::vlp16::Frame),
+    Lidar(u64, vlp16::Frame),
 }
 
 impl Timed {

@@ -29,19 +29,21 @@
 //! marker says so up front. A write error (disk full included) disables that stream, is counted
 //! and reported, and never stops the robot or the run.
 
-use std::collections::BTreeMap;
 use std::fs::{self, File, OpenOptions};
 use std::io::{self, BufWriter, Write};
 use std::net::SocketAddrV4;
 use std::path::{Path, PathBuf};
 
-use protocol::bounded::Text;
 use protocol::mcu::Odometry;
-use protocol::radio::{Absence, MeasurementResult, ResultWarnings, StartMeasurement, Zone};
+use protocol::radio::{StartMeasurement, Zone};
 use serde::{Deserialize, Serialize};
 
-use crate::pcap::PcapWriter;
 use crate::signed::{Signer, write_signed};
+use vlp16::pcap::PcapWriter;
+
+// `result.json`'s record lives with the link, whose client saves it on the handheld; the
+// recorder writes and reads the same record.
+pub use link::record::{NotMeasuredRecord, QUANTITIES, ResultRecord, run_dir_name};
 
 /// Name of the marker of an unfinished run.
 pub const INCOMPLETE: &str = "INCOMPLETE";
@@ -152,203 +154,6 @@ pub struct RunMeta {
     pub write_errors: Vec<String>,
 }
 
-/// A number of `result.json` that JSON has no spelling for (NaN: an angle the calculator could
-/// not determine) is written as `null` by serde_json; read back, `null` is NaN again. Before, such
-/// a `result.json` made the whole run unreadable (`Recording::open_run`: "invalid type: null,
-/// expected f32"), so `passangle replay` and the handheld's fetch refused it.
-fn null_as_nan<'de, D: serde::Deserializer<'de>>(d: D) -> Result<f32, D::Error> {
-    Ok(Option::<f32>::deserialize(d)?.unwrap_or(f32::NAN))
-}
-
-/// `result.json`: the measurement in radians and, for people, degrees; angles that could not be
-/// determined are NaN (`null` in the file).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct ResultRecord {
-    /// The run.
-    pub run_id: u32,
-    /// Vehicle identifier.
-    pub vehicle_id: String,
-    /// Approach angle, rad.
-    #[serde(deserialize_with = "null_as_nan")]
-    pub approach_rad: f32,
-    /// Departure angle, rad.
-    #[serde(deserialize_with = "null_as_nan")]
-    pub departure_rad: f32,
-    /// Ramp breakover angle, rad.
-    #[serde(deserialize_with = "null_as_nan")]
-    pub breakover_rad: f32,
-    /// Approach angle, degrees (for people; the radians are authoritative).
-    #[serde(deserialize_with = "null_as_nan")]
-    pub approach_deg: f32,
-    /// Departure angle, degrees.
-    #[serde(deserialize_with = "null_as_nan")]
-    pub departure_deg: f32,
-    /// Ramp breakover angle, degrees.
-    #[serde(deserialize_with = "null_as_nan")]
-    pub breakover_deg: f32,
-    /// Smallest ground clearance between the axles, m.
-    #[serde(deserialize_with = "null_as_nan")]
-    pub ground_clearance_m: f32,
-    /// Expanded uncertainty (k = 2) of the approach angle, rad (`null`: not measured).
-    #[serde(default = "nan", deserialize_with = "null_as_nan")]
-    pub approach_u_rad: f32,
-    /// Expanded uncertainty (k = 2) of the departure angle, rad.
-    #[serde(default = "nan", deserialize_with = "null_as_nan")]
-    pub departure_u_rad: f32,
-    /// Expanded uncertainty (k = 2) of the ramp breakover angle, rad.
-    #[serde(default = "nan", deserialize_with = "null_as_nan")]
-    pub breakover_u_rad: f32,
-    /// Expanded uncertainty (k = 2) of the approach angle, degrees (for people).
-    #[serde(default = "nan", deserialize_with = "null_as_nan")]
-    pub approach_u_deg: f32,
-    /// Expanded uncertainty (k = 2) of the departure angle, degrees.
-    #[serde(default = "nan", deserialize_with = "null_as_nan")]
-    pub departure_u_deg: f32,
-    /// Expanded uncertainty (k = 2) of the ramp breakover angle, degrees.
-    #[serde(default = "nan", deserialize_with = "null_as_nan")]
-    pub breakover_u_deg: f32,
-    /// Expanded uncertainty (k = 2) of the ground clearance, m.
-    #[serde(default = "nan", deserialize_with = "null_as_nan")]
-    pub ground_clearance_u_m: f32,
-    /// Each quantity that was not measured (`approach`, `departure`, `breakover`,
-    /// `ground_clearance`): why. Its value above is `null`.
-    #[serde(default)]
-    pub not_measured: BTreeMap<String, NotMeasuredRecord>,
-    /// Wheelbase, m.
-    #[serde(deserialize_with = "null_as_nan")]
-    pub wheelbase_m: f32,
-    /// Track, m.
-    #[serde(deserialize_with = "null_as_nan")]
-    pub track_m: f32,
-    /// Points supporting the approach-limiting feature.
-    pub approach_support: u16,
-    /// Points supporting the departure-limiting feature.
-    pub departure_support: u16,
-    /// Points supporting the breakover-limiting feature.
-    pub breakover_support: u16,
-    /// RMS residual of the tyre fits, m.
-    #[serde(deserialize_with = "null_as_nan")]
-    pub tyre_fit_rms_m: f32,
-    /// Warning names.
-    pub warnings: Vec<String>,
-    /// Points in the cloud.
-    pub cloud_points: u32,
-}
-
-/// Why a quantity of `result.json` was not measured.
-#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct NotMeasuredRecord {
-    /// `nothing_in_zone` or `not_covered` ([`Absence`]).
-    pub kind: String,
-    /// In words: what is missing.
-    pub reason: String,
-}
-
-fn nan() -> f32 {
-    f32::NAN
-}
-
-/// The quantities of a result in the wire's [`MeasurementResult::absent`] order.
-pub const QUANTITIES: [&str; 4] = ["approach", "departure", "breakover", "ground_clearance"];
-
-fn absence_name(a: Absence) -> &'static str {
-    match a {
-        Absence::Measured => "measured",
-        Absence::NothingInZone => "nothing_in_zone",
-        Absence::NotCovered => "not_covered",
-    }
-}
-
-impl ResultRecord {
-    /// From the wire form (the reasons in the wire's words; the service replaces them with the
-    /// calculator's own when it has them).
-    pub fn from_wire(r: &MeasurementResult) -> Self {
-        let not_measured = QUANTITIES
-            .iter()
-            .zip(r.absent)
-            .filter_map(|(q, a)| {
-                a.reason().map(|reason| {
-                    (
-                        (*q).to_owned(),
-                        NotMeasuredRecord {
-                            kind: absence_name(a).to_owned(),
-                            reason: reason.to_owned(),
-                        },
-                    )
-                })
-            })
-            .collect();
-        Self {
-            run_id: r.run_id,
-            vehicle_id: r.vehicle_id.as_str().to_owned(),
-            approach_rad: r.approach_rad,
-            departure_rad: r.departure_rad,
-            breakover_rad: r.breakover_rad,
-            approach_deg: r.approach_rad.to_degrees(),
-            departure_deg: r.departure_rad.to_degrees(),
-            breakover_deg: r.breakover_rad.to_degrees(),
-            ground_clearance_m: r.ground_clearance_m,
-            approach_u_rad: r.approach_u_rad,
-            departure_u_rad: r.departure_u_rad,
-            breakover_u_rad: r.breakover_u_rad,
-            approach_u_deg: r.approach_u_rad.to_degrees(),
-            departure_u_deg: r.departure_u_rad.to_degrees(),
-            breakover_u_deg: r.breakover_u_rad.to_degrees(),
-            ground_clearance_u_m: r.ground_clearance_u_m,
-            not_measured,
-            wheelbase_m: r.wheelbase_m,
-            track_m: r.track_m,
-            approach_support: r.approach_support,
-            departure_support: r.departure_support,
-            breakover_support: r.breakover_support,
-            tyre_fit_rms_m: r.tyre_fit_rms_m,
-            warnings: r.warnings.names().map(str::to_owned).collect(),
-            cloud_points: r.cloud_points,
-        }
-    }
-
-    /// To the wire form (`preview_chunks` 0: set when offered).
-    pub fn to_wire(&self) -> MeasurementResult {
-        let mut warnings = ResultWarnings::EMPTY;
-        for (flag, name) in ResultWarnings::NAMES {
-            if self.warnings.iter().any(|w| w == name) {
-                warnings.insert(*flag);
-            }
-        }
-        MeasurementResult {
-            run_id: self.run_id,
-            vehicle_id: Text::truncated(&self.vehicle_id),
-            approach_rad: self.approach_rad,
-            departure_rad: self.departure_rad,
-            breakover_rad: self.breakover_rad,
-            ground_clearance_m: self.ground_clearance_m,
-            approach_u_rad: self.approach_u_rad,
-            departure_u_rad: self.departure_u_rad,
-            breakover_u_rad: self.breakover_u_rad,
-            ground_clearance_u_m: self.ground_clearance_u_m,
-            absent: QUANTITIES.map(|q| {
-                self.not_measured
-                    .get(q)
-                    .map_or(Absence::Measured, |n| match n.kind.as_str() {
-                        "nothing_in_zone" => Absence::NothingInZone,
-                        _ => Absence::NotCovered,
-                    })
-            }),
-            wheelbase_m: self.wheelbase_m,
-            track_m: self.track_m,
-            approach_support: self.approach_support,
-            departure_support: self.departure_support,
-            breakover_support: self.breakover_support,
-            tyre_fit_rms_m: self.tyre_fit_rms_m,
-            warnings,
-            cloud_points: self.cloud_points,
-            preview_chunks: 0,
-        }
-    }
-}
-
 /// Camera intrinsics written with every depth frame (V4L2 gives none: they come from config).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case", deny_unknown_fields)]
@@ -363,11 +168,6 @@ pub struct Intrinsics {
     pub cy: f32,
     /// Metres per depth unit (0.001 for the D435's default).
     pub depth_scale_m: f32,
-}
-
-/// The run directory name of `run_id`.
-pub fn run_dir_name(run_id: u32) -> String {
-    format!("run-{run_id:06}")
 }
 
 /// The next free run id under `root` (1 if none).
@@ -822,7 +622,9 @@ pub fn disk_free_mib(path: &Path) -> Option<u32> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::pcap::PcapReader;
+    use protocol::bounded::Text;
+    use protocol::radio::{Absence, MeasurementResult, ResultWarnings};
+    use vlp16::pcap::PcapReader;
 
     fn tmp(name: &str) -> PathBuf {
         let d = std::env::temp_dir().join(format!("passangle-rec-{name}-{}", std::process::id()));

@@ -20,10 +20,10 @@ use protocol::common::LogLevel;
 use protocol::mcu::Interlocks;
 use protocol::radio::{Phase, Progress, RefuseReason, StartMeasurement};
 
-use crate::link::mcu::MotionIntent;
+use link::mcu::MotionIntent;
 
 /// Period of the handheld's heartbeats on the radio, us (the radio link core's).
-pub const HANDHELD_BEAT_US: u64 = crate::link::reliable::LinkConfig::RADIO.heartbeat_period_us;
+pub const HANDHELD_BEAT_US: u64 = link::reliable::LinkConfig::RADIO.heartbeat_period_us;
 
 /// Limits and timeouts of a run. All times in microseconds.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]

@@ -15,7 +15,7 @@
 //! Safety: on shutdown, and whenever the loop ends for any reason, the MCU gets an immediate stop;
 //! if the process dies instead, the firmware stops by heartbeat loss.
 
-use std::io::{self, Read, Write};
+use std::io::{self, Write};
 use std::net::SocketAddrV4;
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -27,25 +27,25 @@ use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 use protocol::common::LogLevel;
 use protocol::radio::{MeasurementResult, Phase, RefuseReason, RobotStatus, StartMeasurement};
 
-use crate::cloud::Cloud;
+// The depth frame and the processor interface are built without the `service` feature (the
+// handheld's replay uses the processing); the service's users name them from here as well.
+pub use crate::camera::DepthFrame;
+pub use crate::process::{LiveRun, ProcessInput, Processed, Processor, SensorItem};
+
 use crate::config::{self, CameraSource, OnboardConfig};
-use crate::link::mcu::{McuEvent, McuSession, McuSessionConfig, MotionIntent};
-use crate::link::preview;
-use crate::link::radio::{OnboardRadio, RadioRequest, START_ID};
-use crate::link::reliable::LinkConfig;
-use crate::link::session::Entropy;
 use crate::recorder::{self, RecordedOutcome, Recording, ResultRecord, RunRecorder};
 use crate::run::{Action, Observations, Outcome, RunMachine};
 use crate::signed::{self, Signer};
-use crate::vlp16::Vlp16Packet;
+use link::Port;
+use link::mcu::{McuEvent, McuSession, McuSessionConfig, MotionIntent};
+use link::preview;
+use link::radio::{OnboardRadio, RadioRequest, START_ID};
+use link::reliable::LinkConfig;
+use link::session::Entropy;
+use vlp16::Vlp16Packet;
 
 /// Period of the main loop.
 pub const LOOP_PERIOD: Duration = Duration::from_millis(2);
-
-/// A byte stream to a peer (a serial port, a pseudo-terminal, an in-memory pipe). Reads return
-/// `Ok(0)`, `WouldBlock` or `TimedOut` when nothing is there; they must not block for long.
-pub trait Port: Read + Write + Send {}
-impl<T: Read + Write + Send> Port for T {}
 
 /// One UDP datagram from the lidar.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -60,103 +60,6 @@ pub struct LidarPacket {
     pub payload: Vec<u8>,
     /// From the position port (8308) rather than the data port.
     pub position: bool,
-}
-
-/// One depth frame (Z16).
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct DepthFrame {
-    /// Width, pixels.
-    pub width: u16,
-    /// Height, pixels.
-    pub height: u16,
-    /// Row-major depth in units of the configured depth scale, 0 = no return.
-    pub depth: Vec<u16>,
-}
-
-/// What processing a run gets.
-#[derive(Debug, Clone, PartialEq)]
-pub struct ProcessInput {
-    /// The run directory (streams flushed).
-    pub run_dir: PathBuf,
-    /// The run.
-    pub run_id: u32,
-    /// Its parameters.
-    pub params: StartMeasurement,
-    /// Distance driven, m.
-    pub travelled_m: f32,
-    /// The drive ended early.
-    pub short_run: bool,
-    /// Signs `cloud.ply` and `side_view.svg` (`signing.key-file`).
-    pub signer: Signer,
-}
-
-/// What processing a run produces.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Processed {
-    /// The result (`preview_chunks` is set when offered).
-    pub result: MeasurementResult,
-    /// The cloud, vehicle frame, metres.
-    pub cloud: Cloud,
-    /// The side-view report.
-    pub svg: String,
-    /// The angle calculator's whole finding (witnesses, tyres, ground), where the processor
-    /// ran it: for reports and the simulator's checks; not sent or recorded.
-    pub angles: Option<Box<angles::AnglesResult>>,
-}
-
-/// Builds the cloud and computes the angles of a recorded run (see `crate::process`).
-pub trait Processor: Send + Sync {
-    /// Processes one run from its recording; `Err` says why it failed, for the operator.
-    fn process(&self, input: &ProcessInput) -> Result<Processed, String>;
-
-    /// Starts processing a run while it is recorded (`None`: this processor works on recordings
-    /// only). The service feeds it on a worker thread with exactly what the recorder writes.
-    fn start_live(&self) -> Option<Box<dyn LiveRun>> {
-        None
-    }
-}
-
-/// One sensor item of a run, as the recorder writes it (the same values and stamps, so a live
-/// run and the replay of its recording see the same data).
-#[derive(Debug, Clone, PartialEq)]
-pub enum SensorItem {
-    /// A lidar UDP payload; `wall_ns` is rounded down to the recording's whole microseconds.
-    Lidar {
-        /// Host wall clock, ns since the Unix epoch.
-        wall_ns: u64,
-        /// The payload.
-        payload: Vec<u8>,
-        /// From the position port.
-        position: bool,
-    },
-    /// A wheel odometry report.
-    Odometry {
-        /// Host wall clock at reception, us since the Unix epoch.
-        wall_us: u64,
-        /// The report.
-        odometry: protocol::mcu::Odometry,
-    },
-    /// A depth frame (only those the recorder keeps: every `camera.record-every`-th).
-    Depth {
-        /// Host wall clock, us since the Unix epoch.
-        wall_us: u64,
-        /// Width, pixels.
-        width: u16,
-        /// Height, pixels.
-        height: u16,
-        /// Row-major Z16.
-        depth: Vec<u16>,
-        /// The camera's intrinsics from the config.
-        intrinsics: recorder::Intrinsics,
-    },
-}
-
-/// A run processed while it is recorded (see [`Processor::start_live`]).
-pub trait LiveRun: Send {
-    /// The next item, in arrival order.
-    fn push(&mut self, item: SensorItem);
-    /// The robot is at rest and the recording closed: the result.
-    fn finish(self: Box<Self>, input: &ProcessInput) -> Result<Processed, String>;
 }
 
 /// Items waiting for the live worker: about 4 s of lidar packets, beyond which the worker has
@@ -280,10 +183,10 @@ pub enum ServiceError {
     Config(#[from] config::ConfigError),
     /// The pairing-key file.
     #[error(transparent)]
-    Keys(#[from] crate::link::keys::KeyFileError),
+    Keys(#[from] link::keys::KeyFileError),
     /// No random source for the radio sessions.
     #[error("radio session: {0}")]
-    Session(#[from] crate::link::session::SessionError),
+    Session(#[from] link::session::SessionError),
     /// The recording root.
     #[error(transparent)]
     Recorder(#[from] recorder::RecorderError),
@@ -301,7 +204,7 @@ pub enum ServiceError {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct ServiceStats {
     /// What the radio end dropped (unauthenticated, unopened, rate limited) and opened.
-    pub radio: crate::link::radio::RadioStats,
+    pub radio: link::radio::RadioStats,
     /// Longest time between the starts of two loop iterations since the service started, us
     /// (the MCU heartbeat leaves once per iteration; the firmware stops after 100 ms without).
     pub max_loop_gap_us: u64,
@@ -423,10 +326,10 @@ fn complete(
     })));
     let mut errors = Vec::new();
     let mut ply = Vec::new();
-    match crate::cloud::write_ply(
+    match cloud_io::write_ply(
         &mut ply,
         &processed.cloud,
-        crate::cloud::PlyEncoding::BinaryLittleEndian,
+        cloud_io::PlyEncoding::BinaryLittleEndian,
     ) {
         Ok(()) => {
             if let Err(e) = signed::write_signed(&run_dir.join("cloud.ply"), &ply, &input.signer) {
@@ -627,7 +530,7 @@ impl IoWorker {
 /// A recorded run's result with its preview decimated from `cloud.ply` (none without a result).
 fn recorded_ready(rec: &Recording, preview: config::PreviewConfig) -> Option<Ready> {
     let result = rec.result.as_ref()?;
-    let points = crate::cloud::read_cloud(&rec.dir.join("cloud.ply"))
+    let points = cloud_io::read_cloud(&rec.dir.join("cloud.ply"))
         .map(|(c, _)| c.points_m)
         .unwrap_or_default();
     Some(Ready {
@@ -678,7 +581,7 @@ pub struct Service {
     /// The current run's result, saved with its recording when the run ends.
     result_record: Option<ResultRecord>,
     /// Radio counters at the last drop log line.
-    logged_radio: crate::link::radio::RadioStats,
+    logged_radio: link::radio::RadioStats,
     next_drop_log_us: u64,
     mcu: McuSession,
     run: RunMachine,
@@ -784,7 +687,7 @@ impl Service {
             );
             Signer::none()
         };
-        let keys: Vec<_> = crate::link::keys::read(&config.radio.key_file)?
+        let keys: Vec<_> = link::keys::read(&config.radio.key_file)?
             .into_iter()
             .map(|e| {
                 tracing::info!(key_id = %format_args!("{:08x}", e.id), label = %e.label, "paired handheld");
@@ -832,7 +735,7 @@ impl Service {
             execution: startup.execution,
             io_waiting: std::collections::VecDeque::new(),
             result_record: None,
-            logged_radio: crate::link::radio::RadioStats::default(),
+            logged_radio: link::radio::RadioStats::default(),
             next_drop_log_us: DROP_LOG_PERIOD_US,
             mcu,
             run: RunMachine::new(config.run, next_run_id),
@@ -1588,8 +1491,8 @@ impl Service {
 pub fn spawn_lidar_reader(
     config: &config::LidarConfig,
     shutdown: Arc<AtomicBool>,
-) -> Result<(Receiver<LidarPacket>, SocketAddrV4), crate::vlp16::source::SourceError> {
-    use crate::vlp16::source::{PACKET_BUF_LEN, PacketKind, PacketSource, SourceError, UdpSource};
+) -> Result<(Receiver<LidarPacket>, SocketAddrV4), vlp16::source::SourceError> {
+    use vlp16::source::{PACKET_BUF_LEN, PacketKind, PacketSource, SourceError, UdpSource};
     let mut source = UdpSource::bind(
         config.data_addr,
         config.position_addr,
@@ -1603,10 +1506,10 @@ pub fn spawn_lidar_reader(
     // The recording shows the packets as the VLP-16 addressed them: to its standard ports 2368 and
     // 8308, whatever port this service listens on (a test or the demo binds an ephemeral one), so
     // `passangle replay`, VeloView and Wireshark read every recording the same way.
-    let data_dst = SocketAddrV4::new(*data_bound.ip(), crate::vlp16::packet::DATA_PORT);
+    let data_dst = SocketAddrV4::new(*data_bound.ip(), vlp16::packet::DATA_PORT);
     let position_dst = SocketAddrV4::new(
         *to_v4(source.position_addr()).ip(),
-        crate::vlp16::position::POSITION_PORT,
+        vlp16::position::POSITION_PORT,
     );
     let (tx, rx) = sync_channel(4_000);
     thread::Builder::new()

@@ -3,7 +3,7 @@
 
 mod synth;
 
-use onboard::angles::{
+use angles::{
     AngleFinding, AnglesConfig, AnglesError, AnglesResult, ExclusionBox, Quantity, TyrePosition,
     Zone, compute_angles,
 };

@@ -25,13 +25,13 @@ use std::panic::{AssertUnwindSafe, catch_unwind};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicUsize, Ordering};
 
-use onboard::cloud::{
+use cloud_io::{
     Cloud, CloudFormat, ParseError, ParseLimits, detect_format, parse_cloud_with, write_e57,
     write_las,
 };
-use onboard::pcap::{MAX_RECORD_LEN, PcapError, PcapReader, udp_in_frame};
 use onboard::recorder::parse_odometry_csv;
 use onboard::signing::{DeviceKey, Kind, Sidecar, Verdict, sign_bytes};
+use vlp16::pcap::{MAX_RECORD_LEN, PcapError, PcapReader, udp_in_frame};
 
 struct Counting;
 
@@ -277,7 +277,7 @@ fn valid_cloud_seeds() -> Vec<(&'static str, Vec<u8>, CloudFormat)> {
 
 fn valid_pcap_seed() -> Vec<u8> {
     use std::net::{Ipv4Addr, SocketAddrV4};
-    let mut w = onboard::pcap::PcapWriter::new(Vec::new()).expect("writing to a Vec");
+    let mut w = vlp16::pcap::PcapWriter::new(Vec::new()).expect("writing to a Vec");
     let src = SocketAddrV4::new(Ipv4Addr::new(192, 168, 1, 201), 2368);
     let dst = SocketAddrV4::new(Ipv4Addr::BROADCAST, 2368);
     for k in 0..6u8 {

@@ -13,7 +13,7 @@
 //! The nonce is explicit (WireGuard / DTLS style), so a receiver decrypts any frame that arrives,
 //! in any order, after any loss; the [`ReplayWindow`] accepts each nonce at most once and refuses
 //! nonces older than its window. Sessions are created by the handshake (see
-//! `onboard::link::session`); every handshake derives fresh keys, so no counter has to survive a
+//! `link::session`); every handshake derives fresh keys, so no counter has to survive a
 //! restart.
 //!
 //! This module stays `no_std`: it has the wire layout, the key type and the replay window. The

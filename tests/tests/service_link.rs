@@ -27,15 +27,15 @@ use std::sync::{Arc, Mutex};
 use std::thread::{self, JoinHandle};
 use std::time::{Duration, Instant};
 
+use cloud_io::Cloud;
 use hil_sim::can_bus::InProcessBus;
 use hil_sim::fil::{Fil, FilConfig, Pacing};
 use hil_sim::pty::MemPipe;
 use hil_sim::robot::PoseSample;
-use onboard::client::{Client, ClientError, Observer, Quiet};
-use onboard::cloud::Cloud;
+use link::client::{Client, ClientError, Observer, Quiet};
+use link::session::Entropy;
+use link::sim::{LossyPortPair, PipeConfig};
 use onboard::config::{CameraSource, FirmwareConfig, OnboardConfig};
-use onboard::link::session::Entropy;
-use onboard::link::sim::{LossyPortPair, PipeConfig};
 use onboard::recorder::{RecordedOutcome, Recording};
 use onboard::service::{
     self, Io, LidarPacket, NoNotify, ProcessInput, Processed, Processor, ServiceStats, SharedStats,
@@ -183,7 +183,7 @@ fn feed_lidar(tx: SyncSender<LidarPacket>, stop: Arc<AtomicBool>, malformed_ever
 /// The handheld's end of the radio shared with an attacker in range: both write into the same
 /// channel (the attacker's bytes take the same lossy path to the robot).
 #[derive(Clone)]
-struct SharedPort(Arc<Mutex<onboard::link::sim::LossyPort>>);
+struct SharedPort(Arc<Mutex<link::sim::LossyPort>>);
 
 impl std::io::Read for SharedPort {
     fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
@@ -209,7 +209,7 @@ struct Rig {
     dir: PathBuf,
     attacker: Option<SharedPort>,
     radio: LossyPortPair,
-    handheld_port: Option<onboard::link::sim::LossyPort>,
+    handheld_port: Option<link::sim::LossyPort>,
     key: Key,
     truth: Arc<Mutex<Vec<PoseSample>>>,
     produced: Arc<Mutex<Vec<MeasurementResult>>>,
@@ -629,7 +629,7 @@ fn a_flood_of_unauthenticated_frames_while_driving_changes_nothing() {
 fn fetches_of_a_large_cloud_never_stall_the_loop() {
     use std::io::{Read as _, Write as _};
 
-    use onboard::link::handheld::{HandheldConfig, HandheldEvent, HandheldRadio};
+    use link::handheld::{HandheldConfig, HandheldEvent, HandheldRadio};
     let mut rig = Rig::start("fetch", PipeConfig::CLEAN, None);
     rig.wait_firmware_ready();
     let key = rig.key.clone();
@@ -650,12 +650,7 @@ fn fetches_of_a_large_cloud_never_stall_the_loop() {
         .join("runs")
         .join(onboard::recorder::run_dir_name(m.result.run_id));
     let mut ply = Vec::new();
-    onboard::cloud::write_ply(
-        &mut ply,
-        &cloud,
-        onboard::cloud::PlyEncoding::BinaryLittleEndian,
-    )
-    .unwrap();
+    cloud_io::write_ply(&mut ply, &cloud, cloud_io::PlyEncoding::BinaryLittleEndian).unwrap();
     std::fs::write(dir.join("cloud.ply"), ply).unwrap();
     let before = rig.stats.lock().unwrap().max_loop_work_us;
 
@@ -816,11 +811,11 @@ fn malformed_lidar_packets_change_nothing_but_a_counter() {
     assert!((ratio - 0.1).abs() < 0.02, "{ratio}");
     // Only valid packets were recorded: every pcap record is a full VLP-16 packet.
     let pcap = rig.dir.join("runs/run-000001/lidar.pcap");
-    let mut reader = onboard::pcap::PcapReader::new(std::fs::File::open(pcap).unwrap()).unwrap();
+    let mut reader = vlp16::pcap::PcapReader::new(std::fs::File::open(pcap).unwrap()).unwrap();
     let mut n = 0;
     while let Some(r) = reader.next_record().unwrap() {
-        let udp = onboard::pcap::udp_in_frame(r.link_type, r.data).unwrap();
-        onboard::vlp16::Vlp16Packet::new_checked(udp.payload)
+        let udp = vlp16::pcap::udp_in_frame(r.link_type, r.data).unwrap();
+        vlp16::Vlp16Packet::new_checked(udp.payload)
             .unwrap()
             .check_fields()
             .unwrap();

@@ -18,9 +18,10 @@ use std::time::Duration;
 
 use anyhow::Context;
 use clap::{Parser, Subcommand};
+use link::Port;
 use onboard::config::{CameraSource, OnboardConfig};
 use onboard::process::PipelineProcessor;
-use onboard::service::{self, Io, Notifier, Port};
+use onboard::service::{self, Io, Notifier};
 
 /// passangle onboard service: drives the robot under a vehicle and measures its angles.
 #[derive(Parser)]
@@ -152,7 +153,7 @@ fn keys(config_path: &Path, revoke: Option<&str>) -> Result<(), (u8, anyhow::Err
                 anyhow::anyhow!("--revoke {id:?}: expected eight hex digits ({e})"),
             )
         })?;
-        let gone = onboard::link::keys::revoke(file, id).map_err(|e| (exit::DATAERR, e.into()))?;
+        let gone = link::keys::revoke(file, id).map_err(|e| (exit::DATAERR, e.into()))?;
         println!(
             "revoked key {:08x} {} from {}; restart the service for it to take effect",
             gone.id,
@@ -161,7 +162,7 @@ fn keys(config_path: &Path, revoke: Option<&str>) -> Result<(), (u8, anyhow::Err
         );
         return Ok(());
     }
-    let entries = onboard::link::keys::read(file).map_err(|e| (exit::NOINPUT, e.into()))?;
+    let entries = link::keys::read(file).map_err(|e| (exit::NOINPUT, e.into()))?;
     for e in entries {
         println!("{:08x} {}", e.id, e.label);
     }

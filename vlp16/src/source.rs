@@ -4,8 +4,8 @@
 //! each packet with a host receive time; the assembler stays pure.
 //!
 //! ```no_run
-//! use onboard::vlp16::source::{PacketKind, PacketSource, PcapSource, PACKET_BUF_LEN};
-//! use onboard::vlp16::{DecoderConfig, FrameAssembler};
+//! use vlp16::source::{PacketKind, PacketSource, PcapSource, PACKET_BUF_LEN};
+//! use vlp16::{DecoderConfig, FrameAssembler};
 //!
 //! let mut source = PcapSource::open("run.pcap".as_ref()).unwrap();
 //! let mut assembler = FrameAssembler::new(DecoderConfig::default()).unwrap();

@@ -4,14 +4,12 @@
 
 #![allow(clippy::unwrap_used)]
 
-use onboard::vlp16::decoder::{
-    CYCLE_US, ELEVATION_DEG, FIRING_US, SEQUENCE_US, VERTICAL_OFFSET_MM,
-};
-use onboard::vlp16::{
+use proptest::prelude::*;
+use vlp16::decoder::{CYCLE_US, ELEVATION_DEG, FIRING_US, SEQUENCE_US, VERTICAL_OFFSET_MM};
+use vlp16::{
     BlockRepr, ChannelRepr, DataPacketRepr, DecodeError, DecoderConfig, Frame, FrameAssembler,
     PacketError, Product, ReturnKind, ReturnMode,
 };
-use proptest::prelude::*;
 
 /// A packet whose block `b` has azimuth `start_raw + b * step_raw` (mod 36000) and every channel
 /// at `distance_raw` with reflectivity = channel index.

@@ -223,7 +223,7 @@ mod tests {
     }
 }
 
-/// Two connected [`crate::service::Port`]s through a pair of [`LossyPipe`]s: the radio between a
+/// Two connected [`crate::Port`]s through a pair of [`LossyPipe`]s: the radio between a
 /// handheld and the onboard service when both run in one process (tests, `passangle-sim demo`),
 /// on the monotonic clock ([`LossyPortPair::new`]) or on a simulated one
 /// ([`LossyPortPair::on_clock`]). Cutting the line ([`LossyPortPair::set_cut`]) makes a peer

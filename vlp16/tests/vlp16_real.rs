@@ -11,10 +11,8 @@
 
 use std::path::{Path, PathBuf};
 
-use onboard::vlp16::source::{PACKET_BUF_LEN, PacketKind, PacketSource, PcapSource};
-use onboard::vlp16::{
-    AzimuthInterpolation, DecoderConfig, Frame, FrameAssembler, Point, ReturnKind,
-};
+use vlp16::source::{PACKET_BUF_LEN, PacketKind, PacketSource, PcapSource};
+use vlp16::{AzimuthInterpolation, DecoderConfig, Frame, FrameAssembler, Point, ReturnKind};
 
 fn data_dir() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/vlp16")
@@ -253,7 +251,7 @@ fn vertical_offset_switch_moves_only_z_by_the_table() {
     assert_eq!(a.len(), b.len());
     for (p, q) in a.iter().zip(b) {
         assert_eq!((p.x_m, p.y_m), (q.x_m, q.y_m));
-        let expected = onboard::vlp16::decoder::VERTICAL_OFFSET_MM[usize::from(p.laser_id)] * 1e-3;
+        let expected = vlp16::decoder::VERTICAL_OFFSET_MM[usize::from(p.laser_id)] * 1e-3;
         assert!((p.z_m - q.z_m - expected).abs() < 1e-6);
     }
 }

@@ -7,11 +7,9 @@
 use std::net::{Ipv4Addr, SocketAddr, SocketAddrV4, UdpSocket};
 use std::time::Duration;
 
-use onboard::pcap::PcapWriter;
-use onboard::vlp16::source::{
-    PACKET_BUF_LEN, PacketKind, PacketSource, PcapSource, SourceError, UdpSource,
-};
-use onboard::vlp16::{
+use vlp16::pcap::PcapWriter;
+use vlp16::source::{PACKET_BUF_LEN, PacketKind, PacketSource, PcapSource, SourceError, UdpSource};
+use vlp16::{
     BlockRepr, ChannelRepr, DataPacketRepr, DecoderConfig, FrameAssembler, PositionPacketRepr,
     PpsStatus, Product, ReturnMode,
 };

@@ -539,7 +539,7 @@ mod tests {
     use protocol::radio::{Abort, ToOnboard};
 
     use super::*;
-    use crate::link::sim::{LossyPipe, PipeConfig};
+    use crate::sim::{LossyPipe, PipeConfig};
 
     fn decode_aborts(rx: &[Received]) -> Vec<u32> {
         rx.iter()

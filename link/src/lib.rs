@@ -13,15 +13,27 @@
 //! - [`mcu`]: the onboard's MCU session (hello, config, drive/stop, 20 ms heartbeat).
 //! - [`preview`]: cloud decimation, quantisation and chunking.
 //! - [`sim`]: a seeded lossy byte pipe for tests and the simulator.
+//! - [`record`]: the result record (`result.json`) the link delivers, the robot records and the
+//!   handheld saves.
+//! - [`client`]: the handheld's blocking client over a [`Port`].
 
+use std::io::{Read, Write};
+
+pub mod client;
 pub mod handheld;
 pub mod keys;
 pub mod mcu;
 pub mod preview;
 pub mod radio;
+pub mod record;
 pub mod reliable;
 pub mod session;
 pub mod sim;
+
+/// A byte stream to a peer (a serial port, a pseudo-terminal, an in-memory pipe). Reads return
+/// `Ok(0)`, `WouldBlock` or `TimedOut` when nothing is there; they must not block for long.
+pub trait Port: Read + Write + Send {}
+impl<T: Read + Write + Send> Port for T {}
 
 #[cfg(test)]
 mod tests;

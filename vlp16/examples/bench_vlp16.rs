@@ -1,7 +1,7 @@
 //! Throughput of the VLP-16 input path on one core, printed as figures (no timed assertions).
 //!
 //! ```text
-//! cargo run --release -p onboard --example bench_vlp16 -- FILE.pcap [SECONDS]
+//! cargo run --release -p vlp16 --example bench_vlp16 -- FILE.pcap [SECONDS]
 //! ```
 //!
 //! Two figures, each the best and the median of repeated passes (about SECONDS in total,
@@ -18,8 +18,8 @@ use std::error::Error;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
-use onboard::vlp16::source::{PACKET_BUF_LEN, PacketKind, PacketSource, PcapSource};
-use onboard::vlp16::{DecoderConfig, FrameAssembler};
+use vlp16::source::{PACKET_BUF_LEN, PacketKind, PacketSource, PcapSource};
+use vlp16::{DecoderConfig, FrameAssembler};
 
 fn end_to_end(path: &Path) -> Result<u64, Box<dyn Error>> {
     let mut source = PcapSource::open(path)?;

@@ -12,11 +12,11 @@ use protocol::common::LogLine;
 use protocol::ids;
 use protocol::radio::{MeasurementResult, Phase, Progress, Refused, RobotStatus, StartMeasurement};
 
-use crate::link::handheld::{HandheldConfig, HandheldEvent, HandheldRadio};
-use crate::link::preview;
-use crate::link::session::{Entropy, SessionError};
-use crate::recorder::ResultRecord;
-use crate::service::Port;
+use crate::Port;
+use crate::handheld::{HandheldConfig, HandheldEvent, HandheldRadio};
+use crate::preview;
+use crate::record::ResultRecord;
+use crate::session::{Entropy, SessionError};
 
 /// Why a client command failed (each names what the operator should look at).
 #[derive(Debug, thiserror::Error)]
@@ -59,7 +59,7 @@ pub enum ClientError {
     },
     /// A command could not be encoded.
     #[error("{0}")]
-    Send(#[from] crate::link::reliable::SendError),
+    Send(#[from] crate::reliable::SendError),
     /// The session could not be set up (no random source).
     #[error("radio session: {0}")]
     Session(#[from] SessionError),
@@ -474,7 +474,7 @@ pub struct SavedFiles {
 /// Saves the result JSON, the preview as PLY and a side-view SVG of the preview.
 pub fn save(dir: &Path, m: &Measured) -> io::Result<SavedFiles> {
     std::fs::create_dir_all(dir)?;
-    let stem = crate::recorder::run_dir_name(m.result.run_id);
+    let stem = crate::record::run_dir_name(m.result.run_id);
     let files = SavedFiles {
         json: dir.join(format!("{stem}.json")),
         ply: dir.join(format!("{stem}-preview.ply")),
@@ -483,7 +483,7 @@ pub fn save(dir: &Path, m: &Measured) -> io::Result<SavedFiles> {
     let json =
         serde_json::to_vec_pretty(&ResultRecord::from_wire(&m.result)).map_err(io::Error::other)?;
     std::fs::write(&files.json, json)?;
-    let cloud = crate::cloud::Cloud {
+    let cloud = cloud_io::Cloud {
         points_m: m
             .preview_mm
             .iter()
@@ -491,11 +491,7 @@ pub fn save(dir: &Path, m: &Measured) -> io::Result<SavedFiles> {
             .collect(),
     };
     let mut ply = Vec::new();
-    crate::cloud::write_ply(
-        &mut ply,
-        &cloud,
-        crate::cloud::PlyEncoding::BinaryLittleEndian,
-    )?;
+    cloud_io::write_ply(&mut ply, &cloud, cloud_io::PlyEncoding::BinaryLittleEndian)?;
     std::fs::write(&files.ply, ply)?;
     std::fs::write(&files.svg, preview_svg(m))?;
     Ok(files)

@@ -1,4 +1,5 @@
-//! VLP-16 decoding, frame assembly and sources (docs/architecture.md section 6 step 1).
+//! VLP-16 decoding, frame assembly and sources (docs/architecture.md section 6 step 1), and the
+//! pcap reader and writer the sources and the run recorder share.
 //!
 //! - [`packet`]: the 1206-byte data packet as a checked view [`Vlp16Packet`] plus
 //!   [`DataPacketRepr`] parse/emit (the simulator builds byte-exact packets with `emit`).
@@ -6,9 +7,11 @@
 //! - [`decoder`]: [`FrameAssembler`], the pure packet → point → frame stage.
 //! - [`source`]: [`source::PacketSource`] over live UDP ([`source::UdpSource`]) and capture files
 //!   ([`source::PcapSource`]).
+//! - [`pcap`]: the checked pcap/pcapng reader, classic-pcap writer and UDP unwrapping.
 
 pub mod decoder;
 pub mod packet;
+pub mod pcap;
 pub mod position;
 pub mod source;
 

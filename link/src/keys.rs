@@ -186,6 +186,32 @@ pub fn revoke(path: &Path, id: u32) -> Result<KeyEntry, KeyFileError> {
     Ok(gone)
 }
 
+/// Writes a new one-key file (the handheld's, `passangle pair`) readable by its owner only (mode
+/// 0600); refuses to overwrite.
+pub fn write_key(path: &Path, key: &Key) -> Result<(), KeyFileError> {
+    write_secret_hex(path, &key.0).map_err(|source| KeyFileError::Io {
+        path: path.to_owned(),
+        source,
+    })
+}
+
+/// Writes `secret` as hex and a newline to a new file of mode 0600; refuses to overwrite. The
+/// robot's device key file (`onboard::config::write_device_key`) is written the same way.
+pub fn write_secret_hex(path: &Path, secret: &[u8]) -> std::io::Result<()> {
+    use std::os::unix::fs::OpenOptionsExt as _;
+    let hex: String = secret.iter().fold(String::new(), |mut s, b| {
+        let _ = write!(s, "{b:02x}");
+        s
+    });
+    let mut f = std::fs::OpenOptions::new()
+        .write(true)
+        .create_new(true)
+        .mode(0o600)
+        .open(path)?;
+    f.write_all(format!("{hex}\n").as_bytes())?;
+    f.sync_all()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
