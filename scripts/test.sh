@@ -45,6 +45,12 @@ cargo fmt --all -- --check
 step "clippy (pedantic, warnings are errors)"
 cargo clippy --workspace --all-targets -- -D warnings
 
+step "the handheld links no service code (onboard without its \`service\` feature)"
+if cargo tree -p handheld -e normal | grep -F sd-notify; then
+    echo "error: handheld links sd-notify: something enables onboard's \`service\` feature for it" >&2
+    exit 1
+fi
+
 step "python venv for the MCAP read-back check (PyPI mcap)"
 # handheld/tests/export.rs reads the exported MCAP back with the PyPI reader as well as the mcap
 # crate; it runs the Python given in PASSANGLE_PYTHON.
