@@ -5,8 +5,8 @@
 //! Seeds: `onboard/tests/hostile/` (pass it as a corpus directory).
 #![no_main]
 
+use cloud_io::{CloudFormat, ParseLimits, parse_cloud_with};
 use libfuzzer_sys::fuzz_target;
-use onboard::cloud::{CloudFormat, ParseLimits, parse_cloud_with};
 
 fuzz_target!(|data: &[u8]| {
     let limits = ParseLimits {

@@ -3,8 +3,8 @@
 //! the header checks let through. Seeds: the `.e57` files in `onboard/tests/hostile/`.
 #![no_main]
 
+use cloud_io::{CloudFormat, ParseLimits, parse_cloud_with};
 use libfuzzer_sys::fuzz_target;
-use onboard::cloud::{CloudFormat, ParseLimits, parse_cloud_with};
 
 fuzz_target!(|data: &[u8]| {
     let limits = ParseLimits {

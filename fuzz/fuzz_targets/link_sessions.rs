@@ -4,11 +4,11 @@
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
-use onboard::link::handheld::{HandheldConfig, HandheldRadio};
-use onboard::link::mcu::{McuSession, McuSessionConfig};
-use onboard::link::radio::{OnboardRadio, RadioRequest};
-use onboard::link::reliable::LinkConfig;
-use onboard::link::session::Entropy;
+use link::handheld::{HandheldConfig, HandheldRadio};
+use link::mcu::{McuSession, McuSessionConfig};
+use link::radio::{OnboardRadio, RadioRequest};
+use link::reliable::LinkConfig;
+use link::session::Entropy;
 use protocol::auth::{KEY_LEN, Key};
 use protocol::bounded::Text;
 use protocol::radio::{StartMeasurement, Zone};

@@ -5,7 +5,7 @@
 use std::net::{Ipv4Addr, SocketAddrV4};
 
 use libfuzzer_sys::fuzz_target;
-use onboard::pcap::{PcapReader, PcapWriter, udp_in_frame};
+use vlp16::pcap::{PcapReader, PcapWriter, udp_in_frame};
 
 fuzz_target!(|data: &[u8]| {
     if let Ok(mut reader) = PcapReader::new(data) {

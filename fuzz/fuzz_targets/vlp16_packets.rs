@@ -4,7 +4,7 @@
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
-use onboard::vlp16::{
+use vlp16::{
     DataPacketRepr, DecoderConfig, FrameAssembler, PositionPacket, PositionPacketRepr, Vlp16Packet,
 };
 
