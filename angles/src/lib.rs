@@ -81,10 +81,25 @@ pub enum Band {
         /// Margin inside each inner face (metres).
         margin_m: f64,
     },
+    /// Between the outer tyre faces, widened by `margin_m` on each side: the vehicle's whole
+    /// width in the side view, as the standards define the angles (sills and mud flaps outboard
+    /// of the inner faces count), and nothing of a neighbour beside it.
+    OuterFaces {
+        /// Margin outside each outer face (metres).
+        margin_m: f64,
+    },
     /// `|y| <= half_width_m` about the vehicle centreline.
     HalfWidth(f64),
     /// Every body point, whatever its y.
     Full,
+}
+
+impl Band {
+    /// Between the inner tyre faces, 1 cm inside each.
+    pub const INNER: Band = Band::InnerFaces { margin_m: 0.01 };
+    /// Between the outer tyre faces, 10 cm outside each: a body's sides (sills, arches, mud flaps)
+    /// reach past its tyres' outer faces by a few centimetres, a neighbour beside it is metres away.
+    pub const OUTER: Band = Band::OuterFaces { margin_m: 0.10 };
 }
 
 /// An axis-aligned box in cloud coordinates whose points are ignored (tow hooks, steps, mud flaps).
@@ -156,7 +171,7 @@ impl Default for AnglesConfig {
         Self {
             front_is_positive_x: true,
             zone: Zone::Tyre,
-            band: Band::InnerFaces { margin_m: 0.01 },
+            band: Band::INNER,
             exclude: Vec::new(),
             tyre_radius_m: None,
             ground_threshold_m: 0.03,
@@ -472,7 +487,9 @@ impl AnglesConfig {
         }
         match self.band {
             Band::HalfWidth(w) if !pos(w) => return bad("band half width must be > 0"),
-            Band::InnerFaces { margin_m } if !margin_m.is_finite() => {
+            Band::InnerFaces { margin_m } | Band::OuterFaces { margin_m }
+                if !margin_m.is_finite() =>
+            {
                 return bad("band margin must be finite");
             }
             _ => {}
@@ -1080,6 +1097,26 @@ fn band(fits: &[(TyrePosition, TyreFit)], band: Band, warnings: &mut Vec<String>
                 .fold(f64::NEG_INFINITY, f64::max);
             if left.is_finite() && right.is_finite() && left - margin_m > right + margin_m {
                 (right + margin_m, left - margin_m)
+            } else {
+                warnings.push(
+                    "tyres on one side only: the envelope uses every body point (full band)".into(),
+                );
+                (f64::NEG_INFINITY, f64::INFINITY)
+            }
+        }
+        Band::OuterFaces { margin_m } => {
+            let left = fits
+                .iter()
+                .filter(|(p, _)| is_left(*p))
+                .map(|(_, f)| f.outer_y)
+                .fold(f64::NEG_INFINITY, f64::max);
+            let right = fits
+                .iter()
+                .filter(|(p, _)| !is_left(*p))
+                .map(|(_, f)| f.outer_y)
+                .fold(f64::INFINITY, f64::min);
+            if left.is_finite() && right.is_finite() && left > right {
+                (right - margin_m, left + margin_m)
             } else {
                 warnings.push(
                     "tyres on one side only: the envelope uses every body point (full band)".into(),

@@ -34,8 +34,9 @@ pub struct AnglesArgs {
     /// Static loaded tyre radius (metres) to use instead of the fitted wheel-centre height.
     #[arg(long)]
     pub tyre_radius: Option<f64>,
-    /// Lateral band of the side-view envelope: `inner` (between the inner tyre faces), `full`, or a
-    /// half width in metres about the centreline.
+    /// Lateral band of the side-view envelope: `inner` (between the inner tyre faces), `outer`
+    /// (between the outer tyre faces, 10 cm outside each), `full`, or a half width in metres
+    /// about the centreline.
     #[arg(long, default_value = "inner")]
     pub band: String,
     /// Range noise sigma in metres (default: estimated from the cloud).
@@ -130,11 +131,12 @@ fn config_from(args: &AnglesArgs) -> anyhow::Result<AnglesConfig> {
 
 fn parse_band(s: &str) -> anyhow::Result<Band> {
     Ok(match s {
-        "inner" => AnglesConfig::default().band,
+        "inner" => Band::INNER,
+        "outer" => Band::OUTER,
         "full" => Band::Full,
         w => {
             let half: f64 = w.parse().with_context(|| {
-                format!("--band: expected `inner`, `full` or metres, got `{w}`")
+                format!("--band: expected `inner`, `outer`, `full` or metres, got `{w}`")
             })?;
             if !(half.is_finite() && half > 0.0) {
                 bail!("--band: half width must be > 0 m, got {half}");
@@ -494,6 +496,7 @@ mod tests {
         let e = format!("{:#}", parse_box("a,1,0,1,0,1").unwrap_err());
         assert!(e.contains("`a`"), "{e}");
         assert_eq!(parse_band("full").unwrap(), Band::Full);
+        assert_eq!(parse_band("outer").unwrap(), Band::OUTER);
         assert_eq!(parse_band("0.5").unwrap(), Band::HalfWidth(0.5));
         assert!(parse_band("-1").is_err() && parse_band("wide").is_err());
     }
