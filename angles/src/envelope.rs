@@ -18,6 +18,8 @@
 //! Known bias (measured in the tests and docs/method/calculator.md): at a convex corner the mode mixes both
 //! faces within `w`, which lifts the envelope there by up to about `w / 2`.
 
+use std::collections::BTreeMap;
+
 /// One envelope sample in the side view (vehicle frame x forward, z up).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct EnvelopeSample {
@@ -324,6 +326,48 @@ pub(crate) fn lower_envelope(points: &[[f64; 3]], params: EnvelopeParams) -> Env
         }
     }
     env
+}
+
+/// Width of the lateral strips of [`lower_envelope_strips`] (metres): narrower than a sill or a
+/// fuel tank, wide enough to hold a bin's support.
+pub(crate) const BETWEEN_AXLES_STRIP_M: f64 = 0.1;
+
+/// [`lower_envelope`] of each lateral strip `strip_m` wide, the samples of all strips together:
+/// the side view's lower envelope is the lowest surface across the width, and one mode over the
+/// whole width mixes surfaces less than a window apart in height (the module's known bias).
+pub(crate) fn lower_envelope_strips(
+    points: &[[f64; 3]],
+    params: EnvelopeParams,
+    strip_m: f64,
+) -> Envelope {
+    let mut strips: BTreeMap<i64, Vec<[f64; 3]>> = BTreeMap::new();
+    for p in points {
+        strips
+            .entry((p[1] / strip_m).floor() as i64)
+            .or_default()
+            .push(*p);
+    }
+    strips
+        .values()
+        .map(|pts| lower_envelope(pts, params))
+        .fold(Envelope::default(), Envelope::merged)
+}
+
+impl Envelope {
+    /// This envelope with `other`'s samples added; the counts stay this envelope's.
+    pub(crate) fn with_samples_of(mut self, other: Envelope) -> Envelope {
+        self.samples.extend(other.samples);
+        self
+    }
+
+    /// Both envelopes' samples and counts.
+    fn merged(mut self, other: Envelope) -> Envelope {
+        self.samples.extend(other.samples);
+        self.outliers_below += other.outliers_below;
+        self.unsupported_bins += other.unsupported_bins;
+        self.fringe_bins += other.fringe_bins;
+        self
+    }
 }
 
 /// Noise fringe: range noise smears a surface's edge beyond it (mostly along x, since a low
@@ -670,6 +714,44 @@ mod tests {
     /// outnumbers the part's points in the bin, but not at the part's lateral positions, so the
     /// part is the bin's lowest mode, not a noise tail of the surface (the old rule counted the
     /// surface's points across the whole band and climbed to it).
+    #[test]
+    fn a_sill_a_window_below_a_wide_floor_keeps_its_height_in_its_strip() {
+        // Between the axles: the floor pan 0.19 m up across 1.2 m, the sills 1 cm lower outboard
+        // of it (the fleet's city car). One mode over the whole width mixes the two within the
+        // window; per lateral strip the sill's own mode is its height.
+        use rand::{Rng, SeedableRng};
+        let noise = 0.003;
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
+        let mut gauss = move || {
+            let (u, v): (f64, f64) = (rng.random::<f64>().max(1e-12), rng.random());
+            noise * (-2.0 * u.ln()).sqrt() * (std::f64::consts::TAU * v).cos()
+        };
+        let mut pts = Vec::new();
+        for i in 0..20 {
+            let x = f64::from(i) * 0.005;
+            for j in 0..240 {
+                pts.push([x, -0.6 + f64::from(j) * 0.005, 0.19 + gauss()]);
+            }
+            for j in 0..40 {
+                pts.push([x, 0.62 + f64::from(j) * 0.005, 0.18 + gauss()]);
+            }
+        }
+        let params = EnvelopeParams {
+            half_window_m: 2.5 * noise,
+            noise_m: noise,
+            ..P
+        };
+        let lowest = |env: &Envelope| env.samples.iter().map(|s| s.z_m).fold(f64::MAX, f64::min);
+        let strips = lower_envelope_strips(&pts, params, BETWEEN_AXLES_STRIP_M);
+        assert!(
+            (lowest(&strips) - 0.18).abs() < 0.002,
+            "{:?}",
+            lowest(&strips)
+        );
+        let whole = lower_envelope(&pts, params);
+        assert!(lowest(&whole) > 0.183, "{:?}", lowest(&whole));
+    }
+
     #[test]
     fn narrow_part_under_wide_surface_is_not_a_tail() {
         let w = 0.004;

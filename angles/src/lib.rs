@@ -171,7 +171,7 @@ impl Default for AnglesConfig {
         Self {
             front_is_positive_x: true,
             zone: Zone::Tyre,
-            band: Band::INNER,
+            band: Band::OUTER,
             exclude: Vec::new(),
             tyre_radius_m: None,
             ground_threshold_m: 0.03,
@@ -793,14 +793,25 @@ fn classify(
         .filter(|&(_, &a)| !a)
         .map(|(p, _)| *p)
         .collect();
-    let env = lower_envelope(
-        &mode_points,
-        EnvelopeParams {
-            bin_m,
-            half_window_m,
-            min_support: config.min_support,
-            noise_m: noise_sigma_m,
-        },
+    let eparams = EnvelopeParams {
+        bin_m,
+        half_window_m,
+        min_support: config.min_support,
+        noise_m: noise_sigma_m,
+    };
+    // Between the axles the underside is seen from below, its noise is vertical, and a lower
+    // part beside a wider surface within the window (a sill 1 cm below the floor pan) must keep
+    // its own mode: the whole band's envelope gains one per lateral strip there. In the overhangs
+    // the rays graze the faces and smear them along x; there the whole band's support alone keeps
+    // the smear out of the modes. The counts (bins without a mode, points below) are the band's.
+    let (lo, hi) = (axles_x_m.0.min(axles_x_m.1), axles_x_m.0.max(axles_x_m.1));
+    let between: Vec<V3> = mode_points
+        .iter()
+        .copied()
+        .filter(|p| p[0] > lo && p[0] < hi)
+        .collect();
+    let env = lower_envelope(&mode_points, eparams).with_samples_of(
+        envelope::lower_envelope_strips(&between, eparams, envelope::BETWEEN_AXLES_STRIP_M),
     );
     counts.outliers_below_envelope = env.outliers_below;
     let mut samples = env.samples;
