@@ -951,11 +951,16 @@ fn in_footprint(p: V3, t: &TyreFit) -> bool {
     (p[0] - t.centre_x).abs() < t.free_radius_m + 0.03 && p[1] > lo && p[1] < hi
 }
 
+/// Whether `p` is the tyre's: inside its side-view disc (plus `tol`), and laterally from `tol`
+/// inboard of its inner face outward without limit. Outboard of the inner face nothing of the
+/// body lies inside a wheel's disc, while the tread's outermost returns scatter past the fitted
+/// outer face (the 99 % quantile): the outer band ([`Band::OUTER`]) would take them for underside.
 fn is_tyre_point(p: V3, t: &TyreFit, tol: f64) -> bool {
-    let (lo, hi) = (
-        t.inner_y.min(t.outer_y) - tol,
-        t.inner_y.max(t.outer_y) + tol,
-    );
+    let (lo, hi) = if t.outer_y > t.inner_y {
+        (t.inner_y - tol, f64::INFINITY)
+    } else {
+        (f64::NEG_INFINITY, t.inner_y + tol)
+    };
     p[1] > lo
         && p[1] < hi
         && (p[0] - t.centre_x).hypot(p[2] - t.loaded_radius_m) < t.free_radius_m + tol
