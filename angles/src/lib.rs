@@ -49,6 +49,7 @@ mod edge;
 mod envelope;
 mod geom;
 mod ground;
+pub mod profiles;
 mod svg;
 mod tyres;
 mod uncertainty;

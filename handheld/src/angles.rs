@@ -8,6 +8,10 @@
 use std::io::Write;
 use std::path::PathBuf;
 
+use angles::profiles::{
+    Classification, DECISION_RULE, Decision, Measure, ProfileResult, QuantityKind, Standard,
+    Thresholds, Unit, classify_all, compute_profiles,
+};
 use angles::{
     AngleFinding, AnglesConfig, AnglesResult, Band, ExclusionBox, Quantity, Uncertainty, Zone,
     compute_angles, side_view_svg,
@@ -52,6 +56,60 @@ pub struct AnglesArgs {
     /// Write the side-view report (SVG) to this file.
     #[arg(long)]
     pub report: Option<PathBuf>,
+    /// Standards to report side by side: `all` (default), `none`, or a comma-separated list of
+    /// `cfr` (49 CFR 523.2 / SAE J1100), `eu` (EU 2018/858), `iso612`, `gbt` (GB/T 12673),
+    /// `arai` (India), `adr` (Australia). Each runs the calculator with its own zone and band
+    /// (docs/method/standards.md).
+    #[arg(long, default_value = "all")]
+    pub standard: String,
+    /// Print pass/fail decisions against 49 CFR 523.5 (with the `cfr` profile) and the EU off-road
+    /// criteria (with `eu`), by guarded acceptance with the expanded uncertainty.
+    #[arg(long)]
+    pub decide: bool,
+}
+
+/// The standards of `--standard` (`none`: no profiles).
+///
+/// # Errors
+/// An unknown id.
+pub fn parse_standards(s: &str) -> anyhow::Result<Vec<Standard>> {
+    if s.trim() == "none" {
+        return Ok(Vec::new());
+    }
+    Standard::parse_list(s).map_err(|e| anyhow::anyhow!("--standard: {e}"))
+}
+
+/// The standards' profiles and, with `decide`, every threshold set whose standard is among them.
+pub struct Profiles {
+    /// One per standard.
+    pub profiles: Vec<ProfileResult>,
+    /// The decisions (empty unless asked for).
+    pub decisions: Vec<Classification>,
+}
+
+impl Profiles {
+    /// Compute the profiles of `standards` and, if asked, decide on `thresholds`.
+    pub fn compute(
+        points: &[[f64; 3]],
+        config: &AnglesConfig,
+        standards: &[Standard],
+        thresholds: &[Thresholds],
+    ) -> Self {
+        let profiles = compute_profiles(points, config, standards);
+        let decisions = classify_all(&profiles, thresholds);
+        Self {
+            profiles,
+            decisions,
+        }
+    }
+
+    /// No profiles.
+    pub fn none() -> Self {
+        Self {
+            profiles: Vec::new(),
+            decisions: Vec::new(),
+        }
+    }
 }
 
 /// Run the command, writing the table or JSON to `out`. The table or JSON is written even when an
@@ -70,11 +128,15 @@ pub fn run(args: &AnglesArgs, out: &mut impl Write) -> anyhow::Result<()> {
         std::fs::write(path, side_view_svg(&result))
             .with_context(|| format!("writing the report {}", path.display()))?;
     }
+    let standards = parse_standards(&args.standard)?;
+    let thresholds: &[Thresholds] = if args.decide { &Thresholds::ALL } else { &[] };
+    let profiles = Profiles::compute(&cloud.points_m, &config, &standards, thresholds);
     if args.json {
-        let v = to_json(args, &stats, &result);
+        let v = to_json(args, &stats, &result, &profiles);
         writeln!(out, "{}", serde_json::to_string_pretty(&v)?)?;
     } else {
         write_table(out, args, &stats, &result)?;
+        write_profiles(out, &profiles)?;
     }
     missing_angles(&result).map_or(Ok(()), |missing| {
         bail!("{}: not measured: {missing}", args.cloud.display())
@@ -235,13 +297,15 @@ fn witness(f: Option<&AngleFinding>) -> Value {
     })
 }
 
-fn to_json(args: &AnglesArgs, stats: &ReadStats, r: &AnglesResult) -> Value {
+fn to_json(args: &AnglesArgs, stats: &ReadStats, r: &AnglesResult, profiles: &Profiles) -> Value {
     let p = r.points;
     let mut v = json!({
         "file": args.cloud.display().to_string(),
         "format": format!("{} {}", stats.format, stats.encoding),
     });
-    v.as_object_mut().expect("an object").extend(result_json(r));
+    v.as_object_mut()
+        .expect("an object")
+        .extend(result_json(r, profiles));
     v["points"] = json!({
         "read": stats.points_in_file,
         "dropped": stats.dropped_non_finite + stats.dropped_invalid + p.non_finite,
@@ -261,8 +325,9 @@ fn to_json(args: &AnglesArgs, stats: &ReadStats, r: &AnglesResult) -> Value {
 /// The calculator's result as JSON fields: each angle in degrees with its expanded uncertainty
 /// (`*_u_deg`, k = 2), `null` and a reason under `not_measured` when it was not measured; the
 /// witnesses with their uncertainty budgets, the tyres, the vehicle frame and the warnings.
-/// Shared by `passangle angles --json` and `passangle replay --json`.
-pub fn result_json(r: &AnglesResult) -> serde_json::Map<String, Value> {
+/// Shared by `passangle angles --json` and `passangle replay --json`, with the standards'
+/// profiles under `profiles` ([`profiles_json`]).
+pub fn result_json(r: &AnglesResult, p: &Profiles) -> serde_json::Map<String, Value> {
     let tyres: Vec<Value> = r
         .tyres
         .iter()
@@ -318,6 +383,7 @@ pub fn result_json(r: &AnglesResult) -> serde_json::Map<String, Value> {
         "envelope_bin_m": r.bin_m,
         "band_y_m": [finite_or_null(r.band_y_m.0), finite_or_null(r.band_y_m.1)],
         "warnings": r.warnings,
+        "profiles": profiles_json(p),
     });
     match v {
         Value::Object(m) => m,
@@ -475,6 +541,263 @@ fn write_table(
     )?;
     for w in &r.warnings {
         writeln!(out, "warning: {w}")?;
+    }
+    Ok(())
+}
+
+fn unit_round(unit: Unit, v: f64) -> f64 {
+    match unit {
+        Unit::Degree => round(v, 3),
+        Unit::Metre => round(v, 4),
+    }
+}
+
+fn measure_json(kind: QuantityKind, m: &Measure) -> Value {
+    let unit = kind.unit();
+    match m {
+        Measure::Value {
+            value,
+            u,
+            witness_in_vehicle,
+        } => json!({
+            "value": unit_round(unit, *value),
+            "u": unit_round(unit, *u),
+            "unit": unit.symbol(),
+            "witness_in_vehicle_m": v3(*witness_in_vehicle),
+            "not_measured": Value::Null,
+        }),
+        Measure::NotMeasured(why) => json!({
+            "value": Value::Null,
+            "u": Value::Null,
+            "unit": unit.symbol(),
+            "not_measured": why,
+        }),
+    }
+}
+
+fn classification_json(c: &Classification) -> Value {
+    let criteria: Vec<Value> = c
+        .criteria
+        .iter()
+        .map(|d| {
+            let unit = d.criterion.kinds[0].unit();
+            json!({
+                "criterion": d.criterion.label,
+                "limit": d.criterion.limit,
+                "unit": unit.symbol(),
+                "decision": d.decision.label(),
+                "quantities": d.parts.iter().map(|(k, m, dec)| {
+                    let mut v = measure_json(*k, m);
+                    v["id"] = json!(k.id());
+                    v["decision"] = json!(dec.label());
+                    v
+                }).collect::<Vec<_>>(),
+            })
+        })
+        .collect();
+    json!({
+        "thresholds": c.thresholds.id(),
+        "title": c.thresholds.title(),
+        "source": c.thresholds.source(),
+        "rule": DECISION_RULE,
+        "count_rule": format!("at least {} of {}", c.thresholds.required(), c.criteria.len()),
+        "passed": c.passed,
+        "failed": c.failed,
+        "verdict": c.verdict.label(),
+        "criteria": criteria,
+    })
+}
+
+/// The profiles as JSON: per standard its id, title, citation, notes, the quantities (value, U
+/// at k = 2, unit, the limiting point, or `null` and why not measured) and, when decisions were
+/// asked for, the decisions on the thresholds that classify it.
+pub fn profiles_json(p: &Profiles) -> Value {
+    let v: Vec<Value> = p
+        .profiles
+        .iter()
+        .map(|pr| {
+            let quantities: Vec<Value> = pr
+                .quantities
+                .iter()
+                .map(|q| {
+                    let mut v = measure_json(q.kind, &q.measure);
+                    v["id"] = json!(q.kind.id());
+                    v["name"] = json!(q.name);
+                    v
+                })
+                .collect();
+            let decisions: Vec<Value> = p
+                .decisions
+                .iter()
+                .filter(|c| c.thresholds.standard() == pr.standard)
+                .map(classification_json)
+                .collect();
+            let mut v = json!({
+                "standard": pr.standard.id(),
+                "title": pr.standard.title(),
+                "citation": pr.standard.citation(),
+                "zone": match pr.standard.zone() { Zone::Tyre => "tyre", Zone::Axle => "axle" },
+                "notes": pr.notes,
+                "quantities": quantities,
+            });
+            if !decisions.is_empty() {
+                v["decisions"] = json!(decisions);
+            }
+            v
+        })
+        .collect();
+    json!(v)
+}
+
+/// A quantity as `value ± U` (degrees to 2 decimals, metres to 3), or `not measured [n]` with
+/// the reason's footnote number.
+fn cell(kind: QuantityKind, m: &Measure, footnotes: &mut Vec<String>) -> String {
+    match m {
+        Measure::Value { value, u, .. } => match kind.unit() {
+            Unit::Degree => format!("{value:.2} ± {u:.2}"),
+            Unit::Metre => format!("{value:.3} ± {u:.3}"),
+        },
+        Measure::NotMeasured(why) => {
+            let n = footnotes.iter().position(|f| f == why).unwrap_or_else(|| {
+                footnotes.push(why.clone());
+                footnotes.len() - 1
+            });
+            format!("not measured [{}]", n + 1)
+        }
+    }
+}
+
+/// The side-by-side table: a header (quantity, then one column per standard), one row per
+/// quantity any standard reports (`-`: the standard does not define it), and the footnotes
+/// giving each not-measured reason. Shared by the table and the lab report.
+pub fn side_by_side(profiles: &[ProfileResult]) -> (Vec<String>, Vec<Vec<String>>, Vec<String>) {
+    let mut header = vec!["quantity (deg / m), value ± U (k = 2)".to_owned()];
+    header.extend(profiles.iter().map(|p| p.standard.short().to_owned()));
+    let mut footnotes = Vec::new();
+    let rows = QuantityKind::ALL
+        .into_iter()
+        .filter(|k| profiles.iter().any(|p| p.get(*k).is_some()))
+        .map(|k| {
+            let mut row = vec![k.label().to_owned()];
+            row.extend(profiles.iter().map(|p| {
+                p.get(k)
+                    .map_or_else(|| "-".to_owned(), |m| cell(k, m, &mut footnotes))
+            }));
+            row
+        })
+        .collect();
+    (header, rows, footnotes)
+}
+
+/// One line per decision set: the verdict, then each criterion's decision.
+pub fn decision_lines(c: &Classification) -> Vec<String> {
+    let mut lines = vec![format!(
+        "{}: {} ({} of {} criteria pass, {} fail; needs {})",
+        c.thresholds.title(),
+        c.verdict.label().to_uppercase(),
+        c.passed,
+        c.criteria.len(),
+        c.failed,
+        c.thresholds.required()
+    )];
+    for d in &c.criteria {
+        let values: Vec<String> = d
+            .parts
+            .iter()
+            .map(|(k, m, dec)| {
+                let v = match (m, k.unit()) {
+                    (Measure::Value { value, u, .. }, Unit::Degree) => {
+                        format!("{value:.2} ± {u:.2} deg")
+                    }
+                    (Measure::Value { value, u, .. }, Unit::Metre) => {
+                        format!("{value:.3} ± {u:.3} m")
+                    }
+                    (Measure::NotMeasured(why), _) => format!("not measured ({why})"),
+                };
+                if d.parts.len() > 1 {
+                    format!("{}: {v} {}", k.label(), dec.label())
+                } else {
+                    v
+                }
+            })
+            .collect();
+        lines.push(format!(
+            "  {:<14} {}: {}",
+            d.decision.label(),
+            d.criterion.label,
+            values.join("; ")
+        ));
+    }
+    lines
+}
+
+/// The table's standards section: the side-by-side table, the reasons, and the decisions.
+fn write_profiles(out: &mut impl Write, p: &Profiles) -> std::io::Result<()> {
+    if p.profiles.is_empty() {
+        return Ok(());
+    }
+    let (header, rows, footnotes) = side_by_side(&p.profiles);
+    let width = |i: usize| {
+        rows.iter()
+            .map(|r| r[i].chars().count())
+            .chain([header[i].chars().count()])
+            .max()
+            .unwrap_or(0)
+    };
+    let widths: Vec<usize> = (0..header.len()).map(width).collect();
+    let line = |cells: &[String]| {
+        cells
+            .iter()
+            .zip(&widths)
+            .map(|(c, w)| format!("{c:<w$}"))
+            .collect::<Vec<_>>()
+            .join("  ")
+            .trim_end()
+            .to_owned()
+    };
+    writeln!(out)?;
+    writeln!(
+        out,
+        "standards, side by side (each its own zone and band; docs/method/standards.md):"
+    )?;
+    writeln!(out, "  {}", line(&header))?;
+    for r in &rows {
+        writeln!(out, "  {}", line(r))?;
+    }
+    for (i, f) in footnotes.iter().enumerate() {
+        writeln!(out, "  [{}] {f}", i + 1)?;
+    }
+    if p.decisions.is_empty() {
+        writeln!(
+            out,
+            "each profile's notes (what it measures, cannot and assumes): --json, or \
+             docs/method/standards.md"
+        )?;
+        return Ok(());
+    }
+    writeln!(out)?;
+    writeln!(out, "decisions: {DECISION_RULE}")?;
+    for c in &p.decisions {
+        for l in decision_lines(c) {
+            writeln!(out, "{l}")?;
+        }
+        writeln!(out, "  source: {}", c.thresholds.source())?;
+        if let Some(pr) = p
+            .profiles
+            .iter()
+            .find(|pr| pr.standard == c.thresholds.standard())
+        {
+            for n in &pr.notes {
+                writeln!(out, "  note: {n}")?;
+            }
+        }
+    }
+    if p.decisions.iter().any(|c| {
+        c.criteria
+            .iter()
+            .any(|d| d.decision == Decision::NoDecision)
+    }) {
+        writeln!(out, "a criterion with no decision counts neither way")?;
     }
     Ok(())
 }

@@ -136,6 +136,17 @@ fn report(
     // so scripts see a non-zero exit.
     let r = compute_angles(&built.points_in_world, &config)
         .with_context(|| format!("{}: computing the angles", path.display()));
+    // Every standard's profile of the same cloud, in the JSON (as `passangle angles --json`).
+    let profiles = if args.json && r.is_ok() {
+        crate::angles::Profiles::compute(
+            &built.points_in_world,
+            &config,
+            &angles::profiles::Standard::ALL,
+            &[],
+        )
+    } else {
+        crate::angles::Profiles::none()
+    };
     if args.json {
         let mut v = serde_json::json!({
             "run_dir": args.run_dir.display().to_string(),
@@ -152,7 +163,7 @@ fn report(
             Ok(r) => v
                 .as_object_mut()
                 .expect("an object")
-                .extend(crate::angles::result_json(r)),
+                .extend(crate::angles::result_json(r, &profiles)),
             Err(e) => v["error"] = serde_json::json!(format!("{e:#}")),
         }
         writeln!(out, "{}", serde_json::to_string_pretty(&v)?)?;

@@ -13,11 +13,16 @@
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
+use angles::profiles::{
+    Classification, DECISION_RULE, Measure, ProfileQuantity, ProfileResult, QuantityKind, Standard,
+    Thresholds, classify_all, compute_profiles,
+};
 use angles::{
     AngleFinding, AnglesConfig, AnglesResult, Quantity, Zone, compute_angles, side_view_svg,
 };
 use anyhow::Context;
 use cloud_io::read_cloud;
+use link::record::ProfileRecord;
 use onboard::recorder::{RecordedOutcome, Recording, ResultRecord, RunMeta};
 use serde::Deserialize;
 use sha2::{Digest, Sha256};
@@ -104,6 +109,11 @@ pub struct VehicleSection {
 #[derive(Debug, Clone, Default, PartialEq, Eq, Deserialize)]
 #[serde(rename_all = "kebab-case", deny_unknown_fields)]
 pub struct LabFile {
+    /// Pass/fail decisions to state (`decide = ["cfr523.5", "eu-offroad"]`, a top-level key
+    /// before the first table): each against its standard's profile, by guarded acceptance with
+    /// the expanded uncertainty. Empty: no statement of conformity.
+    #[serde(default)]
+    pub decide: Vec<String>,
     /// The lab.
     #[serde(default)]
     pub lab: LabSection,
@@ -118,7 +128,24 @@ pub struct LabFile {
 impl LabFile {
     /// Parses the lab file's text.
     pub fn parse(text: &str) -> anyhow::Result<Self> {
-        toml::from_str(text).map_err(|e| anyhow::anyhow!("{e}"))
+        let lab: Self = toml::from_str(text).map_err(|e| anyhow::anyhow!("{e}"))?;
+        lab.thresholds()?;
+        Ok(lab)
+    }
+
+    /// The threshold sets of `decide`.
+    ///
+    /// # Errors
+    /// Names an unknown id.
+    pub fn thresholds(&self) -> anyhow::Result<Vec<Thresholds>> {
+        self.decide
+            .iter()
+            .map(|id| {
+                Thresholds::parse(id).ok_or_else(|| {
+                    anyhow::anyhow!("decide: unknown `{id}`: expected cfr523.5 or eu-offroad")
+                })
+            })
+            .collect()
     }
 }
 
@@ -144,6 +171,8 @@ pub struct Recomputed {
     pub angles: AnglesResult,
     /// The cloud, in its own (cloud) frame.
     pub points_m: Vec<[f64; 3]>,
+    /// The calculator's settings used.
+    pub config: AnglesConfig,
 }
 
 /// Everything the report shows, gathered from the run directory.
@@ -181,6 +210,48 @@ pub struct Report {
     pub version: String,
     /// The git commit it was built from.
     pub git_hash: String,
+    /// The standards' profiles: from `result.json`, or recomputed from `cloud.ply` when the
+    /// record predates them.
+    pub profiles: Vec<ProfileResult>,
+    /// Where the profiles come from, in words.
+    pub profiles_source: &'static str,
+    /// The decisions the lab file asks for.
+    pub decisions: Vec<Classification>,
+}
+
+/// A profile of `result.json` as the calculator's type (`None`: an id this build does not know).
+fn profile_of_record(p: &ProfileRecord) -> Option<ProfileResult> {
+    let standard = Standard::ALL.into_iter().find(|s| s.id() == p.standard)?;
+    let quantities = p
+        .quantities
+        .iter()
+        .filter_map(|q| {
+            let kind = QuantityKind::ALL.into_iter().find(|k| k.id() == q.id)?;
+            let measure = match (q.value, q.u) {
+                (Some(value), Some(u)) => Measure::Value {
+                    value,
+                    u,
+                    // result.json does not keep the witness.
+                    witness_in_vehicle: [f64::NAN; 3],
+                },
+                _ => Measure::NotMeasured(
+                    q.not_measured
+                        .clone()
+                        .unwrap_or_else(|| "no reason recorded".to_owned()),
+                ),
+            };
+            Some(ProfileQuantity {
+                kind,
+                name: standard.term(kind),
+                measure,
+            })
+        })
+        .collect();
+    Some(ProfileResult {
+        standard,
+        quantities,
+        notes: standard.notes(),
+    })
 }
 
 /// The report id: the first 16 hex digits of SHA-256 over `result.json`'s bytes, a newline and
@@ -243,6 +314,21 @@ pub fn gather(args: &ReportArgs, out: &Path) -> anyhow::Result<Report> {
     let robot_id = verify::read_sidecar(&dir.join("result.json.sig"))
         .ok()
         .map(|s| s.public_key.id());
+    let recorded: Vec<ProfileResult> = recording
+        .result
+        .as_ref()
+        .map(|r| r.profiles.iter().filter_map(profile_of_record).collect())
+        .unwrap_or_default();
+    let (profiles, profiles_source) = match &recomputed {
+        _ if !recorded.is_empty() => (recorded, "as recorded by the robot in result.json"),
+        Ok(rc) => (
+            compute_profiles(&rc.points_m, &rc.config, &Standard::ALL),
+            "recomputed from cloud.ply (this result.json predates the profiles; without the \
+             scan path, so the coverage check is the cloud's own)",
+        ),
+        Err(_) => (Vec::new(), "not available"),
+    };
+    let decisions = classify_all(&profiles, &lab.thresholds()?);
     Ok(Report {
         id: report_id(&result_bytes, &run_name),
         run_name,
@@ -262,6 +348,9 @@ pub fn gather(args: &ReportArgs, out: &Path) -> anyhow::Result<Report> {
         checked_with: trusted.iter().map(|k| k.id()).collect(),
         version: env!("CARGO_PKG_VERSION").to_owned(),
         git_hash: env!("PASSANGLE_GIT_HASH").to_owned(),
+        profiles,
+        profiles_source,
+        decisions,
     })
 }
 
@@ -286,6 +375,7 @@ fn recompute(dir: &Path, meta: &RunMeta, enter_at_front: bool) -> Result<Recompu
     Ok(Recomputed {
         angles,
         points_m: cloud.points_m,
+        config,
     })
 }
 
@@ -476,6 +566,7 @@ pub fn render(r: &Report) -> String {
     lab_section(&mut h, r);
     method_section(&mut h, r);
     results_section(&mut h, r);
+    standards_section(&mut h, r);
     recomputed_sections(&mut h, r);
     provenance_section(&mut h, r);
     h.push_str("</body>\n</html>\n");
@@ -691,8 +782,7 @@ fn results_section(h: &mut String, r: &Report) {
          <tr><th>Wheelbase</th><td>{}</td></tr>\n<tr><th>Track</th><td>{}</td></tr>\n\
          <tr><th>Tyre fit RMS</th><td>{}</td></tr>\n<tr><th>Points in the cloud</th><td>{}</td></tr>\n\
          <tr><th>Warnings</th><td>{}</td></tr>\n\
-         <tr><th>Decision rule</th><td>No pass/fail limits were given: the results are reported \
-         with their uncertainties and no statement of conformity is made.</td></tr>\n\
+         <tr><th>Decision rule</th><td>{}</td></tr>\n\
          </table>\n</section>\n",
         num(res.wheelbase_m),
         num(res.track_m),
@@ -707,7 +797,99 @@ fn results_section(h: &mut String, r: &Report) {
         } else {
             esc(&res.warnings.join(", "))
         },
+        if r.lab.decide.is_empty() {
+            "No pass/fail limits were given: the results are reported with their uncertainties \
+             and no statement of conformity is made."
+                .to_owned()
+        } else {
+            format!(
+                "{} (decisions under Standards).",
+                esc(&upper_first(DECISION_RULE))
+            )
+        },
     );
+}
+
+fn upper_first(s: &str) -> String {
+    let mut c = s.chars();
+    c.next()
+        .map_or_else(String::new, |f| f.to_uppercase().chain(c).collect())
+}
+
+/// The standards side by side and the decisions the lab file asks for.
+fn standards_section(h: &mut String, r: &Report) {
+    h.push_str("<section>\n<h2>Standards</h2>\n");
+    if r.profiles.is_empty() {
+        let _ = writeln!(
+            h,
+            "<p class=\"missing\">No standard profiles: {}.</p>\n</section>",
+            esc(r.profiles_source)
+        );
+        return;
+    }
+    let _ = writeln!(
+        h,
+        "<p class=\"small\">Each standard's quantities with its own zone, lateral band and \
+         clearance region, {}; value ± U (k = 2). docs/method/standards.md says what each \
+         profile measures, cannot measure and assumes.</p>",
+        esc(r.profiles_source)
+    );
+    let (header, rows, footnotes) = crate::angles::side_by_side(&r.profiles);
+    h.push_str("<table>\n<thead><tr>");
+    for c in &header {
+        let _ = write!(h, "<th>{}</th>", esc(c));
+    }
+    h.push_str("</tr></thead>\n<tbody>\n");
+    for row in &rows {
+        let _ = write!(h, "<tr><th>{}</th>", esc(&row[0]));
+        for c in &row[1..] {
+            let class = if c.starts_with("not measured") {
+                "missing"
+            } else {
+                "num"
+            };
+            let _ = write!(h, "<td class=\"{class}\">{}</td>", esc(c));
+        }
+        h.push_str("</tr>\n");
+    }
+    h.push_str("</tbody>\n</table>\n");
+    for (i, f) in footnotes.iter().enumerate() {
+        let _ = writeln!(h, "<p class=\"small\">[{}] {}</p>", i + 1, esc(f));
+    }
+    h.push_str("<details><summary>Profiles' notes</summary>\n");
+    for p in &r.profiles {
+        let _ = write!(
+            h,
+            "<p><b>{}</b> ({})</p>\n<ul>\n",
+            esc(p.standard.title()),
+            esc(p.standard.citation())
+        );
+        for n in &p.notes {
+            let _ = writeln!(h, "<li>{}</li>", esc(n));
+        }
+        h.push_str("</ul>\n");
+    }
+    h.push_str("</details>\n");
+    if !r.decisions.is_empty() {
+        let _ = writeln!(
+            h,
+            "<h3>Decisions</h3>\n<p>Decision rule: {}.</p>",
+            esc(DECISION_RULE)
+        );
+        for c in &r.decisions {
+            let lines = crate::angles::decision_lines(c);
+            let _ = writeln!(h, "<p><b>{}</b></p>\n<ul>", esc(&lines[0]));
+            for l in &lines[1..] {
+                let _ = writeln!(h, "<li>{}</li>", esc(l.trim()));
+            }
+            let _ = writeln!(
+                h,
+                "</ul>\n<p class=\"small\">Source: {}</p>",
+                esc(c.thresholds.source())
+            );
+        }
+    }
+    h.push_str("</section>\n");
 }
 
 /// The recomputation's disagreements with `result.json`, in words.
@@ -1157,6 +1339,19 @@ mod tests {
             report_id(b"{}", "run-000001"),
             report_id(b"{}", "run-000002")
         );
+    }
+
+    #[test]
+    fn lab_file_decisions_are_named_ids() {
+        let l = LabFile::parse("decide = [\"cfr523.5\", \"eu-offroad\"]\n[lab]\nname = \"L\"\n")
+            .unwrap();
+        assert_eq!(
+            l.thresholds().unwrap(),
+            [Thresholds::Cfr523_5, Thresholds::EuOffRoad]
+        );
+        let e = format!("{:#}", LabFile::parse("decide = [\"eu\"]\n").unwrap_err());
+        assert!(e.contains("`eu`"), "{e}");
+        assert!(LabFile::parse("").unwrap().decide.is_empty());
     }
 
     #[test]

@@ -110,6 +110,93 @@ fn angles_json_has_the_fields_and_the_right_approach() {
     assert!((w[0].as_f64().unwrap() - 2.0).abs() < 0.01, "{w}");
     let svg_text = std::fs::read_to_string(&svg).unwrap();
     assert!(svg_text.starts_with("<svg") && svg_text.contains("approach"));
+    // Every standard's profile (default `--standard all`), each with its citation and notes.
+    let profiles = v["profiles"].as_array().unwrap();
+    let ids: Vec<&str> = profiles
+        .iter()
+        .map(|p| p["standard"].as_str().unwrap())
+        .collect();
+    assert_eq!(ids, ["cfr", "eu", "iso612", "gbt", "arai", "adr"]);
+    for p in profiles {
+        assert!(p["citation"].as_str().unwrap().len() > 10);
+        assert!(!p["notes"].as_array().unwrap().is_empty());
+        assert!(p.get("decisions").is_none(), "no decisions unless asked");
+        let approach = &p["quantities"][0];
+        assert_eq!(approach["id"], "approach");
+        assert_eq!(approach["unit"], "deg");
+        let got = approach["value"].as_f64().unwrap();
+        assert!((got - expect.to_degrees()).abs() < 0.05, "{p}");
+        assert!(approach["u"].as_f64().unwrap() > 0.0);
+    }
+    // The central 80 % of the inner track sees the floor.
+    let central = &profiles[2]["quantities"][3];
+    assert_eq!(central["id"], "central_clearance");
+    assert!(
+        (central["value"].as_f64().unwrap() - 0.2).abs() < 0.005,
+        "{central}"
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn decisions_follow_the_guarded_rule_and_the_count() {
+    let dir = std::env::temp_dir().join(format!("passangle-angles-decide-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let ply = dir.join("box.ply");
+    let cloud = Cloud {
+        points_m: box_vehicle(),
+    };
+    write_ply(
+        BufWriter::new(std::fs::File::create(&ply).unwrap()),
+        &cloud,
+        PlyEncoding::BinaryLittleEndian,
+    )
+    .unwrap();
+    let run = |json: bool| {
+        let mut c = Command::new(env!("CARGO_BIN_EXE_passangle"));
+        c.args(["angles", "--standard", "cfr,eu", "--decide"])
+            .arg(&ply);
+        if json {
+            c.arg("--json");
+        }
+        let out = c.output().unwrap();
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        out.stdout
+    };
+    let v: serde_json::Value = serde_json::from_slice(&run(true)).unwrap();
+    let profiles = v["profiles"].as_array().unwrap();
+    assert_eq!(profiles.len(), 2);
+    // CFR 523.5: approach and departure (17 deg) fail, breakover (17.8 deg) and the axle
+    // clearances (0.2 m against 0.18) pass, the running clearance sits on its 0.20 m limit: within
+    // U of it, inconclusive. Two passes and one open criterion cannot reach four: not met.
+    let cfr = &profiles[0]["decisions"][0];
+    assert_eq!(cfr["thresholds"], "cfr523.5");
+    let decisions: Vec<&str> = cfr["criteria"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|c| c["decision"].as_str().unwrap())
+        .collect();
+    assert_eq!(decisions, ["fail", "pass", "fail", "inconclusive", "pass"]);
+    assert_eq!(cfr["verdict"], "not met");
+    assert!(cfr["rule"].as_str().unwrap().contains("value - U >= limit"));
+    let eu = &profiles[1]["decisions"][0];
+    assert_eq!(eu["thresholds"], "eu-offroad");
+    assert_eq!(eu["verdict"], "not met");
+    let table = String::from_utf8(run(false)).unwrap();
+    assert!(table.contains("standards, side by side"), "{table}");
+    assert!(
+        table.contains("CFR/SAE") && table.contains("EU 2018/858"),
+        "{table}"
+    );
+    assert!(
+        table.contains("NOT MET") && table.contains("inconclusive"),
+        "{table}"
+    );
     std::fs::remove_dir_all(&dir).ok();
 }
 

@@ -54,6 +54,7 @@ fn result_record() -> ResultRecord {
         tyre_fit_rms_m: 0.002,
         warnings: Vec::new(),
         cloud_points: 1000,
+        profiles: Vec::new(),
     }
 }
 

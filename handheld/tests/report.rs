@@ -227,6 +227,20 @@ fn report_fills_every_section_and_renders_in_chromium() {
         assert!(html.contains(needle), "no {needle:?} in the report");
     }
     assert!(!html.contains("not given"), "every lab field was given");
+    // The standards side by side (recomputed from cloud.ply: this result.json has no profiles).
+    for needle in [
+        "<h2>Standards</h2>",
+        "CFR/SAE",
+        "ISO 612",
+        "recomputed from cloud.ply",
+    ] {
+        assert!(html.contains(needle), "no {needle:?} in the report");
+    }
+    assert!(
+        !html.contains("<h3>Decisions</h3>"),
+        "no decisions unless asked"
+    );
+    decisions_when_asked(&dir, &lab, &root);
     let id = text
         .split("(report ")
         .nth(1)
@@ -248,6 +262,39 @@ fn report_fills_every_section_and_renders_in_chromium() {
     screenshot(&html_path, &root);
     tampered(&dir, &public.to_hex());
     std::fs::remove_dir_all(&root).unwrap();
+}
+
+/// A lab file asking for decisions: the rule and both verdicts are stated.
+fn decisions_when_asked(dir: &Path, lab: &Path, root: &Path) {
+    let asking = root.join("lab-decide.toml");
+    let text = std::fs::read_to_string(lab).unwrap();
+    std::fs::write(
+        &asking,
+        format!("decide = [\"cfr523.5\", \"eu-offroad\"]\n{text}"),
+    )
+    .unwrap();
+    let out = root.join("report-decide.html");
+    let (code, text) = passangle(&[
+        "report",
+        dir.to_str().unwrap(),
+        "--lab",
+        asking.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{text}");
+    let html = std::fs::read_to_string(&out).unwrap();
+    assert_balanced(&html);
+    for needle in [
+        "<h3>Decisions</h3>",
+        "Decision rule: guarded acceptance",
+        "value - U &gt;= limit",
+        "49 CFR 523.5(b)(2)",
+        "EU off-road vehicle",
+    ] {
+        assert!(html.contains(needle), "no {needle:?} in the report");
+    }
+    assert!(!html.contains("No pass/fail limits were given"));
 }
 
 /// No key, no lab file, the default output: said so, not failed; the same id. An unknown key in

@@ -92,6 +92,45 @@ pub struct ResultRecord {
     pub warnings: Vec<String>,
     /// Points in the cloud.
     pub cloud_points: u32,
+    /// Every standard's quantities from the same cloud, side by side (`angles::profiles`;
+    /// docs/method/standards.md). Empty in files written before the profiles existed.
+    #[serde(default)]
+    pub profiles: Vec<ProfileRecord>,
+}
+
+/// One standard's quantities in `result.json`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ProfileRecord {
+    /// Identifier: `cfr`, `eu`, `iso612`, `gbt`, `arai`, `adr`.
+    pub standard: String,
+    /// Title.
+    pub title: String,
+    /// Where the definitions are.
+    pub citation: String,
+    /// What the profile measures, cannot measure and assumes.
+    pub notes: Vec<String>,
+    /// The quantities, in the standard's order.
+    pub quantities: Vec<ProfileQuantityRecord>,
+}
+
+/// One quantity of a standard's profile: a value with its expanded uncertainty, or `null` and
+/// why it was not measured.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ProfileQuantityRecord {
+    /// Identifier, e.g. `approach`, `running_clearance`, `clearance_under_front_axle`.
+    pub id: String,
+    /// The standard's own name of it.
+    pub name: String,
+    /// `deg` or `m`.
+    pub unit: String,
+    /// The value (`null`: not measured).
+    pub value: Option<f64>,
+    /// Expanded uncertainty, k = 2 (`null`: not measured).
+    pub u: Option<f64>,
+    /// Why it was not measured (`null`: measured).
+    pub not_measured: Option<String>,
 }
 
 /// Why a quantity of `result.json` was not measured.
@@ -164,6 +203,7 @@ impl ResultRecord {
             tyre_fit_rms_m: r.tyre_fit_rms_m,
             warnings: r.warnings.names().map(str::to_owned).collect(),
             cloud_points: r.cloud_points,
+            profiles: Vec::new(),
         }
     }
 

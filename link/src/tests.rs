@@ -895,3 +895,50 @@ proptest::proptest! {
         all_sessions_eat(&bytes, 17);
     }
 }
+
+#[test]
+fn result_json_carries_the_profiles_and_older_files_still_parse() {
+    use crate::record::{ProfileQuantityRecord, ProfileRecord, ResultRecord};
+    let mut record = ResultRecord::from_wire(&result(7));
+    assert!(record.profiles.is_empty());
+    record.profiles.push(ProfileRecord {
+        standard: "eu".into(),
+        title: "EU type approval: off-road vehicle criteria".into(),
+        citation: "Regulation (EU) 2018/858 Annex I".into(),
+        notes: vec!["steps count unless excluded".into()],
+        quantities: vec![
+            ProfileQuantityRecord {
+                id: "approach".into(),
+                name: "approach angle".into(),
+                unit: "deg".into(),
+                value: Some(24.5),
+                u: Some(0.3),
+                not_measured: None,
+            },
+            ProfileQuantityRecord {
+                id: "clearance_under_front_axle".into(),
+                name: "ground clearance under the front axle".into(),
+                unit: "m".into(),
+                value: None,
+                u: None,
+                not_measured: Some("no underside seen under the front axle".into()),
+            },
+        ],
+    });
+    let text = serde_json::to_string(&record).unwrap();
+    let back: ResultRecord = serde_json::from_str(&text).unwrap();
+    assert_eq!(back.profiles, record.profiles);
+    let v: serde_json::Value = serde_json::from_str(&text).unwrap();
+    let q = &v["profiles"][0]["quantities"][1];
+    assert!(q["value"].is_null() && q["u"].is_null(), "{q}");
+    // A result.json written before the profiles: no `profiles` key.
+    let mut old = v.clone();
+    old.as_object_mut().unwrap().remove("profiles");
+    let back: ResultRecord = serde_json::from_value(old).unwrap();
+    assert!(back.profiles.is_empty());
+    // The radio's form is unchanged: the profiles stay in result.json.
+    assert_eq!(
+        record.to_wire(),
+        ResultRecord::from_wire(&result(7)).to_wire()
+    );
+}

@@ -836,6 +836,31 @@ mod tests {
     }
 
     #[test]
+    fn the_standards_of_result_json_are_configurable() {
+        use angles::profiles::Standard;
+        let c = OnboardConfig::parse(MINIMAL, Path::new("x.toml")).unwrap();
+        assert_eq!(c.processing.standards.len(), 6, "all by default");
+        let with = |line: &str| {
+            let text = format!("{MINIMAL}[processing]\n{line}\n");
+            OnboardConfig::parse(&text, Path::new("x.toml"))
+        };
+        let c = with("standards = [\"eu\", \"cfr\"]").unwrap();
+        assert_eq!(
+            c.processing.standards,
+            [Standard::Cfr523Sae, Standard::Eu2018_858]
+        );
+        assert!(
+            with("standards = []")
+                .unwrap()
+                .processing
+                .standards
+                .is_empty()
+        );
+        let e = with("standards = [\"sae\"]").unwrap_err().to_string();
+        assert!(e.contains("`sae`"), "{e}");
+    }
+
+    #[test]
     fn unknown_keys_and_bad_values_are_named() {
         let e = OnboardConfig::parse(
             &format!("{MINIMAL}[run]\nmax-sped-mps = 1.0\n"),

@@ -30,8 +30,10 @@ use serde::Deserialize;
 use crate::mcu_clock::McuClockMap;
 use crate::recorder::{Intrinsics, Recording};
 use crate::signed::Signer;
+use angles::profiles::{ProfileResult, Standard, compute_profiles};
 use angles::{self, AnglesConfig, AnglesResult, Zone, compute_angles, side_view_svg};
 use cloud_io::Cloud;
+use link::record::{ProfileQuantityRecord, ProfileRecord};
 use pipeline::config::FusionConfig;
 use pipeline::geom::V3;
 use pipeline::{BuiltCloud, DepthImage, LidarFrame, Pipeline, PipelineConfig, WheelOdometry};
@@ -67,6 +69,9 @@ pub struct Processed {
     /// The angle calculator's whole finding (witnesses, tyres, ground), where the processor
     /// ran it: for reports and the simulator's checks; not sent or recorded.
     pub angles: Option<Box<AnglesResult>>,
+    /// Every configured standard's quantities from the same cloud, for `result.json` (not sent
+    /// over the radio).
+    pub profiles: Vec<ProfileRecord>,
 }
 
 /// Builds the cloud and computes the angles of a recorded run (the service's default is
@@ -142,6 +147,20 @@ pub struct ProcessConfig {
     pub live: bool,
     /// The point-cloud pipeline's settings (its own documented defaults).
     pub pipeline: PipelineConfig,
+    /// The standards whose profiles `result.json` carries (`standards = ["cfr", "eu"]`; default
+    /// all; `[]`: none). Each distinct zone and band costs one more calculator run (up to four
+    /// for all six).
+    #[serde(deserialize_with = "standards_from_ids")]
+    pub standards: Vec<Standard>,
+}
+
+/// `standards`: ids as `passangle angles --standard` takes them (`all` allowed).
+fn standards_from_ids<'de, D: serde::Deserializer<'de>>(d: D) -> Result<Vec<Standard>, D::Error> {
+    let ids = Vec::<String>::deserialize(d)?;
+    if ids.is_empty() {
+        return Ok(Vec::new());
+    }
+    Standard::parse_list(&ids.join(",")).map_err(serde::de::Error::custom)
 }
 
 impl Default for ProcessConfig {
@@ -151,8 +170,37 @@ impl Default for ProcessConfig {
             min_cloud_points: 1_000,
             live: true,
             pipeline: PipelineConfig::default(),
+            standards: Standard::ALL.to_vec(),
         }
     }
+}
+
+/// The profiles as `result.json` records them.
+pub fn profile_records(profiles: &[ProfileResult]) -> Vec<ProfileRecord> {
+    profiles
+        .iter()
+        .map(|p| ProfileRecord {
+            standard: p.standard.id().to_owned(),
+            title: p.standard.title().to_owned(),
+            citation: p.standard.citation().to_owned(),
+            notes: p.notes.iter().map(|n| (*n).to_owned()).collect(),
+            quantities: p
+                .quantities
+                .iter()
+                .map(|q| {
+                    let (value, u) = q.measure.value_u().unzip();
+                    ProfileQuantityRecord {
+                        id: q.kind.id().to_owned(),
+                        name: q.name.to_owned(),
+                        unit: q.kind.unit().symbol().to_owned(),
+                        value,
+                        u,
+                        not_measured: q.measure.reason().map(str::to_owned),
+                    }
+                })
+                .collect(),
+        })
+        .collect()
 }
 
 /// The service's default [`Processor`]: pipeline plus angle calculator.
@@ -650,11 +698,17 @@ fn angles_of(
         );
     }
     let svg = side_view_svg(&found);
+    let profiles = profile_records(&compute_profiles(
+        &cloud.points_m,
+        &angles_config,
+        &config.standards,
+    ));
     Ok(Processed {
         result,
         cloud,
         svg,
         angles: Some(Box::new(found)),
+        profiles,
     })
 }
 
@@ -831,6 +885,43 @@ fn read_depth(dir: &Path, builder: &mut RunBuilder) -> Result<(), String> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn profile_records_keep_values_with_u_and_reasons_without_numbers() {
+        use angles::profiles::{Measure, ProfileQuantity, QuantityKind};
+        let p = ProfileResult {
+            standard: Standard::Eu2018_858,
+            quantities: vec![
+                ProfileQuantity {
+                    kind: QuantityKind::Breakover,
+                    name: Standard::Eu2018_858.term(QuantityKind::Breakover),
+                    measure: Measure::Value {
+                        value: 21.5,
+                        u: 0.4,
+                        witness_in_vehicle: [0.0, 0.0, 0.3],
+                    },
+                },
+                ProfileQuantity {
+                    kind: QuantityKind::ClearanceUnderRearAxle,
+                    name: "ground clearance under the rear axle",
+                    measure: Measure::NotMeasured("no underside seen".into()),
+                },
+            ],
+            notes: Standard::Eu2018_858.notes(),
+        };
+        let r = profile_records(&[p]);
+        assert_eq!(r[0].standard, "eu");
+        assert_eq!(r[0].quantities[0].name, "ramp angle");
+        assert_eq!(
+            (r[0].quantities[0].value, r[0].quantities[0].u),
+            (Some(21.5), Some(0.4))
+        );
+        assert_eq!(r[0].quantities[0].unit, "deg");
+        let q = &r[0].quantities[1];
+        assert_eq!((q.value, q.u, q.unit.as_str()), (None, None, "m"));
+        assert_eq!(q.not_measured.as_deref(), Some("no underside seen"));
+        assert!(r[0].notes.iter().any(|n| n.contains("steps")));
+    }
 
     #[test]
     fn a_corrupt_lidar_record_fails_the_replay_naming_its_offset() {

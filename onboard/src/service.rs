@@ -285,6 +285,8 @@ struct Ready {
     /// The calculator's own words for each quantity it did not measure (`result.json` keeps
     /// them; the wire carries only the kind).
     not_measured: Vec<(&'static str, String)>,
+    /// The standards' profiles, for `result.json` only.
+    profiles: Vec<link::record::ProfileRecord>,
 }
 
 /// The end of every processing thread (live or from the recording): the heavy work after the
@@ -323,6 +325,7 @@ fn complete(
         result: processed.result,
         preview_mm,
         not_measured,
+        profiles: processed.profiles,
     })));
     let mut errors = Vec::new();
     let mut ply = Vec::new();
@@ -366,7 +369,7 @@ enum IoJob {
     Finish {
         run_id: u32,
         recorder: Box<RunRecorder>,
-        result: Option<ResultRecord>,
+        result: Option<Box<ResultRecord>>,
         outcome: RecordedOutcome,
     },
 }
@@ -537,6 +540,7 @@ fn recorded_ready(rec: &Recording, preview: config::PreviewConfig) -> Option<Rea
         result: result.to_wire(),
         preview_mm: preview::decimate(&points, preview.voxel_m, preview.max_points),
         not_measured: Vec::new(),
+        profiles: result.profiles.clone(),
     })
 }
 
@@ -1304,6 +1308,7 @@ impl Service {
                     n.reason.clone_from(reason);
                 }
             }
+            record.profiles.clone_from(&r.profiles);
             self.result_record = Some(record);
         }
     }
@@ -1373,7 +1378,7 @@ impl Service {
                         self.io_waiting.push_back(IoJob::Finish {
                             run_id,
                             recorder: Box::new(r),
-                            result: self.result_record.take(),
+                            result: self.result_record.take().map(Box::new),
                             outcome: recorded,
                         });
                         self.check_io();

@@ -137,6 +137,7 @@ impl Processor for CountingProcessor {
             cloud,
             svg: "<svg/>".into(),
             angles: None,
+            profiles: Vec::new(),
         })
     }
 }
