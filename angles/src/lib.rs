@@ -16,8 +16,9 @@
 //!    midway between the axles, on the centreline between the inner tyre faces. Steps 2-3 iterate.
 //! 4. **Body** = points above 1.5 x the ground threshold (4.5 cm; more on a noisy floor) that are
 //!    not tyre (and not in an exclusion box).
-//!    Those inside the lateral band (default: between the inner tyre faces) are projected onto the
-//!    median plane and reduced to a robust lower envelope ([`envelope`]); its front and rear
+//!    Those inside the lateral band (default: the vehicle's width, [`Band::OUTER`]) are projected
+//!    onto the median plane and reduced to a robust lower envelope ([`envelope`]; between the axles
+//!    also per lateral strip); its front and rear
 //!    ends are placed by counting the surface's points beyond a reference, not by the last bin
 //!    that reaches a support threshold ([`edge`]).
 //! 5. **Angles**: for an envelope sample at horizontal distance `d` from a wheel centre and height `z`,
@@ -77,14 +78,14 @@ pub enum Zone {
 /// The lateral band whose body points form the side-view envelope.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Band {
-    /// Between the inner tyre faces, shrunk by `margin_m` on each side (default, 1 cm).
+    /// Between the inner tyre faces, shrunk by `margin_m` on each side ([`Band::INNER`]: 1 cm).
     InnerFaces {
         /// Margin inside each inner face (metres).
         margin_m: f64,
     },
     /// Between the outer tyre faces, widened by `margin_m` on each side: the vehicle's whole
     /// width in the side view, as the standards define the angles (sills and mud flaps outboard
-    /// of the inner faces count), and nothing of a neighbour beside it.
+    /// of the inner faces count), and nothing of a neighbour beside it (default, [`Band::OUTER`]).
     OuterFaces {
         /// Margin outside each outer face (metres).
         margin_m: f64,

@@ -38,10 +38,10 @@ pub struct AnglesArgs {
     /// Static loaded tyre radius (metres) to use instead of the fitted wheel-centre height.
     #[arg(long)]
     pub tyre_radius: Option<f64>,
-    /// Lateral band of the side-view envelope: `inner` (between the inner tyre faces), `outer`
-    /// (between the outer tyre faces, 10 cm outside each), `full`, or a half width in metres
-    /// about the centreline.
-    #[arg(long, default_value = "inner")]
+    /// Lateral band of the side-view envelope: `outer` (between the outer tyre faces, 10 cm
+    /// outside each: the vehicle's whole width, as the standards' side views), `inner` (between
+    /// the inner tyre faces), `full`, or a half width in metres about the centreline.
+    #[arg(long, default_value = "outer")]
     pub band: String,
     /// Range noise sigma in metres (default: estimated from the cloud).
     #[arg(long)]
