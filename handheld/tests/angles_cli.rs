@@ -2,10 +2,31 @@
 //! checked for the fields the issue asks for and for the approach angle of its bumper corner.
 //! (The calculator's accuracy is tested in `onboard/tests/angles_synthetic.rs` against brute force.)
 
+#![allow(clippy::unwrap_used)]
+
 use std::io::BufWriter;
+use std::path::PathBuf;
 use std::process::Command;
 
 use cloud_io::{Cloud, PlyEncoding, write_ply};
+
+mod common;
+
+/// A fresh directory for test `name` holding the box vehicle as `box.ply`: (directory, PLY).
+fn box_ply(name: &str) -> (PathBuf, PathBuf) {
+    let dir = common::temp_root(name);
+    let ply = dir.join("box.ply");
+    let cloud = Cloud {
+        points_m: box_vehicle(),
+    };
+    write_ply(
+        BufWriter::new(std::fs::File::create(&ply).unwrap()),
+        &cloud,
+        PlyEncoding::BinaryLittleEndian,
+    )
+    .unwrap();
+    (dir, ply)
+}
 
 /// Ground, a flat floor at 0.2 m ending in a vertical bumper face at x = +-2 m, four rigid tyres
 /// (radius 0.3 m, centres at x = +-1.3 m, |y| = 0.75 m, width 0.2 m). 1 cm spacing.
@@ -51,19 +72,8 @@ fn box_vehicle() -> Vec<[f64; 3]> {
 
 #[test]
 fn angles_json_has_the_fields_and_the_right_approach() {
-    let dir = std::env::temp_dir().join(format!("passangle-angles-cli-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    let ply = dir.join("box.ply");
+    let (dir, ply) = box_ply("angles-cli");
     let svg = dir.join("side.svg");
-    let cloud = Cloud {
-        points_m: box_vehicle(),
-    };
-    write_ply(
-        BufWriter::new(std::fs::File::create(&ply).unwrap()),
-        &cloud,
-        PlyEncoding::BinaryLittleEndian,
-    )
-    .unwrap();
     let out = Command::new(env!("CARGO_BIN_EXE_passangle"))
         .args(["angles", "--json", "--report"])
         .arg(&svg)
@@ -140,18 +150,7 @@ fn angles_json_has_the_fields_and_the_right_approach() {
 
 #[test]
 fn decisions_follow_the_guarded_rule_and_the_count() {
-    let dir = std::env::temp_dir().join(format!("passangle-angles-decide-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    let ply = dir.join("box.ply");
-    let cloud = Cloud {
-        points_m: box_vehicle(),
-    };
-    write_ply(
-        BufWriter::new(std::fs::File::create(&ply).unwrap()),
-        &cloud,
-        PlyEncoding::BinaryLittleEndian,
-    )
-    .unwrap();
+    let (dir, ply) = box_ply("angles-decide");
     let run = |json: bool| {
         let mut c = Command::new(env!("CARGO_BIN_EXE_passangle"));
         c.args(["angles", "--standard", "cfr,eu", "--decide"])
@@ -232,18 +231,7 @@ fn bad_input_is_a_clear_error() {
 
 #[test]
 fn an_undetermined_angle_prints_the_table_and_fails() {
-    let dir = std::env::temp_dir().join(format!("passangle-angles-partial-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    let ply = dir.join("box.ply");
-    let cloud = Cloud {
-        points_m: box_vehicle(),
-    };
-    write_ply(
-        BufWriter::new(std::fs::File::create(&ply).unwrap()),
-        &cloud,
-        PlyEncoding::BinaryLittleEndian,
-    )
-    .unwrap();
+    let (dir, ply) = box_ply("angles-partial");
     // Excluding the body ahead of the front tyres (bumper face and floor) leaves the approach
     // zone empty; departure and breakover are still measured.
     let out = Command::new(env!("CARGO_BIN_EXE_passangle"))
