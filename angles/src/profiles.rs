@@ -561,16 +561,16 @@ fn angle_measure(f: Option<&AngleFinding>, r: &AnglesResult, q: Quantity) -> Mea
     }
 }
 
-/// The clearance budget of a lowest envelope sample: its height (noise sigma normal to the
-/// underside) and the floor's noise, as the calculator's own ground clearance.
-pub fn clearance_uncertainty(r: &AnglesResult) -> Uncertainty {
-    let (h, g) = (r.noise_sigma_m, r.ground.noise_sigma_m);
-    Uncertainty {
-        expanded: 2.0 * h.hypot(g),
-        witness_height: h,
-        ground: g,
-        ..Uncertainty::default()
-    }
+/// The clearance budget of a lowest envelope sample: the calculator's own for its ground
+/// clearance ([`crate::uncertainty::of_clearance`]: the noise normal to the underside and the
+/// floor's).
+fn clearance_uncertainty(r: &AnglesResult) -> Uncertainty {
+    crate::uncertainty::of_clearance(crate::uncertainty::Inputs {
+        noise_m: r.noise_sigma_m,
+        bin_m: r.bin_m,
+        ground_m: r.ground.noise_sigma_m,
+        trajectory_per_m: 0.0,
+    })
 }
 
 fn lowest<'s>(samples: impl Iterator<Item = &'s EnvelopeSample>) -> Option<&'s EnvelopeSample> {
