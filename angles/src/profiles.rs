@@ -468,6 +468,8 @@ struct Runs<'a> {
     cloud: &'a [V3],
     base: &'a AnglesConfig,
     done: Vec<(Setup, Result<AnglesResult, AnglesError>)>,
+    /// How many of `done` the caller gave rather than a run made.
+    reused: usize,
 }
 
 impl Runs<'_> {
@@ -497,32 +499,44 @@ impl Runs<'_> {
     }
 
     fn runs(&self) -> usize {
-        self.done.len()
+        self.done.len() - self.reused
     }
 }
 
 /// The quantities of each standard in `standards`, from `cloud` with the caller's settings
 /// (front direction, exclusion boxes, tyre radius, noise, scan path; the zone and band are the
-/// standard's). The calculator runs once per distinct (zone, band) set-up.
+/// standard's). The calculator runs once per distinct (zone, band) set-up; `known`, the caller's
+/// own result of `cloud` with `base`, serves the set-up it was computed with instead of a run.
 pub fn compute_profiles(
     cloud: &[V3],
     base: &AnglesConfig,
+    known: Option<&AnglesResult>,
     standards: &[Standard],
 ) -> Vec<ProfileResult> {
-    compute_profiles_counted(cloud, base, standards).0
+    compute_profiles_counted(cloud, base, known, standards).0
 }
 
 /// [`compute_profiles`] and the number of calculator runs it took.
 pub fn compute_profiles_counted(
     cloud: &[V3],
     base: &AnglesConfig,
+    known: Option<&AnglesResult>,
     standards: &[Standard],
 ) -> (Vec<ProfileResult>, usize) {
     let mut runs = Runs {
         cloud,
         base,
         done: Vec::new(),
+        reused: 0,
     };
+    if let Some(r) = known {
+        let setup = Setup {
+            zone: base.zone,
+            band: base.band,
+        };
+        runs.done.push((setup, Ok(r.clone())));
+        runs.reused = 1;
+    }
     let out = standards
         .iter()
         .map(|&standard| {
@@ -1230,9 +1244,19 @@ mod tests {
         use QuantityKind as Q;
         let cloud = vehicle(&[FRONT_PART, SIDE_PART, DIFF]);
         let (profiles, runs) =
-            compute_profiles_counted(&cloud, &AnglesConfig::default(), &Standard::ALL);
+            compute_profiles_counted(&cloud, &AnglesConfig::default(), None, &Standard::ALL);
         // Tyre and axle zone at the whole width, the inner band, the central 80 %.
         assert_eq!(runs, 4, "one calculator run per distinct set-up");
+        // The caller's own result serves its set-up (the default: tyre zone, whole width).
+        let known = compute_angles(&cloud, &AnglesConfig::default()).unwrap();
+        let (reused, runs) = compute_profiles_counted(
+            &cloud,
+            &AnglesConfig::default(),
+            Some(&known),
+            &Standard::ALL,
+        );
+        assert_eq!(runs, 3, "the known result is not computed again");
+        assert_eq!(reused, profiles);
         let by = |s: Standard| profiles.iter().find(|p| p.standard == s).unwrap();
         let (cfr, eu, iso) = (
             by(Standard::Cfr523Sae),
@@ -1320,6 +1344,7 @@ mod tests {
         let profiles = compute_profiles(
             &cloud,
             &AnglesConfig::default(),
+            None,
             &[Standard::Cfr523Sae, Standard::Eu2018_858],
         );
         let a: Vec<f64> = profiles

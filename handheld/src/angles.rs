@@ -88,14 +88,16 @@ pub struct Profiles {
 }
 
 impl Profiles {
-    /// Compute the profiles of `standards` and, if asked, decide on `thresholds`.
+    /// Compute the profiles of `standards` (reusing `known`, the result of `points` with
+    /// `config`) and, if asked, decide on `thresholds`.
     pub fn compute(
         points: &[[f64; 3]],
         config: &AnglesConfig,
+        known: &AnglesResult,
         standards: &[Standard],
         thresholds: &[Thresholds],
     ) -> Self {
-        let profiles = compute_profiles(points, config, standards);
+        let profiles = compute_profiles(points, config, Some(known), standards);
         let decisions = classify_all(&profiles, thresholds);
         Self {
             profiles,
@@ -130,7 +132,7 @@ pub fn run(args: &AnglesArgs, out: &mut impl Write) -> anyhow::Result<()> {
     }
     let standards = parse_standards(&args.standard)?;
     let thresholds: &[Thresholds] = if args.decide { &Thresholds::ALL } else { &[] };
-    let profiles = Profiles::compute(&cloud.points_m, &config, &standards, thresholds);
+    let profiles = Profiles::compute(&cloud.points_m, &config, &result, &standards, thresholds);
     if args.json {
         let v = to_json(args, &stats, &result, &profiles);
         writeln!(out, "{}", serde_json::to_string_pretty(&v)?)?;

@@ -137,15 +137,15 @@ fn report(
     let r = compute_angles(&built.points_in_world, &config)
         .with_context(|| format!("{}: computing the angles", path.display()));
     // Every standard's profile of the same cloud, in the JSON (as `passangle angles --json`).
-    let profiles = if args.json && r.is_ok() {
-        crate::angles::Profiles::compute(
+    let profiles = match &r {
+        Ok(found) if args.json => crate::angles::Profiles::compute(
             &built.points_in_world,
             &config,
+            found,
             &angles::profiles::Standard::ALL,
             &[],
-        )
-    } else {
-        crate::angles::Profiles::none()
+        ),
+        _ => crate::angles::Profiles::none(),
     };
     if args.json {
         let mut v = serde_json::json!({

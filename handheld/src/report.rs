@@ -322,7 +322,7 @@ pub fn gather(args: &ReportArgs, out: &Path) -> anyhow::Result<Report> {
     let (profiles, profiles_source) = match &recomputed {
         _ if !recorded.is_empty() => (recorded, "as recorded by the robot in result.json"),
         Ok(rc) => (
-            compute_profiles(&rc.points_m, &rc.config, &Standard::ALL),
+            compute_profiles(&rc.points_m, &rc.config, None, &Standard::ALL),
             "recomputed from cloud.ply (this result.json predates the profiles; without the \
              scan path, so the coverage check is the cloud's own)",
         ),

@@ -701,6 +701,7 @@ fn angles_of(
     let profiles = profile_records(&compute_profiles(
         &cloud.points_m,
         &angles_config,
+        Some(&found),
         &config.standards,
     ));
     Ok(Processed {
