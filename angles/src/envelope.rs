@@ -8,7 +8,9 @@
 //! fluctuation, and the climb goes on; a narrow part under a wide surface is not a tail of it).
 //! `w` is 2.5 x the noise sigma (at least 1 mm), so on a noisy flat surface the mode is the
 //! surface itself, not its low noise tail; a lone low outlier (fewer than `min_support` points
-//! within `2 w`) never forms a mode and is counted in `outliers_below`.
+//! within `2 w`) never forms a mode and is counted in `outliers_below`. A bin without any mode
+//! is merged with its neighbours into a bin twice as wide, up to [`MAX_BIN_M`], and tried again
+//! there: the envelope has the finest resolution the points support, bin by bin.
 //!
 //! The mode's points get a least-squares line `z = a + b (x - x_mean)`; the bin contributes two
 //! envelope samples, the line's values at the mode's lowest and highest x, each pulled 2 noise sigma
@@ -290,42 +292,95 @@ impl Moments {
 
 /// Lower envelope of `points` (x, y, z), already restricted to the band.
 pub(crate) fn lower_envelope(points: &[[f64; 3]], params: EnvelopeParams) -> Envelope {
+    let mut env = Envelope::default();
+    let mut modes: Vec<BinMode> = Vec::new();
+    let mut level = params;
+    let mut pending = points.to_vec();
+    loop {
+        let (sparse, bins) = bin_modes(&pending, level, &mut modes, &mut env);
+        // Bins without a mode at this width are tried again at twice the width (up to
+        // `MAX_BIN_M`): a small part seen by few returns (a tow-hitch receiver, 30 points over
+        // 14 cm) holds `min_support` points over a few centimetres, not in each 5 mm bin. Bins
+        // that have a mode keep it at the finest width; their points never move up a level.
+        let coarser = level.bin_m * 2.0;
+        if sparse.is_empty() || coarser > MAX_BIN_M * (1.0 + 1e-9) {
+            env.unsupported_bins += bins;
+            break;
+        }
+        pending = sparse;
+        level = EnvelopeParams {
+            bin_m: coarser,
+            half_window_m: params.half_window_m.max(0.4 * coarser),
+            ..params
+        };
+    }
+    modes.sort_by(|a, b| a.start_m.total_cmp(&b.start_m));
+    let fringe = fringe_bins(&modes, params);
+    env.fringe_bins = fringe.iter().filter(|f| **f).count();
+    for (mode, is_fringe) in modes.into_iter().zip(fringe) {
+        if !is_fringe {
+            env.samples.extend(mode.samples);
+        }
+    }
+    env
+}
+
+/// The widest bin the envelope uses (metres), in [`lower_envelope`] and the automatic bin width.
+pub(crate) const MAX_BIN_M: f64 = 0.04;
+
+/// One bin's lowest mode.
+struct BinMode {
+    /// Where the bin starts along x and its width (metres).
+    start_m: f64,
+    width_m: f64,
+    /// Points in the mode.
+    support: usize,
+    /// Mean height of the mode's points.
+    z_m: f64,
+    samples: Vec<EnvelopeSample>,
+}
+
+impl BinMode {
+    /// Points per metre along x.
+    fn density(&self) -> f64 {
+        self.support as f64 / self.width_m
+    }
+}
+
+/// The lowest mode of every bin of `params.bin_m` into `modes`; returns the points of the bins
+/// without one and how many such bins there were.
+fn bin_modes(
+    points: &[[f64; 3]],
+    params: EnvelopeParams,
+    modes: &mut Vec<BinMode>,
+    env: &mut Envelope,
+) -> (Vec<[f64; 3]>, usize) {
     let mut keyed: Vec<(i64, [f64; 3])> = points
         .iter()
         .map(|p| ((p[0] / params.bin_m).floor() as i64, *p))
         .collect();
     keyed.sort_unstable_by(|a, b| a.0.cmp(&b.0).then(a.1[2].total_cmp(&b.1[2])));
-    let mut env = Envelope::default();
-    // Per bin: key, support, mode mean height, samples.
-    let mut modes: Vec<(i64, usize, f64, Vec<EnvelopeSample>)> = Vec::new();
-    let mut start = 0;
-    while start < keyed.len() {
-        let key = keyed[start].0;
-        let end = start + keyed[start..].iter().take_while(|(k, _)| *k == key).count();
-        let bin: Vec<[f64; 3]> = keyed[start..end].iter().map(|(_, p)| *p).collect();
-        match bin_mode(&bin, params) {
-            Some((lo, hi)) => {
-                env.outliers_below += lo;
-                let mode = &bin[lo..hi];
-                modes.push((
-                    key,
-                    mode.len(),
-                    mean_z(mode),
-                    line_samples(mode, params.noise_m),
-                ));
-            }
-            None => env.unsupported_bins += 1,
-        }
-        start = end;
-    }
-    let fringe = fringe_bins(&modes, params);
-    env.fringe_bins = fringe.iter().filter(|f| **f).count();
-    for ((_, _, _, samples), is_fringe) in modes.into_iter().zip(fringe) {
-        if !is_fringe {
-            env.samples.extend(samples);
+    let mut sparse = Vec::new();
+    let mut sparse_bins = 0;
+    for group in keyed.chunk_by(|a, b| a.0 == b.0) {
+        let key = group[0].0;
+        let bin: Vec<[f64; 3]> = group.iter().map(|(_, p)| *p).collect();
+        if let Some((lo, hi)) = bin_mode(&bin, params) {
+            env.outliers_below += lo;
+            let mode = &bin[lo..hi];
+            modes.push(BinMode {
+                start_m: key as f64 * params.bin_m,
+                width_m: params.bin_m,
+                support: mode.len(),
+                z_m: mean_z(mode),
+                samples: line_samples(mode, params.noise_m),
+            });
+        } else {
+            sparse_bins += 1;
+            sparse.extend(bin);
         }
     }
-    env
+    (sparse, sparse_bins)
 }
 
 /// Width of the lateral strips of [`lower_envelope_strips`] (metres): narrower than a sill or a
@@ -383,27 +438,36 @@ impl Envelope {
 /// without noise: a part with less than half the support of a surface within 2 cm of it along x
 /// and not lower than it is ignored (its effect is then bounded by those 2 cm); in sparse clouds,
 /// where supports fluctuate, the outermost bins of an edge go first (an inward bias of a bin).
-fn fringe_bins(
-    modes: &[(i64, usize, f64, Vec<EnvelopeSample>)],
-    params: EnvelopeParams,
-) -> Vec<bool> {
+fn fringe_bins(modes: &[BinMode], params: EnvelopeParams) -> Vec<bool> {
     // The fringe is as wide as the noise blur: about 4 sigma, capped at `FRINGE_REACH_M`; a
     // noiseless cloud has none (its sparse bins are real corners, e.g. steep bumper faces).
     let reach_m = (4.0 * params.noise_m).min(FRINGE_REACH_M);
     if reach_m < 1e-4 {
         return vec![false; modes.len()];
     }
-    let reach = (reach_m / params.bin_m).ceil() as i64;
+    // Bins up to `ceil(reach / bin)` finest bins apart along x are neighbours: at most that many
+    // minus one finest bins between their intervals.
+    let gap_m = ((reach_m / params.bin_m).ceil() - 1.0) * params.bin_m + 1e-9;
     let tol = (3.0 * params.noise_m).max(0.002);
+    // Modes are sorted by start; a neighbour starts at most `gap_m + MAX_BIN_M` from this one.
+    let window = gap_m + MAX_BIN_M;
     modes
         .iter()
         .enumerate()
-        .map(|(i, &(key, support, z, _))| {
-            let lo = modes[..i].partition_point(|m| m.0 < key - reach);
+        .map(|(i, m)| {
+            let lo = modes[..i].partition_point(|o| o.start_m < m.start_m - window);
             modes[lo..]
                 .iter()
-                .take_while(|m| m.0 <= key + reach)
-                .any(|m| m.0 != key && m.1 >= FRINGE_RATIO * support && m.2 <= z + tol)
+                .enumerate()
+                .take_while(|(_, o)| o.start_m <= m.start_m + window)
+                .any(|(j, o)| {
+                    let between = (o.start_m - (m.start_m + m.width_m))
+                        .max(m.start_m - (o.start_m + o.width_m));
+                    lo + j != i
+                        && between <= gap_m
+                        && o.density() >= FRINGE_RATIO as f64 * m.density()
+                        && o.z_m <= m.z_m + tol
+                })
         })
         .collect()
 }
@@ -700,6 +764,36 @@ mod tests {
         for s in env.samples {
             assert!((s.z_m - (0.25 + 0.3 * s.x_m)).abs() < 1e-12, "{s:?}");
         }
+    }
+
+    /// A small part seen by few returns (4 per 1 cm bin, fewer than `min_support`) is found at
+    /// twice the bin width; as thin a scatter over the widest bin is not.
+    #[test]
+    fn a_sparse_part_is_found_at_a_coarser_bin() {
+        let part: Vec<[f64; 3]> = (0..24)
+            .map(|i| [1.0 + f64::from(i) * 0.0025, 0.0, 0.45])
+            .collect();
+        let env = lower_envelope(&part, P);
+        assert_eq!(env.unsupported_bins, 0);
+        assert!(!env.samples.is_empty());
+        assert!(
+            env.samples
+                .iter()
+                .all(|s| (s.z_m - 0.45).abs() < 1e-12 && s.support == 8),
+            "{:?}",
+            env.samples
+        );
+        let (lo, hi) = env.samples.iter().fold((f64::MAX, f64::MIN), |(a, b), s| {
+            (a.min(s.x_m), b.max(s.x_m))
+        });
+        assert!(lo < 1.003 && hi > 1.055, "the part spans {lo}..{hi}");
+        // Four points over 4 cm never make a mode.
+        let thin: Vec<[f64; 3]> = (0..4)
+            .map(|i| [2.0 + f64::from(i) * 0.01, 0.0, 0.45])
+            .collect();
+        let env = lower_envelope(&thin, P);
+        assert!(env.samples.is_empty());
+        assert!(env.unsupported_bins > 0);
     }
 
     #[test]

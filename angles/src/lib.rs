@@ -148,6 +148,10 @@ pub struct AnglesConfig {
     pub bin_m: Option<f64>,
     /// Range noise sigma; `None`: estimated from the ground and tyre fits.
     pub noise_m: Option<f64>,
+    /// The scanner's stated range accuracy, metres (a bound on how far a surface's returns
+    /// scatter from it, e.g. the VLP-16 data sheet's +-3 cm); `None`: not known. Returns within it
+    /// of a fitted tyre are the tyre's: the scanner cannot tell a part there from the tread.
+    pub range_accuracy_m: Option<f64>,
     /// Points an envelope bin's lowest mode needs (5): fewer are treated as outliers.
     pub min_support: usize,
     /// RANSAC seed.
@@ -156,7 +160,7 @@ pub struct AnglesConfig {
     /// silencer's) out of the envelope's lowest modes (true; see `envelope::across_path`). The
     /// body's ends are placed from all points either way.
     pub skip_faces_across_path: bool,
-    /// Where the sensor was during the scan (robot positions along the pipeline's trajectory),
+    /// Where the lidar's optical centre was during the scan (along the pipeline's trajectory),
     /// cloud coordinates, metres; empty: unknown. With it, the calculator refuses a scan whose
     /// path does not reach both axles and within [`PATH_REACH_M`] of both ends of the underside
     /// (see `check_coverage`).
@@ -183,6 +187,7 @@ impl Default for AnglesConfig {
             tyre_gap_m: 0.025,
             bin_m: None,
             noise_m: None,
+            range_accuracy_m: None,
             min_support: 5,
             seed: 0x5eed,
             skip_faces_across_path: true,
@@ -484,8 +489,11 @@ impl AnglesConfig {
         }
         if self.bin_m.is_some_and(|b| !pos(b))
             || self.noise_m.is_some_and(|n| !(n.is_finite() && n >= 0.0))
+            || self
+                .range_accuracy_m
+                .is_some_and(|a| !(a.is_finite() && a >= 0.0))
         {
-            return bad("bin width must be > 0 and noise >= 0");
+            return bad("bin width must be > 0, noise and range accuracy >= 0");
         }
         match self.band {
             Band::HalfWidth(w) if !pos(w) => return bad("band half width must be > 0"),
@@ -747,7 +755,13 @@ fn classify(
     band_y_m: (f64, f64),
     counts: &mut PointCounts,
 ) -> Body {
-    let tyre_tol = (3.0 * noise_sigma_m).max(0.01);
+    // A tyre's returns scatter about its outline by the range noise: 3 sigma of the estimated
+    // noise, or the scanner's stated accuracy where it is known and larger. The estimate comes
+    // from the floor and the tyre fits' silhouette points, which see the noise only across the
+    // ray; the tread's front and back, seen head-on near the floor, see it along the ray.
+    let tyre_tol = (3.0 * noise_sigma_m)
+        .max(config.range_accuracy_m.unwrap_or(0.0))
+        .max(0.01);
     // Points below 1.5 x the ground threshold (4.5 cm), or 4 noise sigma if more, are floor,
     // not underside. A noisy floor (a smeared cloud: 1 cm sigma) reaches above the threshold, and
     // so do arcs of floor hits that a frame's small tilt lifted just past the pipeline's own
@@ -1162,10 +1176,11 @@ fn band_ends(points: &[V3]) -> [(f64, f64); 2] {
     [(x_min, top(x_min)), (x_max, top(x_max))]
 }
 
-/// 5 mm, doubled while the median occupied bin holds fewer than 3 x `min_support` points (max 4 cm).
+/// 5 mm, doubled while the median occupied bin holds fewer than 3 x `min_support` points (max
+/// [`envelope::MAX_BIN_M`]).
 fn auto_bin(points: &[V3], min_support: usize) -> f64 {
     let mut bin = 0.005;
-    while bin < 0.04 {
+    while bin < envelope::MAX_BIN_M {
         let mut keys: Vec<i64> = points.iter().map(|p| (p[0] / bin).floor() as i64).collect();
         keys.sort_unstable();
         let mut sizes: Vec<f64> = keys

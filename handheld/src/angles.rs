@@ -46,6 +46,10 @@ pub struct AnglesArgs {
     /// Range noise sigma in metres (default: estimated from the cloud).
     #[arg(long)]
     pub noise: Option<f64>,
+    /// The scanner's stated range accuracy in metres (0.03 for the VLP-16); returns this close
+    /// to a tyre count as the tyre's (default: 3 noise sigma).
+    #[arg(long, value_name = "M")]
+    pub range_accuracy: Option<f64>,
     /// Print one JSON object instead of the table.
     #[arg(long)]
     pub json: bool,
@@ -189,6 +193,7 @@ fn config_from(args: &AnglesArgs) -> anyhow::Result<AnglesConfig> {
         exclude,
         tyre_radius_m: args.tyre_radius,
         noise_m: args.noise,
+        range_accuracy_m: args.range_accuracy,
         ..AnglesConfig::default()
     })
 }

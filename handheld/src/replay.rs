@@ -130,6 +130,7 @@ fn report(
             .map(|t| t.world_from_robot.translation)
             .collect(),
         trajectory_x_sigma_per_m: x_sigma_per_m,
+        range_accuracy_m: Some(vlp16::RANGE_ACCURACY_M),
         ..AnglesConfig::default()
     };
     // The cloud is written either way; the command fails when the angles were not all measured,

@@ -369,6 +369,7 @@ fn recompute(dir: &Path, meta: &RunMeta, enter_at_front: bool) -> Result<Recompu
         } else {
             Zone::Tyre
         },
+        range_accuracy_m: Some(vlp16::RANGE_ACCURACY_M),
         ..AnglesConfig::default()
     };
     let angles = compute_angles(&cloud.points_m, &config).map_err(|e| format!("angles: {e}"))?;

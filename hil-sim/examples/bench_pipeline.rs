@@ -241,11 +241,13 @@ fn run_pipeline(
 
 /// The estimated robot positions, moved into the vehicle frame like the cloud (by the true start
 /// pose `t0`): the scan's path for the angle calculator's coverage check.
-fn path_in_vehicle(built: &BuiltCloud, t0: &Pose) -> Vec<[f64; 3]> {
+/// The lidar's path (its optical centre along the trajectory) in the vehicle frame.
+fn path_in_vehicle(scenario: &Scenario, built: &BuiltCloud, t0: &Pose) -> Vec<[f64; 3]> {
+    let lidar = pose_of(&scenario.file.lidar.robot_from_lidar());
     built
-        .trajectory
-        .iter()
-        .map(|tp| t0.apply(tp.world_from_robot.translation))
+        .lidar_path(lidar.translation)
+        .into_iter()
+        .map(|p| t0.apply(p))
         .collect()
 }
 
@@ -318,7 +320,8 @@ fn evaluate(scenario: &Scenario, scene: &Scene, built: &BuiltCloud, time: &Timin
         true_a.departure.angle_rad,
     ];
     let config = AnglesConfig {
-        scan_path_in_cloud: path_in_vehicle(built, &t0),
+        scan_path_in_cloud: path_in_vehicle(scenario, built, &t0),
+        range_accuracy_m: Some(vlp16::RANGE_ACCURACY_M),
         ..AnglesConfig::default()
     };
     let angle_error_deg = match compute_angles(&in_vehicle, &config) {
@@ -564,7 +567,7 @@ fn save_cloud(
     }
     std::fs::write(stem.with_extension("traj.tsv"), text)?;
     let mut path = String::new();
-    for p in path_in_vehicle(built, &t0) {
+    for p in path_in_vehicle(scenario, built, &t0) {
         writeln!(path, "{} {} {}", p[0], p[1], p[2])?;
     }
     std::fs::write(stem.with_extension("path"), path)?;

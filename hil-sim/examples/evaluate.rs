@@ -28,6 +28,7 @@
 //! often the true value lies within the calculator's expanded uncertainty U, the median U;
 //! runs with every angle within 0.5 degree; runs without angles). Timing goes to stderr only.
 
+use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 use std::time::Instant;
@@ -190,7 +191,7 @@ fn run_pipeline(
 
 /// The oracle's cloud and path (vehicle frame): every return of the run placed with the true
 /// pose of its firing (the decoder's maths on the reported range), reduced to one centroid per
-/// 5 mm voxel, and the true robot positions every 0.1 s.
+/// 5 mm voxel, and the lidar's true positions every 0.1 s.
 fn oracle_cloud(
     scenario: &Scenario,
     scene: &hil_sim::world::Scene,
@@ -234,9 +235,13 @@ fn oracle_cloud(
         .map(|(s, n)| s.map(|v| v / f64::from(n)))
         .collect();
     let steps = (scenario.duration_s / 0.1) as u32;
+    let lidar = scenario.file.lidar.robot_from_lidar().translation;
     let path = (0..=steps)
         .map(|i| {
-            let p = motion.pose_at(f64::from(i) * 0.1).position_m;
+            let p = motion
+                .pose_at(f64::from(i) * 0.1)
+                .to_isometry()
+                .apply(lidar);
             [p.x, p.y, p.z]
         })
         .collect();
@@ -247,8 +252,9 @@ fn run(
     template_path: &Path,
     template: &Scenario,
     entry: &Entry,
-    oracle: bool,
+    args: &Args,
 ) -> anyhow::Result<Outcome> {
+    let oracle = args.oracle;
     let scenario = scenario_of(template_path, template, entry)?;
     let truth = true_angles(&scenario.vehicle, &TruthOptions::default());
     let truth_deg = [
@@ -274,18 +280,23 @@ fn run(
         let motion = scenario.motion();
         let t0 = pose_of(&motion.pose_at(first.stamp_s).to_isometry());
         let cloud: Vec<[f64; 3]> = built.points_in_world.iter().map(|&p| t0.apply(p)).collect();
+        let lidar_mount = pose_of(&scenario.file.lidar.robot_from_lidar());
         let path = built
-            .trajectory
-            .iter()
-            .map(|tp| t0.apply(tp.world_from_robot.translation))
+            .lidar_path(lidar_mount.translation)
+            .into_iter()
+            .map(|p| t0.apply(p))
             .collect();
         detail.push(trajectory_errors(&built, &t0, &motion));
         let x_sigma_per_m = built.x_sigma_per_m(&PipelineConfig::default().fusion);
         (cloud, path, lidar.len(), cpu_s, x_sigma_per_m)
     };
+    if let Some(dir) = &args.save_clouds {
+        save_cloud(dir, entry, oracle, &cloud, &path)?;
+    }
     let config = AnglesConfig {
         scan_path_in_cloud: path,
         trajectory_x_sigma_per_m: x_sigma_per_m,
+        range_accuracy_m: Some(vlp16::RANGE_ACCURACY_M),
         ..AnglesConfig::default()
     };
     let (error_deg, u_deg, missing) = match compute_angles(&cloud, &config) {
@@ -324,6 +335,41 @@ fn run(
         frames,
         detail,
     })
+}
+
+/// `--save-clouds`: the cloud as binary PLY and the path as text, one `x y z` line per pose.
+fn save_cloud(
+    dir: &Path,
+    entry: &Entry,
+    oracle: bool,
+    cloud: &[[f64; 3]],
+    path: &[[f64; 3]],
+) -> anyhow::Result<()> {
+    std::fs::create_dir_all(dir).with_context(|| dir.display().to_string())?;
+    let stem = format!(
+        "{}-{}-{}{}",
+        entry.vehicle_name(),
+        entry.world_name(),
+        entry.seed,
+        if oracle { "-oracle" } else { "" }
+    );
+    let ply = dir.join(format!("{stem}.ply"));
+    let file = std::fs::File::create(&ply).with_context(|| ply.display().to_string())?;
+    cloud_io::write_ply(
+        std::io::BufWriter::new(file),
+        &cloud_io::Cloud {
+            points_m: cloud.to_vec(),
+        },
+        cloud_io::PlyEncoding::BinaryLittleEndian,
+    )
+    .with_context(|| ply.display().to_string())?;
+    let xyz = dir.join(format!("{stem}.path.xyz"));
+    let mut text = String::new();
+    for p in path {
+        writeln!(text, "{:.4} {:.4} {:.4}", p[0], p[1], p[2])?;
+    }
+    std::fs::write(&xyz, text).with_context(|| xyz.display().to_string())?;
+    Ok(())
 }
 
 /// `--detail`: each angle's witness and uncertainty budget against the truth's witness, the axles
@@ -613,6 +659,10 @@ struct Args {
     /// trajectory's largest errors.
     #[arg(long)]
     detail: bool,
+    /// Write each run's cloud (vehicle frame) as `DIR/VEHICLE-WORLD-SEED[-oracle].ply` and its
+    /// scan path as `.path.xyz` beside it, for `passangle angles` and a look by eye.
+    #[arg(long, value_name = "DIR")]
+    save_clouds: Option<PathBuf>,
 }
 
 fn main() -> anyhow::Result<()> {
@@ -623,6 +673,7 @@ fn main() -> anyhow::Result<()> {
     );
     let protocol_path = args
         .protocol
+        .clone()
         .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("evaluation.toml"));
     let text = std::fs::read_to_string(&protocol_path)
         .with_context(|| protocol_path.display().to_string())?;
@@ -672,7 +723,7 @@ fn main() -> anyhow::Result<()> {
                         };
                         let Some(entry) = list.get(i) else { break };
                         let t = Instant::now();
-                        let r = run(&template_path, &template, entry, args.oracle);
+                        let r = run(&template_path, &template, entry, &args);
                         match &r {
                             Ok(o) => eprintln!(
                                 "{name} {}/{}/{}: {} frames, pipeline {:.1} ms CPU per frame, run {:.1} s",

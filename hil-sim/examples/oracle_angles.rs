@@ -119,13 +119,14 @@ fn voxel_centroids(cloud: &[[f64; 3]], voxel_m: f64) -> Vec<[f64; 3]> {
 
 /// The robot's true positions every 0.1 s (vehicle frame): the scan's path.
 fn true_path(scenario: &Scenario) -> Vec<[f64; 3]> {
+    let lidar = scenario.file.lidar.robot_from_lidar().translation;
     (0..=(scenario.duration_s * 10.0) as u32)
         .map(|i| {
             let t = scenario
                 .run
                 .pose_at(f64::from(i) * 0.1)
                 .to_isometry()
-                .translation;
+                .apply(lidar);
             [t.x, t.y, t.z]
         })
         .collect()
@@ -272,6 +273,7 @@ fn main() -> anyhow::Result<()> {
         }
         let config = AnglesConfig {
             scan_path_in_cloud: path,
+            range_accuracy_m: Some(vlp16::RANGE_ACCURACY_M),
             ..AnglesConfig::default()
         };
         match compute_angles(&cloud, &config) {

@@ -34,7 +34,6 @@ use angles::profiles::{ProfileResult, Standard, compute_profiles};
 use angles::{self, AnglesConfig, AnglesResult, Zone, compute_angles, side_view_svg};
 use cloud_io::Cloud;
 use link::record::{ProfileQuantityRecord, ProfileRecord};
-use pipeline::config::FusionConfig;
 use pipeline::geom::V3;
 use pipeline::{BuiltCloud, DepthImage, LidarFrame, Pipeline, PipelineConfig, WheelOdometry};
 use vlp16::source::{PACKET_BUF_LEN, PacketKind, PacketSource, PcapSource};
@@ -275,7 +274,7 @@ impl LiveRun for LivePipeline {
     fn finish(self: Box<Self>, input: &ProcessInput) -> Result<Processed, String> {
         let min_points = self.builder.min_cloud_points;
         let (built, counts) = self.builder.finish_built()?;
-        let (cloud, scan) = cloud_and_path(built, min_points, &self.config.pipeline.fusion)?;
+        let (cloud, scan) = cloud_and_path(built, min_points, &self.config.pipeline)?;
         let mut p = angles_of(
             cloud,
             scan,
@@ -563,8 +562,10 @@ impl RunBuilder {
     pub fn finish(self) -> Result<(Cloud, ReadCounts), String> {
         let min_points = self.min_cloud_points;
         let (built, counts) = self.finish_built()?;
-        let fusion = FusionConfig::default();
-        Ok((cloud_and_path(built, min_points, &fusion)?.0, counts))
+        Ok((
+            cloud_and_path(built, min_points, &PipelineConfig::default())?.0,
+            counts,
+        ))
     }
 
     /// Everything left through the pipeline; the pipeline's whole result (cloud, trajectory,
@@ -584,14 +585,10 @@ impl RunBuilder {
 fn cloud_and_path(
     built: BuiltCloud,
     min_points: usize,
-    fusion: &FusionConfig,
+    pipeline: &PipelineConfig,
 ) -> Result<(Cloud, Scan), String> {
-    let x_sigma_per_m = built.x_sigma_per_m(fusion);
-    let path = built
-        .trajectory
-        .iter()
-        .map(|t| t.world_from_robot.translation)
-        .collect();
+    let x_sigma_per_m = built.x_sigma_per_m(&pipeline.fusion);
+    let path = built.lidar_path(pipeline.mounts.lidar_xyz_m);
     if built.points_in_world.len() < min_points {
         return Err(format!(
             "the fused cloud has {} points, fewer than {min_points}",
@@ -612,7 +609,8 @@ fn cloud_and_path(
 
 /// What the angle calculator needs to know of a scan besides its cloud.
 struct Scan {
-    /// The robot's path in the cloud (the positions of the trajectory), for the coverage check.
+    /// The lidar's path in the cloud (its optical centre along the trajectory), for the coverage
+    /// and view checks.
     path: Vec<V3>,
     /// The trajectory's stated error along x per metre, for the uncertainty budget.
     x_sigma_per_m: f64,
@@ -621,9 +619,8 @@ struct Scan {
 /// Reads a run directory and builds its fused cloud (vehicle-agnostic: no angles yet).
 pub fn build_cloud(dir: &Path, config: &ProcessConfig) -> Result<(Cloud, ReadCounts), String> {
     let (built, counts) = build_run(dir, config)?;
-    let fusion = &config.pipeline.fusion;
     Ok((
-        cloud_and_path(built, config.min_cloud_points, fusion)?.0,
+        cloud_and_path(built, config.min_cloud_points, &config.pipeline)?.0,
         counts,
     ))
 }
@@ -679,6 +676,7 @@ fn angles_of(
         },
         scan_path_in_cloud: scan.path,
         trajectory_x_sigma_per_m: scan.x_sigma_per_m,
+        range_accuracy_m: Some(vlp16::RANGE_ACCURACY_M),
         ..AnglesConfig::default()
     };
     let found =
@@ -722,8 +720,7 @@ pub fn process_run(
 ) -> Result<(Processed, ReadCounts), String> {
     let rec = Recording::open(dir).map_err(|e| e.to_string())?;
     let (built, counts) = build_run(dir, config)?;
-    let fusion = &config.pipeline.fusion;
-    let (cloud, scan) = cloud_and_path(built, config.min_cloud_points, fusion)?;
+    let (cloud, scan) = cloud_and_path(built, config.min_cloud_points, &config.pipeline)?;
     let mut processed = angles_of(cloud, scan, counts, config, zone, short_run)?;
     processed.result.vehicle_id = Text::truncated(&rec.meta.vehicle_id);
     processed.result.run_id = rec.meta.run_id;

@@ -291,7 +291,7 @@ fn a_scan_that_stops_short_leaves_that_end_not_measured_and_a_hitch_end_is_not()
     );
 }
 
-/// A robot path along the centre line, 12 cm up, from `from_x` to `to_x` (vehicle frame), moved
+/// A lidar path along the centre line, 12 cm up, from `from_x` to `to_x` (vehicle frame), moved
 /// by `pose` like the cloud.
 fn path(from_x: f64, to_x: f64, pose: Pose) -> Vec<[f64; 3]> {
     (0..=100)
@@ -349,6 +349,39 @@ fn a_scan_path_that_stops_short_of_an_end_leaves_it_not_measured() {
             .contains("the underside between the axles was not covered"),
         "{err}"
     );
+}
+
+/// A scanner's returns from a tread seen head-on scatter along the rays, up to its stated
+/// accuracy outside the tyre's outline (the VLP-16: +-3 cm). Low behind the off-roader's front
+/// tyre such a scatter (2.5 cm outside the free radius, 5-10 cm up, on the tread) is the lowest
+/// thing between the axles for the breakover's tangent planes. With the scanner's accuracy
+/// stated it is the tyre's; without it, it lowers the breakover angle by degrees.
+#[test]
+fn tread_returns_within_the_scanners_accuracy_are_the_tyres() {
+    let v = synth::off_roader();
+    let t = synth::truth(&v, false);
+    let mut cloud = synth::sample(&v, Scan::noiseless(0.005));
+    let (cx, r) = (v.front_x(), v.free_radius_m + 0.025);
+    for side in [-1.0, 1.0] {
+        for k in 0..36 {
+            let z = 0.05 + 0.01 * f64::from(k / 6);
+            let x = cx - (r * r - (v.loaded_radius_m - z).powi(2)).sqrt();
+            let y = side * (v.track_m / 2.0 + 0.01 * f64::from(k % 6) - 0.03);
+            cloud.push([x, y, z]);
+        }
+    }
+    let with = |range_accuracy_m: Option<f64>| {
+        let config = AnglesConfig {
+            range_accuracy_m,
+            ..AnglesConfig::default()
+        };
+        compute_angles(&cloud, &config).unwrap()
+    };
+    let stated = with(Some(0.03));
+    check(&v, &stated, t, 0.02, "tread scatter, accuracy 3 cm");
+    let unstated = with(None);
+    let e = errors_deg(&unstated, t);
+    assert!(e[2] < -1.0, "the scatter decides the breakover: {e:?}");
 }
 
 #[test]

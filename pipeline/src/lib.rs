@@ -211,6 +211,16 @@ pub struct BuiltCloud {
 pub const MAP_X_SIGMA_PER_M: f64 = 0.005;
 
 impl BuiltCloud {
+    /// Where the lidar's optical centre was at each frame, world frame: the trajectory with the
+    /// mount's offset (`lidar_xyz_m`, robot frame) applied. The angle calculator's view checks
+    /// need the sensor's height, not the robot's.
+    pub fn lidar_path(&self, lidar_xyz_m: V3) -> Vec<V3> {
+        self.trajectory
+            .iter()
+            .map(|t| t.world_from_robot.apply(lidar_xyz_m))
+            .collect()
+    }
+
     /// The trajectory's standard uncertainty along the path per metre travelled, for the angle
     /// calculator's budget: over the frames where the refinement did not determine x, the
     /// wheels' stated speed error relative to the run's mean speed; elsewhere

@@ -45,6 +45,9 @@ pub const ELEVATION_DEG: [f32; LASERS] = [
 pub const VERTICAL_OFFSET_MM: [f32; LASERS] = [
     11.2, -0.7, 9.7, -2.2, 8.1, -3.7, 6.6, -5.1, 5.1, -6.6, 3.7, -8.1, 2.2, -9.7, 0.7, -11.2,
 ];
+/// Range accuracy, metres: the data sheet's "+-3 cm (typical)". Returns of a surface scatter
+/// about it by up to this much along the ray.
+pub const RANGE_ACCURACY_M: f64 = 0.03;
 /// Time between two laser firings, microseconds.
 pub const FIRING_US: f64 = 2.304;
 /// Time of one firing sequence (16 firings and the recharge), microseconds.

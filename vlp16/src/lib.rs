@@ -17,7 +17,7 @@ pub mod source;
 
 pub use decoder::{
     AzimuthInterpolation, ConfigError, DecodeError, DecodeStats, DecoderConfig, Frame,
-    FrameAssembler, Point, ReturnKind,
+    FrameAssembler, Point, RANGE_ACCURACY_M, ReturnKind,
 };
 
 pub use packet::{
