@@ -13,7 +13,7 @@
 //! rays from the pose the simulated robot actually has (firmware in the loop), placed in the
 //! scenario's start pose under the vehicle. The depth camera is rendered the same way at a quarter
 //! of the D435's resolution and 6 fps (full size costs too much CPU in real time beside everything
-//! else on two cores) and reaches the service as `camera.source = "simulated"` ([`demo_camera`]).
+//! else on two cores) and reaches the service as `camera.source = "simulated"` (`demo_camera`).
 //!
 //! The result is compared with the vehicle's true angles (`crate::truth`, brute force on the
 //! vehicle geometry, independent of the onboard code).

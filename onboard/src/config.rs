@@ -645,7 +645,7 @@ impl OnboardConfig {
     }
 }
 
-/// Reads the robot's device key (`signing.key-file`): a file that [`check_secret_file`] accepts,
+/// Reads the robot's device key (`signing.key-file`): a file that `check_secret_file` accepts,
 /// holding a 32-byte seed as 64 hex digits. Every error names `signing.key-file` and the file.
 pub fn read_device_key(path: &Path) -> Result<signing::DeviceKey, ConfigError> {
     const KEY: &str = "signing.key-file";

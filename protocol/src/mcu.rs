@@ -1,9 +1,9 @@
 //! MCU link: onboard computer <-> STM32 firmware, UART 921600 baud, fast and nearly clean.
 //!
-//! The onboard sends [`Hello`](crate::Hello), [`SetConfig`], then [`Drive`] / [`Stop`] and a
-//! [`Heartbeat`](crate::Heartbeat) every 20 ms. The firmware answers `Hello`, sends [`Odometry`] at
-//! the configured rate (default 100 Hz), [`Status`] at 10 Hz and on every change, and [`Rejected`]
-//! for any command it refuses, naming the reason and the field.
+//! The onboard sends [`Hello`], [`SetConfig`](ToFirmware::SetConfig) (a [`McuConfig`]), then
+//! [`Drive`] / [`Stop`] and a [`Heartbeat`] every 20 ms. The firmware answers `Hello`, sends
+//! [`Odometry`] at the configured rate (default 100 Hz), [`Status`] at 10 Hz and on every change,
+//! and [`Rejected`] for any command it refuses, naming the reason and the field.
 
 use postcard::experimental::max_size::MaxSize;
 use serde::{Deserialize, Serialize};
