@@ -28,7 +28,7 @@ use angles::{self, AnglesResult};
 use anyhow::Context;
 use link::client::{Client, Measured, Observer};
 use link::sim::{LossyPortPair, PipeConfig};
-use onboard::config::{CameraSource, FirmwareConfig, OnboardConfig};
+use onboard::config::{CameraSource, OnboardConfig};
 use onboard::process::PipelineProcessor;
 use onboard::service::{
     self, Io, LiveRun, NoNotify, ProcessInput, Processed, Processor, SensorItem, ServiceStats,
@@ -411,7 +411,7 @@ pub(crate) fn prepare(options: &DemoOptions) -> anyhow::Result<Prepared> {
     );
     let mut config = OnboardConfig::parse(&text, Path::new("demo.toml"))?;
     let fw = control::Config::default();
-    config.mcu.firmware = FirmwareConfig::from_wire(&fw.to_mcu());
+    config.mcu.firmware = fw.to_mcu();
     // The scenario's ramp, if it has one (0 means "cruising from t = 0", which a real robot
     // cannot do): else the service's default ramp.
     if run_spec.accel_mps2 > 0.0 {

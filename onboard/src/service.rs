@@ -713,7 +713,7 @@ impl Service {
                 link: LinkConfig::MCU,
                 heartbeat_period_us: millis(config.mcu.heartbeat_period_ms),
                 resend_us: 200_000,
-                firmware: config.mcu.firmware.to_wire(),
+                firmware: config.mcu.firmware,
                 accel_mps2: config.mcu.accel_mps2,
                 jerk_mps3: config.mcu.jerk_mps3,
                 status_timeout_us: 500_000,
