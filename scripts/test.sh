@@ -3,14 +3,14 @@
 # lacks first. This is the README's test command and what CI runs (.ci/run).
 #
 #   scripts/test.sh            everything below
-#   scripts/test.sh --quick    host tests only (fmt, clippy, cargo test --workspace)
+#   scripts/test.sh --quick    host tests only (fmt, clippy, cargo doc, cargo test --workspace)
 #
-# Tiers: (1) formatting and lints; (2) host tests: `cargo test --workspace` (protocol, firmware
-# control logic, onboard pipeline, simulator, end-to-end scenarios on the in-process CAN bus);
-# (3) the book in docs/ (mdbook); (4) no_std checks for the thumbv7em-none-eabihf target and the
-# STM32 release build with its size report and the release ELF on an emulated STM32F407; (5) the
-# end-to-end demo per example vehicle (release, lockstep, golden results), faults in lockstep and
-# one real-time demo; (6) the firmware-in-the-loop tests
+# Tiers: (1) formatting, lints and the API docs' links; (2) host tests: `cargo test --workspace`
+# (protocol, firmware control logic, onboard pipeline, simulator, end-to-end scenarios on the
+# in-process CAN bus); (3) the book in docs/ (mdbook); (4) no_std checks for the
+# thumbv7em-none-eabihf target and the STM32 release build with its size report and the release
+# ELF on an emulated STM32F407; (5) the end-to-end demo per example vehicle (release, lockstep,
+# golden results), faults in lockstep and one real-time demo; (6) the firmware-in-the-loop tests
 # over real SocketCAN vcan0 inside a qemu guest.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -44,6 +44,11 @@ cargo fmt --all -- --check
 
 step "clippy (pedantic, warnings are errors)"
 cargo clippy --workspace --all-targets -- -D warnings
+
+step "API docs: cargo doc, broken or private intra-doc links are errors"
+# Only the workspace's own crates (--no-deps): their dependencies are already checked by clippy,
+# so this adds the rustdoc pass alone.
+RUSTDOCFLAGS="-D warnings" cargo doc --no-deps --workspace
 
 step "the handheld links no service code (onboard without its \`service\` feature)"
 if cargo tree -p handheld -e normal | grep -F sd-notify; then

@@ -5,10 +5,10 @@
 //! Pure: points and an [`AnglesConfig`] in, an [`AnglesResult`] out; no IO, no clock, seeded RANSAC.
 //!
 //! # Method
-//! 1. **Ground** ([`ground`]): RANSAC plane (seeded, near-horizontal hypotheses only, penalising
+//! 1. **Ground** (`ground`): RANSAC plane (seeded, near-horizontal hypotheses only, penalising
 //!    planes with many points far below them), least-squares refinement, noise sigma from the
 //!    inliers (robust MAD). Refined again once the tyres are known, without their footprints.
-//! 2. **Tyres** ([`tyres`]): compact clusters of points a few centimetres above the ground are the
+//! 2. **Tyres** (`tyres`): compact clusters of points a few centimetres above the ground are the
 //!    footprints; each tyre is a circle in the side view fitted to its silhouette. Static loaded
 //!    radius = centre height above the ground; the fitted radius is the free tread radius.
 //! 3. **Vehicle frame**: z = ground normal, x = from the rear axle's midpoint to the front axle's
@@ -17,10 +17,10 @@
 //! 4. **Body** = points above 1.5 x the ground threshold (4.5 cm; more on a noisy floor) that are
 //!    not tyre (and not in an exclusion box).
 //!    Those inside the lateral band (default: the vehicle's width, [`Band::OUTER`]) are projected
-//!    onto the median plane and reduced to a robust lower envelope ([`envelope`]; between the axles
+//!    onto the median plane and reduced to a robust lower envelope (`envelope`; between the axles
 //!    also per lateral strip); its front and rear
 //!    ends are placed by counting the surface's points beyond a reference, not by the last bin
-//!    that reaches a support threshold ([`edge`]).
+//!    that reaches a support threshold (`edge`).
 //! 5. **Angles**: for an envelope sample at horizontal distance `d` from a wheel centre and height `z`,
 //!    with static loaded radius `r`, the plane through it tangent to the tyre rises at
 //!    `a = asin(r / hypot(d, r - z)) - atan2(r - z, d)` ([`tangent_slope`]). Approach = min `a`
@@ -38,7 +38,7 @@
 //!    or, without a path, when the cloud itself ends there; the breakover and the clearance when
 //!    the underside between the axles has a gap. When the path does not reach both axles nothing
 //!    is measured ([`AnglesError::Incomplete`]).
-//! 7. **Uncertainty** ([`uncertainty`]): every angle and the clearance carry an expanded
+//! 7. **Uncertainty** (`uncertainty`): every angle and the clearance carry an expanded
 //!    uncertainty (k = 2) from a budget of this run's own data: noise at the witness, envelope
 //!    bin, tyre fits' covariances, floor flatness, and the trajectory's stated error.
 //!
@@ -168,7 +168,7 @@ pub struct AnglesConfig {
     /// Standard uncertainty of the scan's trajectory along the path per metre travelled
     /// (dimensionless; 0.01: 1 cm per metre). The pipeline states it for its own clouds; 0 for a
     /// cloud whose scanner's uncertainty is not known here (the results' uncertainties then
-    /// leave it out, [`uncertainty`]).
+    /// leave it out, `uncertainty`).
     pub trajectory_x_sigma_per_m: f64,
 }
 

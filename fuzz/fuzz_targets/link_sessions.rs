@@ -32,7 +32,7 @@ fuzz_target!(|data: &[u8]| {
         link: LinkConfig::MCU,
         heartbeat_period_us: 20_000,
         resend_us: 200_000,
-        firmware: onboard::config::FirmwareConfig::default().to_wire(),
+        firmware: onboard::config::firmware_defaults(),
         accel_mps2: 0.3,
         jerk_mps3: 1.0,
         status_timeout_us: 500_000,

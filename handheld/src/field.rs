@@ -7,11 +7,12 @@ use std::time::Duration;
 
 use anyhow::Context;
 use clap::{Args, ValueEnum};
+use indicatif::{ProgressBar, ProgressStyle};
 use link::Port;
 use link::client::{Client, Measured, Observer};
 use protocol::bounded::Text;
 use protocol::common::LogLine;
-use protocol::radio::{Progress, StartMeasurement, Zone};
+use protocol::radio::{Phase, Progress, StartMeasurement, Zone};
 
 fn default_key_file() -> PathBuf {
     std::env::var_os("HOME").map_or_else(
@@ -165,20 +166,102 @@ fn timeout(s: f64) -> Duration {
     Duration::from_secs_f64(s.clamp(0.1, 86_400.0))
 }
 
-/// Live progress on stderr: one rewritten line on a terminal, plain lines otherwise.
-struct Bar {
-    tty: bool,
+/// The robot's progress on stderr while `measure` or `fetch` waits: a live bar on a terminal
+/// ([`Live`]), plain lines otherwise ([`Lines`]).
+enum Display {
+    Live(Live),
+    Lines(Lines<std::io::Stderr>),
 }
 
-impl Bar {
-    fn line(&self, text: &str) {
-        let mut err = std::io::stderr().lock();
-        if self.tty {
-            let _ = write!(err, "\r\x1b[2K{text}");
+impl Display {
+    fn on_stderr() -> Self {
+        if std::io::stderr().is_terminal() {
+            Self::Live(Live::new())
         } else {
-            let _ = writeln!(err, "{text}");
+            Self::Lines(Lines::new(std::io::stderr()))
         }
-        let _ = err.flush();
+    }
+
+    fn observer(&mut self) -> &mut dyn Observer {
+        match self {
+            Self::Live(live) => live,
+            Self::Lines(lines) => lines,
+        }
+    }
+
+    /// Leaves the bar's last state on its own line, so what follows starts on a fresh one.
+    fn finish(&self) {
+        if let Self::Live(live) = self {
+            live.bar.finish();
+        }
+    }
+}
+
+/// One bar that indicatif redraws in place, cut to the terminal's width so that it never wraps;
+/// the robot's log lines are printed above it.
+struct Live {
+    bar: ProgressBar,
+}
+
+impl Live {
+    fn new() -> Self {
+        let style = ProgressStyle::with_template("{prefix} [{bar:20}] {percent:>3}%  {wide_msg}")
+            .map_or_else(
+                |_| ProgressStyle::default_bar(),
+                |s| s.progress_chars("#>-"),
+            );
+        let bar = ProgressBar::new(100).with_style(style);
+        bar.set_prefix("waiting for the robot");
+        Self { bar }
+    }
+}
+
+impl Observer for Live {
+    fn progress(&mut self, p: &Progress) {
+        self.bar
+            .set_prefix(format!("run {} {:<10}", p.run_id, p.phase.name()));
+        self.bar.set_length(100);
+        self.bar.set_position(u64::from(p.percent.min(100)));
+        self.bar.set_message(format!(
+            "{:.2} m  {} lidar frames",
+            p.travelled_m, p.lidar_frames
+        ));
+    }
+    fn log(&mut self, l: &LogLine) {
+        self.bar.println(log_text(l));
+    }
+    fn preview(&mut self, received: usize, total: usize) {
+        self.bar.set_prefix("preview");
+        self.bar.set_length(total.max(1) as u64);
+        self.bar
+            .set_position(if total == 0 { 1 } else { received as u64 });
+        self.bar.set_message(format!("{received}/{total} chunks"));
+    }
+}
+
+/// Plain lines for a log file or a pipe: a line when the run enters a phase and at each quarter
+/// of it, and for the preview at its start, each quarter and its end; the robot's 2 Hz updates in
+/// between are not printed.
+struct Lines<W> {
+    out: W,
+    /// Run, phase and quarter (0..=4) of the last progress line printed.
+    progress: Option<(u32, Phase, u8)>,
+    /// Chunk total and quarter of the last preview line printed.
+    preview: Option<(usize, usize)>,
+}
+
+impl<W: Write> Lines<W> {
+    fn new(out: W) -> Self {
+        Self {
+            out,
+            progress: None,
+            preview: None,
+        }
+    }
+
+    fn line(&mut self, text: &str) {
+        let _ = writeln!(self.out, "{text}");
+        let _ = self.out.flush();
     }
 }
 
@@ -187,8 +270,17 @@ fn bar(percent: u8) -> String {
     format!("[{}{}]", "#".repeat(filled), "-".repeat(20 - filled))
 }
 
-impl Observer for Bar {
+fn log_text(l: &LogLine) -> String {
+    format!("robot {}: {}", l.level.name(), l.text.as_str())
+}
+
+impl<W: Write> Observer for Lines<W> {
     fn progress(&mut self, p: &Progress) {
+        let at = Some((p.run_id, p.phase, p.percent.min(100) / 25));
+        if at == self.progress {
+            return;
+        }
+        self.progress = at;
         self.line(&format!(
             "run {} {:<10} {} {:3}%  {:.2} m  {} lidar frames",
             p.run_id,
@@ -200,13 +292,15 @@ impl Observer for Bar {
         ));
     }
     fn log(&mut self, l: &LogLine) {
-        if self.tty {
-            eprintln!();
-        }
-        eprintln!("robot {}: {}", l.level.name(), l.text.as_str());
+        self.line(&log_text(l));
     }
     fn preview(&mut self, received: usize, total: usize) {
-        let pct = (received * 100).checked_div(total).unwrap_or(100);
+        let pct = (received * 100).checked_div(total).unwrap_or(100).min(100);
+        let at = Some((total, pct / 25));
+        if at == self.preview {
+            return;
+        }
+        self.preview = at;
         self.line(&format!(
             "preview {} {received}/{total} chunks",
             bar(pct as u8)
@@ -340,27 +434,23 @@ pub fn measure(args: &MeasureArgs, out: &mut dyn Write) -> anyhow::Result<()> {
             ZoneArg::Axle => Zone::Axle,
         },
     };
-    let mut bar = Bar {
-        tty: std::io::stderr().is_terminal(),
-    };
-    let m = client.measure(&params, timeout(args.run_timeout_s), &mut bar)?;
-    if bar.tty {
-        eprintln!();
-    }
-    save_and_print(&m, &args.out, out)
+    let mut display = Display::on_stderr();
+    let m = client.measure(&params, timeout(args.run_timeout_s), display.observer());
+    display.finish();
+    save_and_print(&m?, &args.out, out)
 }
 
 /// `passangle fetch`.
 pub fn fetch(args: &FetchArgs, out: &mut dyn Write) -> anyhow::Result<()> {
     let mut client = open(&args.link)?;
-    let mut bar = Bar {
-        tty: std::io::stderr().is_terminal(),
-    };
-    let m = client.fetch(args.run, timeout(args.link.timeout_s.max(120.0)), &mut bar)?;
-    if bar.tty {
-        eprintln!();
-    }
-    save_and_print(&m, &args.out, out)
+    let mut display = Display::on_stderr();
+    let m = client.fetch(
+        args.run,
+        timeout(args.link.timeout_s.max(120.0)),
+        display.observer(),
+    );
+    display.finish();
+    save_and_print(&m?, &args.out, out)
 }
 
 /// `passangle abort`.
@@ -408,4 +498,69 @@ pub fn status(args: &StatusArgs, out: &mut dyn Write) -> anyhow::Result<()> {
     )?;
     writeln!(out, "free space for recordings: {} MiB", s.disk_free_mib)?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use protocol::common::LogLevel;
+
+    fn progress(phase: Phase, percent: u8) -> Progress {
+        Progress {
+            run_id: 7,
+            phase,
+            percent,
+            travelled_m: f32::from(percent) / 20.0,
+            lidar_frames: u32::from(percent) * 10,
+        }
+    }
+
+    /// Off a terminal the 2 Hz updates become a line per phase and quarter, the preview's many
+    /// calls a line per quarter, and nothing rewrites a line.
+    #[test]
+    fn plain_lines_only_when_something_changed() {
+        let mut lines = Lines::new(Vec::new());
+        for (phase, percent) in [
+            (Phase::Checks, 0),
+            (Phase::Checks, 0),
+            (Phase::Checks, 100),
+            (Phase::Driving, 0),
+            (Phase::Driving, 3),
+            (Phase::Driving, 12),
+            (Phase::Driving, 26),
+            (Phase::Driving, 30),
+            (Phase::Driving, 49),
+            (Phase::Driving, 100),
+            (Phase::Driving, 100),
+            (Phase::Processing, 0),
+        ] {
+            lines.progress(&progress(phase, percent));
+        }
+        lines.log(&LogLine {
+            level: LogLevel::Warn,
+            text: Text::truncated("tyre fit poor"),
+        });
+        for received in [0, 0, 1, 1, 2, 3, 3, 4, 4] {
+            lines.preview(received, 4);
+        }
+        let text = String::from_utf8(lines.out).unwrap();
+        assert_eq!(
+            text.lines().collect::<Vec<_>>(),
+            [
+                "run 7 Checks     [--------------------]   0%  0.00 m  0 lidar frames",
+                "run 7 Checks     [####################] 100%  5.00 m  1000 lidar frames",
+                "run 7 Driving    [--------------------]   0%  0.00 m  0 lidar frames",
+                "run 7 Driving    [#####---------------]  26%  1.30 m  260 lidar frames",
+                "run 7 Driving    [####################] 100%  5.00 m  1000 lidar frames",
+                "run 7 Processing [--------------------]   0%  0.00 m  0 lidar frames",
+                "robot Warn: tyre fit poor",
+                "preview [--------------------] 0/4 chunks",
+                "preview [#####---------------] 1/4 chunks",
+                "preview [##########----------] 2/4 chunks",
+                "preview [###############-----] 3/4 chunks",
+                "preview [####################] 4/4 chunks",
+            ]
+        );
+        assert!(!text.contains(['\r', '\x1b']), "{text:?}");
+    }
 }

@@ -200,7 +200,8 @@ pub struct Report {
     pub recomputed: Result<Recomputed, String>,
     /// SHA-256 of `config.toml` (`None`: not in the run).
     pub config_sha256: Option<String>,
-    /// The robot, as far as the run says (its signing key's id).
+    /// The robot, as far as the run says: meta.json's `robot_id`, else the id of the key that
+    /// signed result.json.
     pub robot_id: Option<String>,
     /// Every file of the run directory.
     pub files: Vec<FileEntry>,
@@ -311,9 +312,13 @@ pub fn gather(args: &ReportArgs, out: &Path) -> anyhow::Result<Report> {
     let recomputed = recompute(dir, &recording.meta, enter_at_front);
     let trusted = verify::given_keys(&args.public_keys, args.keys.as_deref())?;
     let files = list_files(dir, out, &trusted)?;
-    let robot_id = verify::read_sidecar(&dir.join("result.json.sig"))
-        .ok()
-        .map(|s| s.public_key.id());
+    // The robot as meta.json names it; a run whose meta.json has no `robot_id` is named by the
+    // key that signed its result.json, if any.
+    let robot_id = recording.meta.robot_id.clone().or_else(|| {
+        verify::read_sidecar(&dir.join("result.json.sig"))
+            .ok()
+            .map(|s| s.public_key.id())
+    });
     let recorded: Vec<ProfileResult> = recording
         .result
         .as_ref()
@@ -1269,7 +1274,7 @@ fn provenance_section(h: &mut String, r: &Report) {
         robot = r.robot_id.as_ref().map_or_else(
             || "<span class=\"missing\">not recorded (the run is not signed)</span>".to_owned(),
             |id| format!(
-                "device key <span class=\"hash\">{}</span> (the key that signed result.json)",
+                "device key <span class=\"hash\">{}</span> (the key that signs the run's files)",
                 esc(id)
             )
         ),

@@ -261,7 +261,23 @@ fn report_fills_every_section_and_renders_in_chromium() {
     without_key_or_lab(&dir, &lab, id);
     screenshot(&html_path, &root);
     tampered(&dir, &public.to_hex());
+    named_by_meta(&dir, &public.id());
     std::fs::remove_dir_all(&root).unwrap();
+}
+
+/// meta.json names the robot: the report names it without result.json's signature too.
+fn named_by_meta(dir: &Path, key_id: &str) {
+    let meta: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.join("meta.json")).unwrap()).unwrap();
+    assert_eq!(meta["robot_id"], key_id, "{meta}");
+    std::fs::remove_file(dir.join("result.json.sig")).unwrap();
+    let (code, text) = passangle(&["report", dir.to_str().unwrap()]);
+    assert_eq!(code, 0, "{text}");
+    let html = std::fs::read_to_string(dir.join("report.html")).unwrap();
+    assert!(
+        html.contains(&format!("device key <span class=\"hash\">{key_id}")),
+        "the robot is not named from meta.json"
+    );
 }
 
 /// A lab file asking for decisions: the rule and both verdicts are stated.

@@ -13,7 +13,7 @@
 //! rays from the pose the simulated robot actually has (firmware in the loop), placed in the
 //! scenario's start pose under the vehicle. The depth camera is rendered the same way at a quarter
 //! of the D435's resolution and 6 fps (full size costs too much CPU in real time beside everything
-//! else on two cores) and reaches the service as `camera.source = "simulated"` ([`demo_camera`]).
+//! else on two cores) and reaches the service as `camera.source = "simulated"` (`demo_camera`).
 //!
 //! The result is compared with the vehicle's true angles (`crate::truth`, brute force on the
 //! vehicle geometry, independent of the onboard code).
@@ -28,7 +28,7 @@ use angles::{self, AnglesResult};
 use anyhow::Context;
 use link::client::{Client, Measured, Observer};
 use link::sim::{LossyPortPair, PipeConfig};
-use onboard::config::{CameraSource, FirmwareConfig, OnboardConfig};
+use onboard::config::{CameraSource, OnboardConfig};
 use onboard::process::PipelineProcessor;
 use onboard::service::{
     self, Io, LiveRun, NoNotify, ProcessInput, Processed, Processor, SensorItem, ServiceStats,
@@ -411,7 +411,7 @@ pub(crate) fn prepare(options: &DemoOptions) -> anyhow::Result<Prepared> {
     );
     let mut config = OnboardConfig::parse(&text, Path::new("demo.toml"))?;
     let fw = control::Config::default();
-    config.mcu.firmware = FirmwareConfig::from_wire(&fw.to_mcu());
+    config.mcu.firmware = fw.to_mcu();
     // The scenario's ramp, if it has one (0 means "cruising from t = 0", which a real robot
     // cannot do): else the service's default ramp.
     if run_spec.accel_mps2 > 0.0 {

@@ -1,6 +1,6 @@
 //! The handheld end of the radio link (used by `passangle measure/status/abort/fetch`).
 //!
-//! [`HandheldRadio::connect`] opens a session: the [`HandshakeInit`] is sent again (with backoff)
+//! [`HandheldRadio::connect`] opens a session: the [`HandshakeInit`](protocol::radio::HandshakeInit) is sent again (with backoff)
 //! until the onboard's reply arrives, so any one init and reply that get through connect. From
 //! then on every frame both ways is sealed in the session; frames that do not open in it (plain
 //! frames, forged or replayed sealed frames) are dropped and counted, never reported.

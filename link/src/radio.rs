@@ -9,9 +9,9 @@
 //! - Replies are sealed for the session the handheld last spoke in, so each handheld hears the
 //!   answers to its own commands; any paired handheld may abort.
 //! - A result goes out with [`Delivery::Persistent`] (retransmitted until the link acks it) and
-//!   stays in [`OnboardRadio::pending_results`] until the handheld's [`ResultAck`], which comes
+//!   stays in [`OnboardRadio::pending_results`] until the handheld's [`ResultAck`](protocol::radio::ResultAck), which comes
 //!   after the handheld has the whole preview.
-//! - Preview chunks are best effort and paced through the bulk queue; [`ResendChunks`] puts the
+//! - Preview chunks are best effort and paced through the bulk queue; [`ResendChunks`](protocol::radio::ResendChunks) puts the
 //!   wanted ones back in front.
 //! - Per-session rate limit: commands beyond [`COMMANDS_PER_S`] (burst [`COMMAND_BURST`]) are
 //!   dropped unacked (the sender retries); aborts and acks are never limited.

@@ -1,7 +1,7 @@
 //! The D435's depth stream over V4L2 (UVC, Z16 848x480 at 30 Hz by default).
 //!
 //! [`z16_frame`] turns one captured buffer into a [`DepthFrame`] (pure, always built, tested).
-//! [`spawn_v4l2_depth`] opens the device, sets the Z16 format and frame rate, and captures with an
+//! `spawn_v4l2_depth` opens the device, sets the Z16 format and frame rate, and captures with an
 //! mmap stream on its own thread; it needs the `v4l2` cargo feature (the `v4l` crate, whose
 //! bindings need libclang at build time: `apt-get install libclang-dev`, then
 //! `cargo build --release -p onboard --features v4l2`). V4L2 reports neither intrinsics nor the depth

@@ -158,9 +158,13 @@ pub struct McuLinkConfig {
     /// Jerk of the speed ramp, m/s^3 (default 1.0; 0 = trapezoid).
     #[serde(default = "default_jerk")]
     pub jerk_mps3: f32,
-    /// The firmware's configuration, sent after its hello.
-    #[serde(default)]
-    pub firmware: FirmwareConfig,
+    /// The firmware's configuration, sent after its hello; a key missing from `[mcu.firmware]`
+    /// takes the firmware's own default ([`firmware_defaults`]).
+    #[serde(
+        default = "firmware_defaults",
+        deserialize_with = "firmware_over_defaults"
+    )]
+    pub firmware: McuConfig,
 }
 
 fn default_mcu_baud() -> u32 {
@@ -176,84 +180,22 @@ fn default_jerk() -> f32 {
     1.0
 }
 
-/// `[mcu.firmware]`: mirrors [`McuConfig`] (see its field docs), with the robot's defaults.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(rename_all = "kebab-case", deny_unknown_fields, default)]
-#[allow(missing_docs)] // each field is documented on `protocol::mcu::McuConfig`
-pub struct FirmwareConfig {
-    pub wheel_radius_m: f32,
-    pub half_length_m: f32,
-    pub half_width_m: f32,
-    pub esc_ids: [u8; 4],
-    pub wheel_signs: [i8; 4],
-    pub current_limit_a: f32,
-    pub speed_kp: f32,
-    pub speed_ki: f32,
-    pub speed_kd: f32,
-    pub max_speed_mps: f32,
-    pub max_accel_mps2: f32,
-    pub heartbeat_timeout_ms: u16,
-    pub feedback_timeout_ms: u16,
-    pub odometry_period_ms: u16,
-    pub over_temperature_c: u8,
-    pub over_current_a: f32,
-    pub stall_timeout_ms: u16,
+/// The firmware's own built-in defaults (`control::Config::default`), so the configuration the
+/// service sends after `Hello` is the one the firmware was tuned and tested with, not a copy.
+pub fn firmware_defaults() -> McuConfig {
+    control::Config::default().to_mcu()
 }
 
-impl Default for FirmwareConfig {
-    /// The firmware's own built-in defaults (`control::Config::default`), so the configuration the
-    /// service sends after `Hello` is the one the firmware was tuned and tested with, not a copy.
-    fn default() -> Self {
-        Self::from_wire(&control::Config::default().to_mcu())
-    }
-}
-
-impl FirmwareConfig {
-    /// From the wire form (e.g. the firmware's own defaults, `control::Config::to_mcu`).
-    pub fn from_wire(m: &McuConfig) -> Self {
-        Self {
-            wheel_radius_m: m.wheel_radius_m,
-            half_length_m: m.half_length_m,
-            half_width_m: m.half_width_m,
-            esc_ids: m.esc_ids,
-            wheel_signs: m.wheel_signs,
-            current_limit_a: m.current_limit_a,
-            speed_kp: m.speed_kp,
-            speed_ki: m.speed_ki,
-            speed_kd: m.speed_kd,
-            max_speed_mps: m.max_speed_mps,
-            max_accel_mps2: m.max_accel_mps2,
-            heartbeat_timeout_ms: m.heartbeat_timeout_ms,
-            feedback_timeout_ms: m.feedback_timeout_ms,
-            odometry_period_ms: m.odometry_period_ms,
-            over_temperature_c: m.over_temperature_c,
-            over_current_a: m.over_current_a,
-            stall_timeout_ms: m.stall_timeout_ms,
-        }
-    }
-
-    /// The wire form.
-    pub fn to_wire(&self) -> McuConfig {
-        McuConfig {
-            wheel_radius_m: self.wheel_radius_m,
-            half_length_m: self.half_length_m,
-            half_width_m: self.half_width_m,
-            esc_ids: self.esc_ids,
-            wheel_signs: self.wheel_signs,
-            current_limit_a: self.current_limit_a,
-            speed_kp: self.speed_kp,
-            speed_ki: self.speed_ki,
-            speed_kd: self.speed_kd,
-            max_speed_mps: self.max_speed_mps,
-            max_accel_mps2: self.max_accel_mps2,
-            heartbeat_timeout_ms: self.heartbeat_timeout_ms,
-            feedback_timeout_ms: self.feedback_timeout_ms,
-            odometry_period_ms: self.odometry_period_ms,
-            over_temperature_c: self.over_temperature_c,
-            over_current_a: self.over_current_a,
-            stall_timeout_ms: self.stall_timeout_ms,
-        }
-    }
+/// `[mcu.firmware]` is [`McuConfig`] itself (its field docs are the keys' docs). The wire type
+/// cannot know the firmware's defaults (they live in `control`, which depends on `protocol`), so
+/// a partial table is laid over [`firmware_defaults`] here: every key given replaces its default,
+/// and `McuConfig` itself refuses unknown keys.
+fn firmware_over_defaults<'de, D: serde::Deserializer<'de>>(d: D) -> Result<McuConfig, D::Error> {
+    use serde::de::Error as _;
+    let given = toml::Table::deserialize(d)?;
+    let mut table = toml::Table::try_from(firmware_defaults()).map_err(D::Error::custom)?;
+    table.extend(given);
+    McuConfig::deserialize(toml::Value::Table(table)).map_err(D::Error::custom)
 }
 
 /// `[lidar]`.
@@ -482,7 +424,7 @@ impl OnboardConfig {
         }
         // The firmware's own validation of what the service will send it.
         if let Err(e) = control::Config::default()
-            .with_mcu(&self.mcu.firmware.to_wire())
+            .with_mcu(&self.mcu.firmware)
             .validate()
         {
             bad("mcu.firmware", format!("the firmware would refuse it: {e}"));
@@ -645,7 +587,7 @@ impl OnboardConfig {
     }
 }
 
-/// Reads the robot's device key (`signing.key-file`): a file that [`check_secret_file`] accepts,
+/// Reads the robot's device key (`signing.key-file`): a file that `check_secret_file` accepts,
 /// holding a 32-byte seed as 64 hex digits. Every error names `signing.key-file` and the file.
 pub fn read_device_key(path: &Path) -> Result<signing::DeviceKey, ConfigError> {
     const KEY: &str = "signing.key-file";
@@ -903,6 +845,30 @@ mod tests {
         );
         let c = OnboardConfig::parse(MINIMAL, Path::new("x.toml")).unwrap();
         assert!((c.stop_time_s() - (0.5 / 0.3 + 0.3 + 0.5)).abs() < 1e-6);
+    }
+
+    #[test]
+    fn a_partial_firmware_table_keeps_the_firmware_defaults() {
+        let c = OnboardConfig::parse(
+            &format!("{MINIMAL}[mcu.firmware]\nwheel-radius-m = 0.05\nesc-ids = [4, 3, 2, 1]\n"),
+            Path::new("f.toml"),
+        )
+        .unwrap();
+        let expected = McuConfig {
+            wheel_radius_m: 0.05,
+            esc_ids: [4, 3, 2, 1],
+            ..firmware_defaults()
+        };
+        assert_eq!(c.mcu.firmware, expected);
+        let minimal = OnboardConfig::parse(MINIMAL, Path::new("x.toml")).unwrap();
+        assert_eq!(minimal.mcu.firmware, firmware_defaults());
+        let e = OnboardConfig::parse(
+            &format!("{MINIMAL}[mcu.firmware]\nwheel-radius = 0.05\n"),
+            Path::new("g.toml"),
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains("g.toml") && e.contains("wheel-radius"), "{e}");
     }
 
     #[test]

@@ -3,7 +3,7 @@
 //! ```text
 //! <root>/run-000007/
 //!   INCOMPLETE          created first, removed last: present = the run did not finish cleanly
-//!   meta.json           run id, parameters, start time, outcome (rewritten atomically)
+//!   meta.json           run id, parameters, start time, outcome, robot id (rewritten atomically)
 //!   config.toml         the onboard configuration used
 //!   lidar.pcap          raw VLP-16 UDP packets (data and position), opens in Wireshark/VeloView
 //!   odometry.csv        wheel odometry: wall_us,mcu_us,x_m,y_m,yaw_rad,vx_mps,vy_mps,wz_radps,w_fl,w_fr,w_rl,w_rr
@@ -152,6 +152,11 @@ pub struct RunMeta {
     /// Files or streams that failed to write, with the error.
     #[serde(default)]
     pub write_errors: Vec<String>,
+    /// The robot: the id of its device key (`signing.key-file`, [`signing::PublicKey::id`]),
+    /// the key that signs this run's files, so that a report names the robot from the run itself.
+    /// Absent when the robot signs nothing (it has no other identity).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub robot_id: Option<String>,
 }
 
 /// Camera intrinsics written with every depth frame (V4L2 gives none: they come from config).
@@ -282,6 +287,7 @@ impl RunRecorder {
             started_unix_us,
             outcome: RecordedOutcome::Running,
             write_errors: Vec::new(),
+            robot_id: signer.key().map(|k| k.public().id()),
         };
         let mut errors = Vec::new();
         let mut stream = |name: &str, header: &[u8]| {
@@ -717,6 +723,10 @@ mod tests {
         let rec = Recording::open_run(&root, 1).unwrap();
         assert!(!rec.incomplete);
         assert_eq!(rec.meta.outcome, RecordedOutcome::Completed);
+        // Without a device key the robot has no id, and meta.json has no `robot_id` key.
+        assert_eq!(rec.meta.robot_id, None);
+        let meta = fs::read_to_string(root.join("run-000001/meta.json")).unwrap();
+        assert!(!meta.contains("robot_id"), "{meta}");
         assert_eq!(
             rec.result.as_ref().unwrap().to_wire(),
             wire,
@@ -776,6 +786,9 @@ mod tests {
                 "{name}"
             );
         }
+        // meta.json names the robot by the id of the key that signs the run.
+        let meta = Recording::open_run(&root, 1).unwrap().meta;
+        assert_eq!(meta.robot_id, Some(public.id()));
         // One digit of the approach angle, changed in place: named by its pointer.
         let text = fs::read_to_string(dir.join("result.json")).unwrap();
         let line = text

@@ -8,7 +8,7 @@
 //! [`LOOP_PERIOD`]); the lidar socket and the camera have their own reader threads feeding bounded
 //! channels; processing a run runs on a worker thread, and the radio's disk work (reading an
 //! earlier run's cloud for a fetch, decimating its preview, marking a result delivered) runs on
-//! the IO worker ([`IoWorker`], bounded queues), so the loop (MCU heartbeat, radio) never waits on
+//! the IO worker (`IoWorker`, bounded queues), so the loop (MCU heartbeat, radio) never waits on
 //! disk or CPU work. Warnings about dropped radio frames are rate limited (one line per
 //! [`DROP_LOG_PERIOD_US`] with the counts), so a flood cannot fill the log.
 //!
@@ -713,7 +713,7 @@ impl Service {
                 link: LinkConfig::MCU,
                 heartbeat_period_us: millis(config.mcu.heartbeat_period_ms),
                 resend_us: 200_000,
-                firmware: config.mcu.firmware.to_wire(),
+                firmware: config.mcu.firmware,
                 accel_mps2: config.mcu.accel_mps2,
                 jerk_mps3: config.mcu.jerk_mps3,
                 status_timeout_us: 500_000,

@@ -115,7 +115,7 @@ pub const WHEEL_SCALE_RANGE: (f64, f64) = (0.8, 1.2);
 const MIN_SCALE_PAIRS: usize = 30;
 
 /// Fewer long-baseline distance measurements than this, counted as independent
-/// ([`Slope::independent`]: four back-to-back baselines, or 1 m covered by overlapping ones at
+/// (`Slope::independent`: four back-to-back baselines, or 1 m covered by overlapping ones at
 /// the default 0.25 m): the wheel scale stays 1. (Three: the simulated off-roader's seed 10
 /// with the assumed wheel errors still took a false slip; 10 seeds per vehicle, sd < 0.15 on 11
 /// of 15 angles on exact wheels against 12 with four.)

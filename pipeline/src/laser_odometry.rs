@@ -9,7 +9,7 @@
 //!   (largest eigenvalue dominates) the residual is the distance from `q` to the line.
 //!
 //! Both are weighted by a Huber kernel (`huber_m`) truncated beyond a cutoff that grows with the
-//! residual's lever arm (`max_residual_m`, `max_residual_rad`; see [`Kernel`]). The increment is
+//! residual's lever arm (`max_residual_m`, `max_residual_rad`; see `Kernel`). The increment is
 //! left-multiplied with its rotation about the prior's position `c`, `T <- about(c, delta) T`, with
 //! `delta = [rx, ry, rz, tx, ty, tz]`, so the Jacobian of a residual with unit direction `e` (the
 //! plane normal, or the perpendicular to the line) is `[(q - c) x e, e]`: the same numbers wherever

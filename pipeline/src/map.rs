@@ -189,7 +189,7 @@ impl Block {
 /// Implementation: a column is a voxel of a [`CloudAccumulator`] in coordinates where heights are
 /// compressed into one voxel layer (`z' = cell / 2 + z * cell / (2 * FLOOR_HALF_RANGE_M)`), so
 /// the floor keeps that accumulator's batched, cache-friendly layout (a hash map with one lookup
-/// per point costs measurably more per frame). Its blocks are dense sheets ([`Blocking::Sheets`]),
+/// per point costs measurably more per frame). Its blocks are dense sheets (`Blocking::Sheets`),
 /// slightly cheaper than sparse cubes for a floor, with the same output (decision record 006). Floor more than [`FLOOR_HALF_RANGE_M`] above or below the first frame's ground
 /// splits a column in two points, as the 3D voxels did.
 #[derive(Debug, Clone)]

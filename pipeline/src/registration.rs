@@ -1,4 +1,4 @@
-//! Registration: the laser's LM solves ([`super::laser_odometry::solve`]) put together as the
+//! Registration: the laser's LM solves (`laser_odometry::solve`) put together as the
 //! scan-to-scan two-step and the scan-to-map joint registration, and the degeneracy test with
 //! solution remapping that decides which directions the scan determines.
 //!

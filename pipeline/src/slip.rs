@@ -155,7 +155,7 @@ impl SlipMeter {
     }
 
     /// True when scan number `frame` with wheel pose `wheel` should become a keyframe: none is
-    /// kept yet, or the newest is a quarter baseline and [`MIN_FRAMES_BETWEEN_KEYFRAMES`] frames
+    /// kept yet, or the newest is a quarter baseline and `MIN_FRAMES_BETWEEN_KEYFRAMES` frames
     /// behind. Never when the meter is off.
     pub fn wants_keyframe(&self, frame: u64, wheel: &Pose) -> bool {
         self.baseline_m > 0.0

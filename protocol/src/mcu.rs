@@ -1,9 +1,9 @@
 //! MCU link: onboard computer <-> STM32 firmware, UART 921600 baud, fast and nearly clean.
 //!
-//! The onboard sends [`Hello`](crate::Hello), [`SetConfig`], then [`Drive`] / [`Stop`] and a
-//! [`Heartbeat`](crate::Heartbeat) every 20 ms. The firmware answers `Hello`, sends [`Odometry`] at
-//! the configured rate (default 100 Hz), [`Status`] at 10 Hz and on every change, and [`Rejected`]
-//! for any command it refuses, naming the reason and the field.
+//! The onboard sends [`Hello`], [`SetConfig`](ToFirmware::SetConfig) (a [`McuConfig`]), then
+//! [`Drive`] / [`Stop`] and a [`Heartbeat`] every 20 ms. The firmware answers `Hello`, sends
+//! [`Odometry`] at the configured rate (default 100 Hz), [`Status`] at 10 Hz and on every change,
+//! and [`Rejected`] for any command it refuses, naming the reason and the field.
 
 use postcard::experimental::max_size::MaxSize;
 use serde::{Deserialize, Serialize};
@@ -39,7 +39,13 @@ pub struct Stop {
 pub struct ClearFaults {}
 
 /// The firmware's configuration (the firmware starts from built-in defaults; see docs/firmware.md).
+///
+/// The same type is the onboard service's `[mcu.firmware]` table (`onboard::config`), so the
+/// file and the wire cannot drift apart. The serde attributes serve that file only: postcard
+/// encodes a struct as its fields in order, without names, so renaming and refusing unknown keys
+/// leave the wire format as it is (`tests/wire.rs` pins its bytes).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, MaxSize)]
+#[serde(rename_all = "kebab-case", deny_unknown_fields)]
 pub struct McuConfig {
     /// Wheel radius, m.
     pub wheel_radius_m: f32,

@@ -35,7 +35,7 @@ use hil_sim::robot::PoseSample;
 use link::client::{Client, ClientError, Observer, Quiet};
 use link::session::Entropy;
 use link::sim::{LossyPortPair, PipeConfig};
-use onboard::config::{CameraSource, FirmwareConfig, OnboardConfig};
+use onboard::config::{CameraSource, OnboardConfig};
 use onboard::recorder::{RecordedOutcome, Recording};
 use onboard::service::{
     self, Io, LidarPacket, NoNotify, ProcessInput, Processed, Processor, ServiceStats, SharedStats,
@@ -251,7 +251,7 @@ impl Rig {
         );
         let mut config = OnboardConfig::parse(&text, Path::new("e2e.toml")).unwrap();
         let fw = control::Config::default();
-        config.mcu.firmware = FirmwareConfig::from_wire(&fw.to_mcu());
+        config.mcu.firmware = fw.to_mcu();
         config.run.max_speed_mps = config.mcu.firmware.max_speed_mps.min(0.5);
         config.mcu.accel_mps2 = config
             .mcu
