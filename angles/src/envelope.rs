@@ -136,10 +136,10 @@ const ACROSS_REACH_M: f64 = 0.08;
 /// fell (the sedan's departure sd moved between 0.13 and 0.23 with the cell size on the
 /// pipeline's clouds); a point is marked if either of two grids, offset by half a cell, marks it.
 pub(crate) fn across_path(points: &[[f64; 3]], inner_x_m: (f64, f64)) -> Vec<bool> {
-    use passangle_geom::{VoxelMap, voxel_of};
+    use passangle_geom::{V3, VoxelMap, voxel_of};
     let candidate = |p: &[f64; 3]| p[0] < inner_x_m.0 || p[0] > inner_x_m.1;
     // The lowest candidate point per column of one cell along x.
-    let column = |p: &[f64; 3]| [voxel_of(*p, ACROSS_CELL_M)[0], 0, 0];
+    let column = |p: &[f64; 3]| [voxel_of(V3::from(*p), ACROSS_CELL_M)[0], 0, 0];
     let mut lowest: VoxelMap<f64> = VoxelMap::default();
     for p in points.iter().filter(|p| candidate(p)) {
         let z = lowest.entry(column(p)).or_insert(f64::MAX);
@@ -163,14 +163,14 @@ pub(crate) fn across_path(points: &[[f64; 3]], inner_x_m: (f64, f64)) -> Vec<boo
 
 /// [`across_path`]'s test on one grid, shifted by `offset_m` along every axis.
 fn faces_across(points: &[[f64; 3]], offset_m: f64) -> Vec<bool> {
-    use passangle_geom::{VoxelMap, voxel_of};
+    use passangle_geom::{V3, VoxelMap, voxel_of};
     // Each cell's moments, about its first point (so the sums stay small).
     let mut index: VoxelMap<u32> = VoxelMap::default();
     let mut cells: Vec<([i32; 3], Moments)> = Vec::new();
     let cell_of_point: Vec<u32> = points
         .iter()
         .map(|&p| {
-            let key = voxel_of(p.map(|c| c + offset_m), ACROSS_CELL_M);
+            let key = voxel_of(V3::from(p.map(|c| c + offset_m)), ACROSS_CELL_M);
             let id = *index.entry(key).or_insert_with(|| {
                 cells.push((key, Moments::at(p)));
                 (cells.len() - 1) as u32
@@ -281,10 +281,10 @@ impl Moments {
             let (a, b) = Self::PAIRS[k];
             self.ss[k] / n - self.s[a] * self.s[b] / (n * n)
         });
-        let cov = [[c[0], c[1], c[2]], [c[1], c[3], c[4]], [c[2], c[4], c[5]]];
+        let cov = passangle_geom::M3::new(c[0], c[1], c[2], c[1], c[3], c[4], c[2], c[4], c[5]);
         // Eigenvalues ascending, eigenvectors as columns: the normal is column 0.
         passangle_geom::symmetric_eigen3(&cov)
-            .is_some_and(|(_, vectors)| vectors[0][0].abs() > ACROSS_MIN_NORMAL_X)
+            .is_some_and(|(_, vectors)| vectors[(0, 0)].abs() > ACROSS_MIN_NORMAL_X)
     }
 }
 

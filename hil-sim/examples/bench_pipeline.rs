@@ -146,8 +146,12 @@ fn variants(mode: Mode, depth: bool, base: &PipelineConfig) -> Vec<Variant> {
 
 fn pose_of(iso: &Isometry) -> Pose {
     Pose {
-        rotation: iso.rotation.0,
-        translation: [iso.translation.x, iso.translation.y, iso.translation.z],
+        rotation: pipeline::geom::M3::from_fn(|i, j| iso.rotation.0[i][j]),
+        translation: pipeline::geom::V3::new(
+            iso.translation.x,
+            iso.translation.y,
+            iso.translation.z,
+        ),
     }
 }
 
@@ -155,10 +159,10 @@ fn pose_of(iso: &Isometry) -> Pose {
 fn mounts_from(scenario: &Scenario, config: &mut PipelineConfig) {
     let lidar = pose_of(&scenario.file.lidar.robot_from_lidar());
     let camera = pose_of(&scenario.file.depth.robot_from_camera());
-    config.mounts.lidar_xyz_m = lidar.translation;
-    config.mounts.lidar_rpy_rad = rpy_of(&lidar.rotation);
-    config.mounts.camera_xyz_m = camera.translation;
-    config.mounts.camera_rpy_rad = rpy_of(&camera.rotation);
+    config.mounts.lidar_xyz_m = lidar.translation.into();
+    config.mounts.lidar_rpy_rad = rpy_of(&lidar.rotation).into();
+    config.mounts.camera_xyz_m = camera.translation.into();
+    config.mounts.camera_rpy_rad = rpy_of(&camera.rotation).into();
 }
 
 /// Depth frames at 10 Hz (every 3rd of the 30 Hz stream).
@@ -245,7 +249,7 @@ fn path_in_vehicle(built: &BuiltCloud, t0: &Pose) -> Vec<[f64; 3]> {
     built
         .trajectory
         .iter()
-        .map(|tp| t0.apply(tp.world_from_robot.translation))
+        .map(|tp| t0.apply(tp.world_from_robot.translation).into())
         .collect()
 }
 
@@ -304,7 +308,11 @@ fn evaluate(scenario: &Scenario, scene: &Scene, built: &BuiltCloud, time: &Timin
     let last = built.trajectory.last().map_or(0.0, |l| l.stamp_s);
     let t_last = t0.inverse().compose(&truth(last)).translation;
     let travelled = t_last.iter().map(|v| v * v).sum::<f64>().sqrt();
-    let in_vehicle: Vec<[f64; 3]> = built.points_in_world.iter().map(|&p| t0.apply(p)).collect();
+    let in_vehicle: Vec<[f64; 3]> = built
+        .points_in_world
+        .iter()
+        .map(|&p| t0.apply(p).into())
+        .collect();
     let mut dist: Vec<f64> = in_vehicle
         .iter()
         .step_by(7)
@@ -349,7 +357,7 @@ fn evaluate(scenario: &Scenario, scene: &Scene, built: &BuiltCloud, time: &Timin
 fn kitti_row(p: &Pose) -> String {
     let (r, t) = (&p.rotation, &p.translation);
     (0..3)
-        .map(|i| format!("{} {} {} {}", r[i][0], r[i][1], r[i][2], t[i]))
+        .map(|i| format!("{} {} {} {}", r[(i, 0)], r[(i, 1)], r[(i, 2)], t[i]))
         .collect::<Vec<_>>()
         .join(" ")
 }
@@ -419,13 +427,13 @@ fn export_frames(
             samples.push((
                 i,
                 j,
-                world_from_lidar.apply(p.xyz_in_lidar_m.map(f64::from)),
+                world_from_lidar.apply(pipeline::geom::V3::from(p.xyz_in_lidar_m.map(f64::from))),
             ));
         }
     }
     let mut distances: Vec<f64> = samples
         .iter()
-        .map(|&(_, _, v)| surface_distance(scene, v))
+        .map(|&(_, _, v)| surface_distance(scene, v.into()))
         .collect();
     distances.sort_by(f64::total_cmp);
     let median_mm = percentile(&distances, 0.5) * 1e3;
@@ -513,7 +521,11 @@ fn save_cloud(
     let truth = |t: f64| pose_of(&motion.pose_at(t).to_isometry());
     let t0 = truth(built.trajectory.first().map_or(0.0, |t| t.stamp_s));
     let cloud = Cloud {
-        points_m: built.points_in_world.iter().map(|&p| t0.apply(p)).collect(),
+        points_m: built
+            .points_in_world
+            .iter()
+            .map(|&p| t0.apply(p).into())
+            .collect(),
     };
     let file = std::fs::File::create(stem.with_extension("ply"))?;
     write_ply(

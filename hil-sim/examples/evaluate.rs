@@ -123,8 +123,12 @@ fn entries(dir: &Path, groups: &[Group]) -> Vec<Entry> {
 
 fn pose_of(iso: &Isometry) -> Pose {
     Pose {
-        rotation: iso.rotation.0,
-        translation: [iso.translation.x, iso.translation.y, iso.translation.z],
+        rotation: pipeline::geom::M3::from_fn(|i, j| iso.rotation.0[i][j]),
+        translation: pipeline::geom::V3::new(
+            iso.translation.x,
+            iso.translation.y,
+            iso.translation.z,
+        ),
     }
 }
 
@@ -167,10 +171,10 @@ fn run_pipeline(
     config.visual.enabled = false;
     let lidar_mount = pose_of(&scenario.file.lidar.robot_from_lidar());
     let camera_mount = pose_of(&scenario.file.depth.robot_from_camera());
-    config.mounts.lidar_xyz_m = lidar_mount.translation;
-    config.mounts.lidar_rpy_rad = rpy_of(&lidar_mount.rotation);
-    config.mounts.camera_xyz_m = camera_mount.translation;
-    config.mounts.camera_rpy_rad = rpy_of(&camera_mount.rotation);
+    config.mounts.lidar_xyz_m = lidar_mount.translation.into();
+    config.mounts.lidar_rpy_rad = rpy_of(&lidar_mount.rotation).into();
+    config.mounts.camera_xyz_m = camera_mount.translation.into();
+    config.mounts.camera_rpy_rad = rpy_of(&camera_mount.rotation).into();
     let mut events: Vec<(f64, Result<&LidarFrame, &WheelOdometry>)> = lidar
         .iter()
         .map(|f| (f.stamp_s + 0.1, Ok(f)))
@@ -273,11 +277,15 @@ fn run(
         };
         let motion = scenario.motion();
         let t0 = pose_of(&motion.pose_at(first.stamp_s).to_isometry());
-        let cloud: Vec<[f64; 3]> = built.points_in_world.iter().map(|&p| t0.apply(p)).collect();
+        let cloud: Vec<[f64; 3]> = built
+            .points_in_world
+            .iter()
+            .map(|&p| t0.apply(p).into())
+            .collect();
         let path = built
             .trajectory
             .iter()
-            .map(|tp| t0.apply(tp.world_from_robot.translation))
+            .map(|tp| t0.apply(tp.world_from_robot.translation).into())
             .collect();
         detail.push(trajectory_errors(&built, &t0, &motion));
         let x_sigma_per_m = built.x_sigma_per_m(&PipelineConfig::default().fusion);

@@ -599,7 +599,7 @@ fn cloud_and_path(
         ));
     }
     let cloud = Cloud {
-        points_m: built.points_in_world,
+        points_m: built.points_in_world.into_iter().map(Into::into).collect(),
     };
     Ok((
         cloud,
@@ -677,7 +677,7 @@ fn angles_of(
             WireZone::Tyre => Zone::Tyre,
             WireZone::Axle => Zone::Axle,
         },
-        scan_path_in_cloud: scan.path,
+        scan_path_in_cloud: scan.path.into_iter().map(Into::into).collect(),
         trajectory_x_sigma_per_m: scan.x_sigma_per_m,
         ..AnglesConfig::default()
     };
