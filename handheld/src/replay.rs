@@ -127,20 +127,19 @@ fn report(
         scan_path_in_cloud: built
             .trajectory
             .iter()
-            .map(|t| t.world_from_robot.translation.into())
+            .map(|t| t.world_from_robot.translation)
             .collect(),
         trajectory_x_sigma_per_m: x_sigma_per_m,
         ..AnglesConfig::default()
     };
     // The cloud is written either way; the command fails when the angles were not all measured,
     // so scripts see a non-zero exit.
-    let points: Vec<[f64; 3]> = built.points_in_world.iter().map(|&p| p.into()).collect();
-    let r = compute_angles(&points, &config)
+    let r = compute_angles(&built.points_in_world, &config)
         .with_context(|| format!("{}: computing the angles", path.display()));
     // Every standard's profile of the same cloud, in the JSON (as `passangle angles --json`).
     let profiles = match &r {
         Ok(found) if args.json => crate::angles::Profiles::compute(
-            &points,
+            &built.points_in_world,
             &config,
             found,
             &angles::profiles::Standard::ALL,

@@ -326,10 +326,16 @@ fn evaluate(scenario: &Scenario, scene: &Scene, built: &BuiltCloud, time: &Timin
         true_a.departure.angle_rad,
     ];
     let config = AnglesConfig {
-        scan_path_in_cloud: path_in_vehicle(built, &t0),
+        scan_path_in_cloud: path_in_vehicle(built, &t0)
+            .into_iter()
+            .map(Into::into)
+            .collect(),
         ..AnglesConfig::default()
     };
-    let angle_error_deg = match compute_angles(&in_vehicle, &config) {
+    let angle_error_deg = match compute_angles(
+        &in_vehicle.iter().map(|&p| p.into()).collect::<Vec<_>>(),
+        &config,
+    ) {
         Ok(r) => {
             let m = [&r.approach, &r.breakover, &r.departure]
                 .map(|a| a.as_ref().map_or(f64::NAN, |a| a.angle_rad));

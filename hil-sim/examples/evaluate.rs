@@ -292,11 +292,14 @@ fn run(
         (cloud, path, lidar.len(), cpu_s, x_sigma_per_m)
     };
     let config = AnglesConfig {
-        scan_path_in_cloud: path,
+        scan_path_in_cloud: path.into_iter().map(Into::into).collect(),
         trajectory_x_sigma_per_m: x_sigma_per_m,
         ..AnglesConfig::default()
     };
-    let (error_deg, u_deg, missing) = match compute_angles(&cloud, &config) {
+    let (error_deg, u_deg, missing) = match compute_angles(
+        &cloud.iter().map(|&p| p.into()).collect::<Vec<_>>(),
+        &config,
+    ) {
         Ok(r) => {
             let names = ["approach", "breakover", "departure"];
             detail.extend(witness_detail(&r, &truth, &scenario.vehicle));

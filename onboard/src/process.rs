@@ -677,12 +677,12 @@ fn angles_of(
             WireZone::Tyre => Zone::Tyre,
             WireZone::Axle => Zone::Axle,
         },
-        scan_path_in_cloud: scan.path.into_iter().map(Into::into).collect(),
+        scan_path_in_cloud: scan.path,
         trajectory_x_sigma_per_m: scan.x_sigma_per_m,
         ..AnglesConfig::default()
     };
-    let found =
-        compute_angles(&cloud.points_m, &angles_config).map_err(|e| format!("angles: {e}"))?;
+    let points: Vec<V3> = cloud.points_m.iter().map(|&p| p.into()).collect();
+    let found = compute_angles(&points, &angles_config).map_err(|e| format!("angles: {e}"))?;
     let mut result = wire_result(&found, cloud.points_m.len());
     if short_run {
         result.warnings.insert(ResultWarnings::SHORT_RUN);
@@ -699,7 +699,7 @@ fn angles_of(
     }
     let svg = side_view_svg(&found);
     let profiles = profile_records(&compute_profiles(
-        &cloud.points_m,
+        &points,
         &angles_config,
         Some(&found),
         &config.standards,
@@ -899,7 +899,7 @@ mod tests {
                     measure: Measure::Value {
                         value: 21.5,
                         u: 0.4,
-                        witness_in_vehicle: [0.0, 0.0, 0.3],
+                        witness_in_vehicle: V3::new(0.0, 0.0, 0.3),
                     },
                 },
                 ProfileQuantity {
