@@ -144,15 +144,9 @@ fn variants(mode: Mode, depth: bool, base: &PipelineConfig) -> Vec<Variant> {
     }
 }
 
+/// The simulator's transform as the pipeline's pose (both are `passangle_geom::Pose`).
 fn pose_of(iso: &Isometry) -> Pose {
-    Pose {
-        rotation: pipeline::geom::M3::from_fn(|i, j| iso.rotation.0[i][j]),
-        translation: pipeline::geom::V3::new(
-            iso.translation.x,
-            iso.translation.y,
-            iso.translation.z,
-        ),
-    }
+    *iso
 }
 
 /// The pipeline's mounts from the scenario's sensor configs.

@@ -60,11 +60,9 @@ use pipeline::map::FeatureMap;
 use pipeline::registration::{JointProblem, register_joint};
 use pipeline::{Candidates, LidarFrame, step1_planes, tagged_index};
 
+/// The simulator's transform as the pipeline's pose (both are `passangle_geom::Pose`).
 fn pose_of(iso: &Isometry) -> Pose {
-    Pose {
-        rotation: pipeline::geom::M3::from_fn(|i, j| iso.rotation.0[i][j]),
-        translation: V3::new(iso.translation.x, iso.translation.y, iso.translation.z),
-    }
+    *iso
 }
 
 struct Prepared {

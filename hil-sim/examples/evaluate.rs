@@ -121,15 +121,9 @@ fn entries(dir: &Path, groups: &[Group]) -> Vec<Entry> {
     out
 }
 
+/// The simulator's transform as the pipeline's pose (both are `passangle_geom::Pose`).
 fn pose_of(iso: &Isometry) -> Pose {
-    Pose {
-        rotation: pipeline::geom::M3::from_fn(|i, j| iso.rotation.0[i][j]),
-        translation: pipeline::geom::V3::new(
-            iso.translation.x,
-            iso.translation.y,
-            iso.translation.z,
-        ),
-    }
+    *iso
 }
 
 /// The scenario of one run: the template with the run's vehicle, world and seed, the robot from
