@@ -409,11 +409,11 @@ mod tests {
         for i in 0..150 {
             for j in 0..50 {
                 let (x, y) = (f64::from(i) * 0.002 + 0.001, f64::from(j) * 0.01);
-                points.push([
+                points.push(V3::new(
                     x + 0.008 * gaussian(&mut rng),
                     y,
                     0.40 + 0.001 * gaussian(&mut rng),
-                ]);
+                ));
             }
         }
         let mut samples = envelope_5mm(&points, 0.002);
@@ -437,8 +437,10 @@ mod tests {
     /// Without noise the envelope's extreme sample is exact and nothing is refined.
     #[test]
     fn noiseless_ends_are_left_alone() {
-        let points: Vec<[f64; 3]> = (0..100)
-            .flat_map(|i| (0..20).map(move |j| [f64::from(i) * 0.003, f64::from(j) * 0.01, 0.3]))
+        let points: Vec<V3> = (0..100)
+            .flat_map(|i| {
+                (0..20).map(move |j| V3::new(f64::from(i) * 0.003, f64::from(j) * 0.01, 0.3))
+            })
             .collect();
         let params = EnvelopeParams {
             bin_m: 0.005,
@@ -462,11 +464,11 @@ mod tests {
             let y = f64::from(j) * 0.01;
             for i in 0..150 {
                 let x = f64::from(i) * 0.002 + 0.001;
-                points.push([x + 0.004 * gaussian(&mut rng), y, 0.40]);
+                points.push(V3::new(x + 0.004 * gaussian(&mut rng), y, 0.40));
             }
             for k in 0..400 {
                 let z = 0.40 + f64::from(k) * 0.0005;
-                points.push([0.30 + 0.004 * gaussian(&mut rng), y, z]);
+                points.push(V3::new(0.30 + 0.004 * gaussian(&mut rng), y, z));
             }
         }
         let mut samples = envelope_5mm(&points, 0.002);
@@ -485,15 +487,15 @@ mod tests {
             let y = f64::from(j) * 0.005;
             for i in 0..150 {
                 let x = f64::from(i) * 0.002 + 0.001;
-                points.push([
+                points.push(V3::new(
                     x + 0.008 * gaussian(&mut rng),
                     y,
                     0.40 + 0.006 * gaussian(&mut rng),
-                ]);
+                ));
             }
             for _ in 0..10 {
                 let z = 0.40 + 0.12 * rng.random::<f64>();
-                points.push([0.30 + 0.008 * gaussian(&mut rng), y, z]);
+                points.push(V3::new(0.30 + 0.008 * gaussian(&mut rng), y, z));
             }
         }
         let mut samples = envelope_5mm(&points, 0.006);

@@ -22,6 +22,8 @@
 
 use std::collections::BTreeMap;
 
+use super::geom::V3;
+
 /// One envelope sample in the side view (vehicle frame x forward, z up).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct EnvelopeSample {
@@ -64,9 +66,9 @@ pub(crate) struct Envelope {
 /// Range noise projects unevenly (rays near the sensor's path see it vertically, grazing rays
 /// little), so this is a typical, not a worst-case, figure.
 /// `None` if fewer than 10 columns qualify.
-pub(crate) fn surface_noise(points: &[[f64; 3]]) -> Option<f64> {
+pub(crate) fn surface_noise(points: &[V3]) -> Option<f64> {
     const CELL_M: f64 = 0.03;
-    let mut keyed: Vec<((i64, i64), [f64; 3])> = points
+    let mut keyed: Vec<((i64, i64), V3)> = points
         .iter()
         .map(|p| {
             (
@@ -137,11 +139,11 @@ const ACROSS_REACH_M: f64 = 0.08;
 /// the corner of a part mixes the faces and whether a point is marked depended on where the grid
 /// fell (the sedan's departure sd moved between 0.13 and 0.23 with the cell size on the
 /// pipeline's clouds); a point is marked if either of two grids, offset by half a cell, marks it.
-pub(crate) fn across_path(points: &[[f64; 3]], inner_x_m: (f64, f64)) -> Vec<bool> {
+pub(crate) fn across_path(points: &[V3], inner_x_m: (f64, f64)) -> Vec<bool> {
     use passangle_geom::{VoxelMap, voxel_of};
-    let candidate = |p: &[f64; 3]| p[0] < inner_x_m.0 || p[0] > inner_x_m.1;
+    let candidate = |p: &V3| p[0] < inner_x_m.0 || p[0] > inner_x_m.1;
     // The lowest candidate point per column of one cell along x.
-    let column = |p: &[f64; 3]| [voxel_of(*p, ACROSS_CELL_M)[0], 0, 0];
+    let column = |p: &V3| [voxel_of(*p, ACROSS_CELL_M)[0], 0, 0];
     let mut lowest: VoxelMap<f64> = VoxelMap::default();
     for p in points.iter().filter(|p| candidate(p)) {
         let z = lowest.entry(column(p)).or_insert(f64::MAX);
@@ -153,7 +155,7 @@ pub(crate) fn across_path(points: &[[f64; 3]], inner_x_m: (f64, f64)) -> Vec<boo
         .filter(|(_, p)| candidate(p) && p[2] <= lowest[&column(p)] + ACROSS_REACH_M)
         .map(|(i, _)| i)
         .collect();
-    let near_points: Vec<[f64; 3]> = near.iter().map(|&i| points[i]).collect();
+    let near_points: Vec<V3> = near.iter().map(|&i| points[i]).collect();
     let mut marked = vec![false; points.len()];
     for offset_m in [0.0, 0.5 * ACROSS_CELL_M] {
         for (&i, across) in near.iter().zip(faces_across(&near_points, offset_m)) {
@@ -164,7 +166,7 @@ pub(crate) fn across_path(points: &[[f64; 3]], inner_x_m: (f64, f64)) -> Vec<boo
 }
 
 /// [`across_path`]'s test on one grid, shifted by `offset_m` along every axis.
-fn faces_across(points: &[[f64; 3]], offset_m: f64) -> Vec<bool> {
+fn faces_across(points: &[V3], offset_m: f64) -> Vec<bool> {
     use passangle_geom::{VoxelMap, voxel_of};
     // Each cell's moments, about its first point (so the sums stay small).
     let mut index: VoxelMap<u32> = VoxelMap::default();
@@ -174,7 +176,7 @@ fn faces_across(points: &[[f64; 3]], offset_m: f64) -> Vec<bool> {
         .map(|&p| {
             let key = voxel_of(p.map(|c| c + offset_m), ACROSS_CELL_M);
             let id = *index.entry(key).or_insert_with(|| {
-                cells.push((key, Moments::at(p)));
+                cells.push((key, Moments::at(p.into())));
                 (cells.len() - 1) as u32
             });
             cells[id as usize].1.add_point(p);
@@ -248,7 +250,7 @@ impl Moments {
         }
     }
 
-    fn add_point(&mut self, p: [f64; 3]) {
+    fn add_point(&mut self, p: V3) {
         let d: [f64; 3] = std::array::from_fn(|k| p[k] - self.origin[k]);
         self.n += 1.0;
         for (s, d) in self.s.iter_mut().zip(d) {
@@ -283,15 +285,15 @@ impl Moments {
             let (a, b) = Self::PAIRS[k];
             self.ss[k] / n - self.s[a] * self.s[b] / (n * n)
         });
-        let cov = [[c[0], c[1], c[2]], [c[1], c[3], c[4]], [c[2], c[4], c[5]]];
+        let cov = passangle_geom::M3::new(c[0], c[1], c[2], c[1], c[3], c[4], c[2], c[4], c[5]);
         // Eigenvalues ascending, eigenvectors as columns: the normal is column 0.
         passangle_geom::symmetric_eigen3(&cov)
-            .is_some_and(|(_, vectors)| vectors[0][0].abs() > ACROSS_MIN_NORMAL_X)
+            .is_some_and(|(_, vectors)| vectors[(0, 0)].abs() > ACROSS_MIN_NORMAL_X)
     }
 }
 
 /// Lower envelope of `points` (x, y, z), already restricted to the band.
-pub(crate) fn lower_envelope(points: &[[f64; 3]], params: EnvelopeParams) -> Envelope {
+pub(crate) fn lower_envelope(points: &[V3], params: EnvelopeParams) -> Envelope {
     let mut env = Envelope::default();
     let mut modes: Vec<BinMode> = Vec::new();
     let mut level = params;
@@ -350,12 +352,12 @@ impl BinMode {
 /// The lowest mode of every bin of `params.bin_m` into `modes`; returns the points of the bins
 /// without one and how many such bins there were.
 fn bin_modes(
-    points: &[[f64; 3]],
+    points: &[V3],
     params: EnvelopeParams,
     modes: &mut Vec<BinMode>,
     env: &mut Envelope,
-) -> (Vec<[f64; 3]>, usize) {
-    let mut keyed: Vec<(i64, [f64; 3])> = points
+) -> (Vec<V3>, usize) {
+    let mut keyed: Vec<(i64, V3)> = points
         .iter()
         .map(|p| ((p[0] / params.bin_m).floor() as i64, *p))
         .collect();
@@ -364,7 +366,7 @@ fn bin_modes(
     let mut sparse_bins = 0;
     for group in keyed.chunk_by(|a, b| a.0 == b.0) {
         let key = group[0].0;
-        let bin: Vec<[f64; 3]> = group.iter().map(|(_, p)| *p).collect();
+        let bin: Vec<V3> = group.iter().map(|(_, p)| *p).collect();
         if let Some((lo, hi)) = bin_mode(&bin, params) {
             env.outliers_below += lo;
             let mode = &bin[lo..hi];
@@ -391,11 +393,11 @@ pub(crate) const BETWEEN_AXLES_STRIP_M: f64 = 0.1;
 /// the side view's lower envelope is the lowest surface across the width, and one mode over the
 /// whole width mixes surfaces less than a window apart in height (the module's known bias).
 pub(crate) fn lower_envelope_strips(
-    points: &[[f64; 3]],
+    points: &[V3],
     params: EnvelopeParams,
     strip_m: f64,
 ) -> Envelope {
-    let mut strips: BTreeMap<i64, Vec<[f64; 3]>> = BTreeMap::new();
+    let mut strips: BTreeMap<i64, Vec<V3>> = BTreeMap::new();
     for p in points {
         strips
             .entry((p[1] / strip_m).floor() as i64)
@@ -478,7 +480,7 @@ const FRINGE_REACH_M: f64 = 0.02;
 const FRINGE_RATIO: usize = 2;
 
 /// Index range (into the height-sorted bin) of the lowest mode.
-fn bin_mode(bin: &[[f64; 3]], params: EnvelopeParams) -> Option<(usize, usize)> {
+fn bin_mode(bin: &[V3], params: EnvelopeParams) -> Option<(usize, usize)> {
     let (w, m) = (params.half_window_m, params.min_support.max(1));
     let n = bin.len();
     let mut j = 0;
@@ -533,18 +535,18 @@ fn bin_mode(bin: &[[f64; 3]], params: EnvelopeParams) -> Option<(usize, usize)> 
 }
 
 /// Lowest and highest y of `points`.
-fn y_range(points: &[[f64; 3]]) -> (f64, f64) {
+fn y_range(points: &[V3]) -> (f64, f64) {
     points.iter().fold((f64::MAX, f64::MIN), |(lo, hi), p| {
         (lo.min(p[1]), hi.max(p[1]))
     })
 }
 
-fn mean_z(points: &[[f64; 3]]) -> f64 {
+fn mean_z(points: &[V3]) -> f64 {
     points.iter().map(|p| p[2]).sum::<f64>() / points.len().max(1) as f64
 }
 
 /// The two samples of a bin: its mode's line at the lowest and the highest x.
-fn line_samples(mode: &[[f64; 3]], noise_m: f64) -> Vec<EnvelopeSample> {
+fn line_samples(mode: &[V3], noise_m: f64) -> Vec<EnvelopeSample> {
     let n = mode.len() as f64;
     let (mx, my, mz) = mode.iter().fold((0.0, 0.0, 0.0), |(a, b, c), p| {
         (a + p[0], b + p[1], c + p[2])
@@ -599,7 +601,7 @@ mod tests {
     /// dense disc-shaped end cap at x -1.0 (radius 6 cm, centre 0.27 m up), the cap's points
     /// smeared 3 mm along x, the surface's 2 mm in z; behind it a floor at 0.30 m to x -1.3.
     /// Returns the points and which are the cap's.
-    fn part_with_end_cap(x_shift_m: f64) -> (Vec<[f64; 3]>, Vec<bool>) {
+    fn part_with_end_cap(x_shift_m: f64) -> (Vec<V3>, Vec<bool>) {
         use rand::{Rng, SeedableRng};
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
         let mut gauss = move |sigma: f64| {
@@ -610,7 +612,7 @@ mod tests {
         for i in 0..=80 {
             for j in 0..=8 {
                 let (x, y) = (-1.0 + f64::from(i) * 0.005, 0.43 + f64::from(j) * 0.005);
-                points.push([x + x_shift_m, y, 0.21 + gauss(0.002)]);
+                points.push(V3::new(x + x_shift_m, y, 0.21 + gauss(0.002)));
                 is_cap.push(false);
             }
         }
@@ -619,7 +621,7 @@ mod tests {
         for i in 1..=30 {
             for j in 0..=30 {
                 let (x, y) = (-1.0 - f64::from(i) * 0.01, 0.30 + f64::from(j) * 0.01);
-                points.push([x + x_shift_m, y, 0.30 + gauss(0.002)]);
+                points.push(V3::new(x + x_shift_m, y, 0.30 + gauss(0.002)));
                 is_cap.push(false);
             }
         }
@@ -627,7 +629,11 @@ mod tests {
             for k in -24..=24 {
                 let (dy, dz) = (f64::from(j) * 0.0025, f64::from(k) * 0.0025);
                 if dy.hypot(dz) <= 0.06 {
-                    points.push([-1.0 + x_shift_m + gauss(0.003), 0.45 + dy, 0.27 + dz]);
+                    points.push(V3::new(
+                        -1.0 + x_shift_m + gauss(0.003),
+                        0.45 + dy,
+                        0.27 + dz,
+                    ));
                     is_cap.push(true);
                 }
             }
@@ -672,9 +678,9 @@ mod tests {
         let mut points = Vec::new();
         for k in 0..30 {
             let d = f64::from(k) * 1e-3;
-            points.push([1e12 + d, 1e12, 1e12 - d]);
-            points.push([-1e12, -1e12 - d, -1e12 + d]);
-            points.push([f64::MAX, f64::MIN, d]);
+            points.push(V3::new(1e12 + d, 1e12, 1e12 - d));
+            points.push(V3::new(-1e12, -1e12 - d, -1e12 + d));
+            points.push(V3::new(f64::MAX, f64::MIN, d));
         }
         let marked = across_path(&points, (-0.5, 0.5));
         assert_eq!(marked.len(), points.len());
@@ -691,7 +697,7 @@ mod tests {
             noise_m: 0.004,
         };
         // The rearmost sample below 0.25 m (the departure witness's candidate): x and height.
-        let rearmost = |pts: &[[f64; 3]]| {
+        let rearmost = |pts: &[V3]| {
             lower_envelope(pts, params)
                 .samples
                 .iter()
@@ -702,7 +708,7 @@ mod tests {
         let (_, lifted) = rearmost(&points);
         assert!(lifted > 0.22, "the cap lifts the last bins: {lifted}");
         let marked = across_path(&points, (-0.5, 2.5));
-        let kept: Vec<[f64; 3]> = points
+        let kept: Vec<V3> = points
             .iter()
             .zip(&marked)
             .filter(|(_, m)| !**m)
@@ -718,10 +724,10 @@ mod tests {
 
     #[test]
     fn single_low_outlier_is_ignored() {
-        let mut pts: Vec<[f64; 3]> = (0..40)
-            .map(|i| [0.005, f64::from(i) * 0.01, 0.30])
+        let mut pts: Vec<V3> = (0..40)
+            .map(|i| V3::new(0.005, f64::from(i) * 0.01, 0.30))
             .collect();
-        pts.push([0.005, 0.1, 0.10]);
+        pts.push(V3::new(0.005, 0.1, 0.10));
         let env = lower_envelope(&pts, P);
         assert_eq!(env.outliers_below, 1);
         assert!(
@@ -733,10 +739,10 @@ mod tests {
 
     #[test]
     fn narrow_low_feature_with_support_wins() {
-        let mut pts: Vec<[f64; 3]> = (0..40)
-            .map(|i| [0.005, f64::from(i) * 0.01, 0.30])
+        let mut pts: Vec<V3> = (0..40)
+            .map(|i| V3::new(0.005, f64::from(i) * 0.01, 0.30))
             .collect();
-        pts.extend((0..6).map(|i| [0.005, 0.5 + f64::from(i) * 0.005, 0.20]));
+        pts.extend((0..6).map(|i| V3::new(0.005, 0.5 + f64::from(i) * 0.005, 0.20)));
         let env = lower_envelope(&pts, P);
         assert!(
             env.samples
@@ -747,10 +753,10 @@ mod tests {
 
     #[test]
     fn sloped_surface_samples_lie_on_it() {
-        let pts: Vec<[f64; 3]> = (0..200)
+        let pts: Vec<V3> = (0..200)
             .map(|i| {
                 let x = f64::from(i % 20) * 0.0005;
-                [x, f64::from(i / 20) * 0.01, 0.25 + 0.3 * x]
+                V3::new(x, f64::from(i / 20) * 0.01, 0.25 + 0.3 * x)
             })
             .collect();
         let env = lower_envelope(
@@ -770,8 +776,8 @@ mod tests {
     /// twice the bin width; as thin a scatter over the widest bin is not.
     #[test]
     fn a_sparse_part_is_found_at_a_coarser_bin() {
-        let part: Vec<[f64; 3]> = (0..24)
-            .map(|i| [1.0 + f64::from(i) * 0.0025, 0.0, 0.45])
+        let part: Vec<V3> = (0..24)
+            .map(|i| V3::new(1.0 + f64::from(i) * 0.0025, 0.0, 0.45))
             .collect();
         let env = lower_envelope(&part, P);
         assert_eq!(env.unsupported_bins, 0);
@@ -788,8 +794,8 @@ mod tests {
         });
         assert!(lo < 1.003 && hi > 1.055, "the part spans {lo}..{hi}");
         // Four points over 4 cm never make a mode.
-        let thin: Vec<[f64; 3]> = (0..4)
-            .map(|i| [2.0 + f64::from(i) * 0.01, 0.0, 0.45])
+        let thin: Vec<V3> = (0..4)
+            .map(|i| V3::new(2.0 + f64::from(i) * 0.01, 0.0, 0.45))
             .collect();
         let env = lower_envelope(&thin, P);
         assert!(env.samples.is_empty());
@@ -798,7 +804,7 @@ mod tests {
 
     #[test]
     fn sparse_bins_are_reported_not_used() {
-        let pts = [[0.0, 0.0, 0.3], [0.0, 0.1, 0.5]];
+        let pts = [V3::new(0.0, 0.0, 0.3), V3::new(0.0, 0.1, 0.5)];
         let env = lower_envelope(&pts, P);
         assert!(env.samples.is_empty());
         assert_eq!(env.unsupported_bins, 1);
@@ -824,10 +830,10 @@ mod tests {
         for i in 0..20 {
             let x = f64::from(i) * 0.005;
             for j in 0..240 {
-                pts.push([x, -0.6 + f64::from(j) * 0.005, 0.19 + gauss()]);
+                pts.push(V3::new(x, -0.6 + f64::from(j) * 0.005, 0.19 + gauss()));
             }
             for j in 0..40 {
-                pts.push([x, 0.62 + f64::from(j) * 0.005, 0.18 + gauss()]);
+                pts.push(V3::new(x, 0.62 + f64::from(j) * 0.005, 0.18 + gauss()));
             }
         }
         let params = EnvelopeParams {
@@ -849,13 +855,13 @@ mod tests {
     #[test]
     fn narrow_part_under_wide_surface_is_not_a_tail() {
         let w = 0.004;
-        let mut pts: Vec<[f64; 3]> = (0..20)
+        let mut pts: Vec<V3> = (0..20)
             .map(|i| {
                 let jitter = if i % 2 == 0 { 0.001 } else { -0.001 };
-                [0.005, 0.40 + f64::from(i) * 0.005, 0.20 + jitter]
+                V3::new(0.005, 0.40 + f64::from(i) * 0.005, 0.20 + jitter)
             })
             .collect();
-        pts.extend((0..240).map(|i| [0.005, -0.6 + f64::from(i) * 0.005, 0.20 + 2.0 * w]));
+        pts.extend((0..240).map(|i| V3::new(0.005, -0.6 + f64::from(i) * 0.005, 0.20 + 2.0 * w)));
         let env = lower_envelope(
             &pts,
             EnvelopeParams {

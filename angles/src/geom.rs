@@ -1,31 +1,8 @@
-//! Small geometry helpers: 3-vectors, the vehicle frame, a least-squares plane and a circle fit.
+//! The calculator's own geometry on top of passangle-geom's vectors and operations: the vehicle
+//! frame, a least-squares plane, a circle fit with its covariance, and the median.
 
-/// A 3-vector or point, metres.
-pub type V3 = [f64; 3];
-
-pub(crate) fn sub(a: V3, b: V3) -> V3 {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-
-pub(crate) fn add(a: V3, b: V3) -> V3 {
-    [a[0] + b[0], a[1] + b[1], a[2] + b[2]]
-}
-
-pub(crate) fn scale(a: V3, s: f64) -> V3 {
-    [a[0] * s, a[1] * s, a[2] * s]
-}
-
-pub(crate) fn dot(a: V3, b: V3) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-
-pub(crate) fn cross(a: V3, b: V3) -> V3 {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
-}
+pub use passangle_geom::V3;
+pub(crate) use passangle_geom::{add, cross, dot, scale, sub};
 
 /// Unit vector along `a`, or `None` for a (near) zero vector.
 pub(crate) fn unit(a: V3) -> Option<V3> {
@@ -64,11 +41,11 @@ impl VehicleFrame {
     /// Coordinates of a cloud point in this frame.
     pub fn vehicle_from_cloud(&self, p_in_cloud: V3) -> V3 {
         let d = sub(p_in_cloud, self.origin_in_cloud);
-        [
+        V3::new(
             dot(d, self.x_axis_in_cloud),
             dot(d, self.y_axis_in_cloud),
             dot(d, self.z_axis_in_cloud),
-        ]
+        )
     }
 
     /// Cloud coordinates of a point given in this frame.
@@ -131,7 +108,7 @@ pub(crate) fn solve3(mut a: [[f64; 3]; 3], mut b: [f64; 3]) -> Option<[f64; 3]> 
 /// Least-squares plane `z = a x + b y + c` through points (centred for conditioning); returns the
 /// upward unit normal and a point on the plane. Suited to near-horizontal planes (tilt well under 45 degrees).
 pub(crate) fn fit_plane(points: impl Iterator<Item = V3> + Clone) -> Option<(V3, V3)> {
-    let (mut n, mut centre) = (0.0, [0.0; 3]);
+    let (mut n, mut centre) = (0.0, V3::zeros());
     for p in points.clone() {
         n += 1.0;
         centre = add(centre, p);
@@ -155,7 +132,7 @@ pub(crate) fn fit_plane(points: impl Iterator<Item = V3> + Clone) -> Option<(V3,
     }
     let a = (sxz * syy - syz * sxy) / det;
     let b = (syz * sxx - sxz * sxy) / det;
-    Some((unit([-a, -b, 1.0])?, centre))
+    Some((unit(V3::new(-a, -b, 1.0))?, centre))
 }
 
 /// A circle in a plane: centre `(u, v)` and radius.
@@ -342,21 +319,25 @@ mod tests {
         let pts: Vec<V3> = (0..100)
             .map(|i| {
                 let (x, y) = (f64::from(i % 10), f64::from(i / 10));
-                [x, y, 0.1 * x - 0.05 * y + 2.0]
+                V3::new(x, y, 0.1 * x - 0.05 * y + 2.0)
             })
             .collect();
         let (n, p) = fit_plane(pts.iter().copied()).unwrap();
-        let expect = unit([-0.1, 0.05, 1.0]).unwrap();
+        let expect = unit(V3::new(-0.1, 0.05, 1.0)).unwrap();
         assert!(dot(n, expect) > 1.0 - 1e-12);
         assert!((p[2] - (0.1 * p[0] - 0.05 * p[1] + 2.0)).abs() < 1e-12);
     }
 
     #[test]
     fn frame_round_trips() {
-        let f = VehicleFrame::from_up_forward([1.0, 2.0, 3.0], [0.05, -0.02, 1.0], [1.0, 0.3, 0.0])
-            .unwrap()
-            .yawed(0.2, [0.5, -0.1, 0.0]);
-        let p = [3.0, -1.0, 0.7];
+        let f = VehicleFrame::from_up_forward(
+            V3::new(1.0, 2.0, 3.0),
+            V3::new(0.05, -0.02, 1.0),
+            V3::new(1.0, 0.3, 0.0),
+        )
+        .unwrap()
+        .yawed(0.2, V3::new(0.5, -0.1, 0.0));
+        let p = V3::new(3.0, -1.0, 0.7);
         let q = f.cloud_from_vehicle(f.vehicle_from_cloud(p));
         assert!(sub(p, q).iter().all(|d| d.abs() < 1e-12));
     }

@@ -667,9 +667,9 @@ fn settle_frame(
         .ok_or(no_ground.clone())?;
     let mut plane = ground::refine(points, plane0, thr, |_| true).unwrap_or(plane0);
     let forward = if config.front_is_positive_x {
-        [1.0, 0.0, 0.0]
+        V3::new(1.0, 0.0, 0.0)
     } else {
-        [-1.0, 0.0, 0.0]
+        V3::new(-1.0, 0.0, 0.0)
     };
     let mut frame = frame_on(plane, points, forward).ok_or(no_ground)?;
     let (mut sigma, _) = ground::noise_sigma(points, plane, thr, |_| true);
@@ -700,7 +700,7 @@ fn settle_frame(
             warnings.extend(round_warnings);
             // Move the origin to mid-wheelbase on the centreline.
             let (front, rear) = axles(&fits, config, sigma);
-            let shift = [0.5 * (front.x_m + rear.x_m), centreline_y(&fits), 0.0];
+            let shift = V3::new(0.5 * (front.x_m + rear.x_m), centreline_y(&fits), 0.0);
             for (_, f) in &mut fits {
                 f.centre_x -= shift[0];
                 f.centre_y -= shift[1];
@@ -873,7 +873,7 @@ fn refine_ends(body: &mut Body, front: Axle, rear: Axle, zone: Zone) {
 /// projection of the points' centroid.
 fn frame_on(plane: Plane, points: &[V3], forward: V3) -> Option<VehicleFrame> {
     let n = points.len() as f64;
-    let c = points.iter().fold([0.0; 3], |a, p| geom::add(a, *p));
+    let c = points.iter().fold(V3::zeros(), |a, p| geom::add(a, *p));
     let c = geom::scale(c, 1.0 / n);
     let origin = sub(c, geom::scale(plane.normal, plane.height(c)));
     VehicleFrame::from_up_forward(origin, plane.normal, forward)
@@ -994,7 +994,7 @@ fn axle_heading(frame: &VehicleFrame, fits: &[(TyrePosition, TyreFit)]) -> Optio
         (n > 0.0).then(|| {
             let x = sel.iter().map(|f| f.centre_x).sum::<f64>() / n;
             let y = sel.iter().map(|f| f.centre_y).sum::<f64>() / n;
-            frame.cloud_from_vehicle([x, y, 0.0])
+            frame.cloud_from_vehicle(V3::new(x, y, 0.0))
         })
     };
     unit(sub(mid(true)?, mid(false)?))
@@ -1439,7 +1439,7 @@ fn find_angles(
 ) -> Findings {
     let (front_limit, rear_limit) = zone_limits(front, rear, zone);
     let finding = |s: &EnvelopeSample, angle_rad: f64, parts_rad: Option<(f64, f64)>| {
-        let w = [s.x_m, s.y_m, s.z_m];
+        let w = V3::new(s.x_m, s.y_m, s.z_m);
         AngleFinding {
             angle_rad,
             parts_rad,
@@ -1484,7 +1484,7 @@ fn find_angles(
             && s.x_m <= front.x_m
             && out.clearance.as_ref().is_none_or(|c| s.z_m < c.height_m)
         {
-            let w = [s.x_m, s.y_m, s.z_m];
+            let w = V3::new(s.x_m, s.y_m, s.z_m);
             out.clearance = Some(Clearance {
                 height_m: s.z_m,
                 witness_in_vehicle: w,
@@ -1511,7 +1511,7 @@ fn tyres_out(fits: &[(TyrePosition, TyreFit)], frame: &VehicleFrame) -> Vec<Tyre
     let mut out: Vec<Tyre> = fits
         .iter()
         .map(|(pos, f)| {
-            let c = [f.centre_x, f.centre_y, f.loaded_radius_m];
+            let c = V3::new(f.centre_x, f.centre_y, f.loaded_radius_m);
             Tyre {
                 position: *pos,
                 centre_in_vehicle: c,

@@ -595,7 +595,7 @@ fn sample_measure(s: &EnvelopeSample, r: &AnglesResult) -> Measure {
     Measure::Value {
         value: s.z_m,
         u: clearance_uncertainty(r).expanded,
-        witness_in_vehicle: [s.x_m, s.y_m, s.z_m],
+        witness_in_vehicle: V3::new(s.x_m, s.y_m, s.z_m),
     }
 }
 
@@ -776,7 +776,7 @@ fn derive(r: &AnglesResult, kind: QuantityKind) -> Measure {
                     Measure::Value {
                         value: h,
                         u: slope.abs() * u_z,
-                        witness_in_vehicle: [s.x_m, s.y_m, s.z_m],
+                        witness_in_vehicle: V3::new(s.x_m, s.y_m, s.z_m),
                     }
                 }
                 None => no_underside(which),
@@ -1138,17 +1138,17 @@ mod tests {
         let [(x0, x1), (y0, y1), (z0, z1)] = *p;
         for x in steps(x0, x1, S) {
             for y in steps(y0, y1, S) {
-                out.push([x, y, z0]);
+                out.push(V3::new(x, y, z0));
             }
             for z in steps(z0, z1, S) {
-                out.push([x, y0, z]);
-                out.push([x, y1, z]);
+                out.push(V3::new(x, y0, z));
+                out.push(V3::new(x, y1, z));
             }
         }
         for y in steps(y0, y1, S) {
             for z in steps(z0, z1, S) {
-                out.push([x0, y, z]);
-                out.push([x1, y, z]);
+                out.push(V3::new(x0, y, z));
+                out.push(V3::new(x1, y, z));
             }
         }
     }
@@ -1162,7 +1162,7 @@ mod tests {
                 let t = k as f64 / n as f64 * tau;
                 let z = LOADED_R + rho * t.sin();
                 if z >= 0.0 {
-                    out.push([xc + rho * t.cos(), y_in, z]);
+                    out.push(V3::new(xc + rho * t.cos(), y_in, z));
                 }
             }
         }
@@ -1174,7 +1174,7 @@ mod tests {
                 (LOADED_R + FREE_R * t.sin()).max(0.0),
             );
             for y in steps(y_in, y_out, S) {
-                out.push([x, y, z]);
+                out.push(V3::new(x, y, z));
             }
         }
     }
@@ -1199,7 +1199,7 @@ mod tests {
                 let t = i as f64 / n as f64;
                 let (x, z) = (x0 + (x1 - x0) * t, z0 + (z1 - z0) * t);
                 for y in steps(-hw, hw, S) {
-                    out.push([x, y, z]);
+                    out.push(V3::new(x, y, z));
                 }
             }
         }
@@ -1217,7 +1217,7 @@ mod tests {
                     && y.abs() >= INNER_Y - 0.001
                     && y.abs() <= INNER_Y + TYRE_W + 0.001;
                 if !under_tyre {
-                    out.push([x, y, 0.0]);
+                    out.push(V3::new(x, y, 0.0));
                 }
             }
         }
@@ -1359,7 +1359,7 @@ mod tests {
         Measure::Value {
             value,
             u,
-            witness_in_vehicle: [0.0; 3],
+            witness_in_vehicle: V3::zeros(),
         }
     }
 

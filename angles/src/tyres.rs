@@ -577,7 +577,7 @@ pub(super) mod tests {
                 let rho = (x - centre_x).hypot(z - loaded_m);
                 // Inside the free circle and above the flattened contact patch.
                 if rho > rim && rho < free_m && z > 0.0 {
-                    pts.push([x + noise_m * gauss(&mut rng), inner_y, z]);
+                    pts.push(V3::new(x + noise_m * gauss(&mut rng), inner_y, z));
                 }
             }
         }
@@ -589,19 +589,27 @@ pub(super) mod tests {
             }
             for y in steps(inner_y, inner_y + width) {
                 for side in [-1.0, 1.0] {
-                    pts.push([centre_x + side * h.sqrt() + noise_m * gauss(&mut rng), y, z]);
+                    pts.push(V3::new(
+                        centre_x + side * h.sqrt() + noise_m * gauss(&mut rng),
+                        y,
+                        z,
+                    ));
                 }
             }
         }
         for x in steps(centre_x - 1.2, centre_x + 1.2) {
             for y in steps(0.3, 1.1) {
-                pts.push([x, y, 0.002 * gauss(&mut rng)]);
+                pts.push(V3::new(x, y, 0.002 * gauss(&mut rng)));
             }
         }
         for side in [-1.0, 1.0] {
             for z in steps(0.17, 0.45) {
                 for y in steps(0.70, 0.90) {
-                    pts.push([centre_x + side * 0.46 + noise_m * gauss(&mut rng), y, z]);
+                    pts.push(V3::new(
+                        centre_x + side * 0.46 + noise_m * gauss(&mut rng),
+                        y,
+                        z,
+                    ));
                 }
             }
         }
@@ -659,7 +667,7 @@ pub(super) mod tests {
             for i in 0..=((z_hi - z_lo) / 0.005) as usize {
                 for j in 0..=20 {
                     let (y, z) = (0.70 + 0.01 * f64::from(j), z_lo + 0.005 * i as f64);
-                    pts.push([x + 0.004 * gauss(&mut rng), y, z]);
+                    pts.push(V3::new(x + 0.004 * gauss(&mut rng), y, z));
                 }
             }
         }

@@ -1,7 +1,9 @@
-//! Small fixed-size geometry and linear algebra for the pipeline: 3-vectors, rotation matrices,
-//! rigid poses with a 6-vector increment, symmetric eigen-decomposition, Cholesky solves, and a
-//! voxel hash index for nearest-neighbour queries. Written by hand (no nalgebra) because every
-//! system here is at most 6x6 and the per-frame budget is a few milliseconds.
+//! The pipeline's geometry on nalgebra: 3-vectors and 3x3 matrices are nalgebra's fixed-size
+//! types ([`V3`], [`M3`]); on them sit rigid poses with a 6-vector increment, Cholesky solves of
+//! the small normal equations, a closed-form symmetric 3x3 eigen-decomposition, and a voxel hash
+//! index for nearest-neighbour queries. The last three stay hand-written: nalgebra has no spatial
+//! index, and its general eigen and Cholesky code is slower here or sums in another order
+//! (docs/decisions/032-geometry-on-nalgebra.md).
 //!
 //! Increments are `[rx, ry, rz, tx, ty, tz]`: a rotation vector (radians, axis times angle) and a
 //! translation (metres). [`Pose::from_increment`] maps one to `(exp(r), t)`; robot-frame names
@@ -15,105 +17,105 @@
 use std::collections::HashMap;
 use std::hash::BuildHasherDefault;
 
-/// A 3-vector in metres (or a direction), `[x, y, z]`.
-pub type V3 = [f64; 3];
-/// A 3x3 matrix, row-major.
-pub type M3 = [[f64; 3]; 3];
-/// A 6-vector `[rx, ry, rz, tx, ty, tz]` (rotation vector in radians, translation in metres).
+pub use nalgebra;
+
+/// A 3-vector in metres (or a direction): nalgebra's column vector, `v[0]`, `v.x` and the
+/// operators read as usual.
+pub type V3 = nalgebra::Vector3<f64>;
+/// A 3x3 matrix (rotations, covariances); `m[(row, column)]`.
+pub type M3 = nalgebra::Matrix3<f64>;
+/// A 6-vector `[rx, ry, rz, tx, ty, tz]` (rotation vector in radians, translation in metres): the
+/// unknowns of the 6x6 normal equations that [`solve_spd`] solves, kept as a plain array like them.
 pub type Twist6 = [f64; 6];
+
+// The free functions below name nalgebra's own operations. nalgebra evaluates each of them with
+// the operations in the same order as the component expressions in their docs (a 3-vector's dot
+// product is `(x x' + y y') + z z'`, a matrix product sums over k = 0, 1, 2 in turn), so results
+// are bit for bit those of the written-out formulas. Their value is the pinned form at call sites
+// where a neighbouring expression would round differently: `scale(a, 1.0 / n)` multiplies by a
+// reciprocal where `a / n` divides.
 
 /// `a + b`.
 #[inline]
 pub fn add(a: V3, b: V3) -> V3 {
-    [a[0] + b[0], a[1] + b[1], a[2] + b[2]]
+    a + b
 }
 /// `a - b`.
 #[inline]
 pub fn sub(a: V3, b: V3) -> V3 {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+    a - b
 }
-/// `s * a`.
+/// `s * a`, component by component.
 #[inline]
 pub fn scale(a: V3, s: f64) -> V3 {
-    [a[0] * s, a[1] * s, a[2] * s]
+    a * s
 }
-/// Dot product.
+/// Dot product, `(a0 b0 + a1 b1) + a2 b2`.
 #[inline]
 pub fn dot(a: V3, b: V3) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+    a.dot(&b)
 }
 /// Cross product.
 #[inline]
 pub fn cross(a: V3, b: V3) -> V3 {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
+    a.cross(&b)
 }
-/// Euclidean norm.
+/// Euclidean norm, `sqrt(dot(a, a))`.
 #[inline]
 pub fn norm(a: V3) -> f64 {
-    dot(a, a).sqrt()
+    a.norm()
 }
 /// Squared distance.
 #[inline]
 pub fn dist2(a: V3, b: V3) -> f64 {
-    let d = sub(a, b);
-    dot(d, d)
+    let d = a - b;
+    d.dot(&d)
 }
 
 /// The identity matrix.
-pub const IDENTITY: M3 = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+pub const IDENTITY: M3 = M3::new(1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0);
 
 /// `m v`.
 #[inline]
 pub fn mat_vec(m: &M3, v: V3) -> V3 {
-    [dot(m[0], v), dot(m[1], v), dot(m[2], v)]
+    m * v
 }
 /// `a b`.
+#[inline]
 pub fn mat_mul(a: &M3, b: &M3) -> M3 {
-    let mut out = [[0.0; 3]; 3];
-    for (i, row) in out.iter_mut().enumerate() {
-        for (j, v) in row.iter_mut().enumerate() {
-            *v = (0..3).map(|k| a[i][k] * b[k][j]).sum();
-        }
-    }
-    out
+    a * b
 }
 /// `m^T`.
+#[inline]
 pub fn transpose(m: &M3) -> M3 {
-    [
-        [m[0][0], m[1][0], m[2][0]],
-        [m[0][1], m[1][1], m[2][1]],
-        [m[0][2], m[1][2], m[2][2]],
-    ]
+    m.transpose()
 }
 
-/// Rotation matrix of a rotation vector (Rodrigues).
+/// Rotation matrix of a rotation vector: Rodrigues' `I + a K + b K^2` with `K` the cross-product
+/// matrix of `r`, summed entry by entry as `I + (a K + b K^2)`. (nalgebra's
+/// `Rotation3::from_scaled_axis` builds the same rotation from a different formula, which rounds
+/// differently.)
 pub fn exp_so3(r: V3) -> M3 {
     let theta = norm(r);
-    let k = [[0.0, -r[2], r[1]], [r[2], 0.0, -r[0]], [-r[1], r[0], 0.0]];
+    let k = M3::new(0.0, -r[2], r[1], r[2], 0.0, -r[0], -r[1], r[0], 0.0);
     let (a, b) = if theta < 1e-9 {
         (1.0, 0.5)
     } else {
         (theta.sin() / theta, (1.0 - theta.cos()) / (theta * theta))
     };
-    let k2 = mat_mul(&k, &k);
-    let mut out = IDENTITY;
-    for i in 0..3 {
-        for j in 0..3 {
-            out[i][j] += a * k[i][j] + b * k2[i][j];
-        }
-    }
-    out
+    let k2 = k * k;
+    IDENTITY + (k * a + k2 * b)
 }
 
 /// Rotation vector of a rotation matrix (inverse of [`exp_so3`] for angles below pi).
 pub fn log_so3(m: &M3) -> V3 {
-    let c = ((m[0][0] + m[1][1] + m[2][2] - 1.0) / 2.0).clamp(-1.0, 1.0);
+    let c = ((m[(0, 0)] + m[(1, 1)] + m[(2, 2)] - 1.0) / 2.0).clamp(-1.0, 1.0);
     let theta = c.acos();
-    let w = [m[2][1] - m[1][2], m[0][2] - m[2][0], m[1][0] - m[0][1]];
+    let w = V3::new(
+        m[(2, 1)] - m[(1, 2)],
+        m[(0, 2)] - m[(2, 0)],
+        m[(1, 0)] - m[(0, 1)],
+    );
     let s = if theta < 1e-9 {
         0.5
     } else {
@@ -122,27 +124,49 @@ pub fn log_so3(m: &M3) -> V3 {
     scale(w, s)
 }
 
-/// Rotation from roll, pitch, yaw (radians): `Rz(yaw) Ry(pitch) Rx(roll)`.
+/// Rotation from roll, pitch, yaw (radians): `Rz(yaw) Ry(pitch) Rx(roll)`, each factor by
+/// [`exp_so3`].
 pub fn rot_from_rpy(roll_rad: f64, pitch_rad: f64, yaw_rad: f64) -> M3 {
-    let rx = exp_so3([roll_rad, 0.0, 0.0]);
-    let ry = exp_so3([0.0, pitch_rad, 0.0]);
-    let rz = exp_so3([0.0, 0.0, yaw_rad]);
-    mat_mul(&rz, &mat_mul(&ry, &rx))
+    let rx = exp_so3(V3::new(roll_rad, 0.0, 0.0));
+    let ry = exp_so3(V3::new(0.0, pitch_rad, 0.0));
+    let rz = exp_so3(V3::new(0.0, 0.0, yaw_rad));
+    rz * (ry * rx)
 }
 
 /// Roll, pitch, yaw (radians) of a rotation built by [`rot_from_rpy`].
 pub fn rpy_of(m: &M3) -> V3 {
-    let pitch = (-m[2][0]).clamp(-1.0, 1.0).asin();
-    [m[2][1].atan2(m[2][2]), pitch, m[1][0].atan2(m[0][0])]
+    let pitch = (-m[(2, 0)]).clamp(-1.0, 1.0).asin();
+    V3::new(
+        m[(2, 1)].atan2(m[(2, 2)]),
+        pitch,
+        m[(1, 0)].atan2(m[(0, 0)]),
+    )
 }
 
-/// A rigid transform `b_from_a`: `p_b = rotation p_a + translation`.
-#[derive(Debug, Clone, Copy, PartialEq)]
+/// A rigid transform `b_from_a`: `p_b = rotation p_a + translation`. The same map as nalgebra's
+/// [`nalgebra::IsometryMatrix3`] (see the `From` conversions), with the pipeline's constructors
+/// and its increment and interpolation on top.
+#[derive(Clone, Copy, PartialEq)]
 pub struct Pose {
     /// Rotation matrix.
     pub rotation: M3,
     /// Translation, metres.
     pub translation: V3,
+}
+
+/// The rotation as its rows and the translation as `[x, y, z]`, as plain arrays: the text that
+/// logs, reports and the pipeline's golden digests (`tests/golden/synthetic-runs.txt`) hold.
+/// nalgebra's own `Debug` would print the matrix column by column.
+impl std::fmt::Debug for Pose {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let rows: [[f64; 3]; 3] =
+            std::array::from_fn(|i| std::array::from_fn(|j| self.rotation[(i, j)]));
+        let translation: [f64; 3] = self.translation.into();
+        f.debug_struct("Pose")
+            .field("rotation", &rows)
+            .field("translation", &translation)
+            .finish()
+    }
 }
 
 impl Default for Pose {
@@ -151,26 +175,46 @@ impl Default for Pose {
     }
 }
 
+impl From<Pose> for nalgebra::IsometryMatrix3<f64> {
+    fn from(pose: Pose) -> Self {
+        Self::from_parts(
+            pose.translation.into(),
+            nalgebra::Rotation3::from_matrix_unchecked(pose.rotation),
+        )
+    }
+}
+
+impl From<nalgebra::IsometryMatrix3<f64>> for Pose {
+    fn from(iso: nalgebra::IsometryMatrix3<f64>) -> Self {
+        Self {
+            rotation: iso.rotation.into_inner(),
+            translation: iso.translation.vector,
+        }
+    }
+}
+
 impl Pose {
     /// The identity transform.
     pub const IDENTITY: Self = Self {
         rotation: IDENTITY,
-        translation: [0.0; 3],
+        translation: V3::new(0.0, 0.0, 0.0),
     };
 
-    /// From a translation and roll, pitch, yaw.
-    pub fn from_xyz_rpy(xyz_m: V3, rpy_rad: V3) -> Self {
+    /// From a translation and roll, pitch, yaw (see [`rot_from_rpy`]); either may be given as an
+    /// array (a configuration's `[x, y, z]`).
+    pub fn from_xyz_rpy(xyz_m: impl Into<V3>, rpy_rad: impl Into<V3>) -> Self {
+        let rpy_rad = rpy_rad.into();
         Self {
             rotation: rot_from_rpy(rpy_rad[0], rpy_rad[1], rpy_rad[2]),
-            translation: xyz_m,
+            translation: xyz_m.into(),
         }
     }
 
     /// `(exp(r), t)` of an increment `[rx, ry, rz, tx, ty, tz]`.
     pub fn from_increment(d: Twist6) -> Self {
         Self {
-            rotation: exp_so3([d[0], d[1], d[2]]),
-            translation: [d[3], d[4], d[5]],
+            rotation: exp_so3(V3::new(d[0], d[1], d[2])),
+            translation: V3::new(d[3], d[4], d[5]),
         }
     }
 
@@ -182,20 +226,22 @@ impl Pose {
     }
 
     /// Transform a point.
+    #[inline]
     pub fn apply(&self, p: V3) -> V3 {
-        add(mat_vec(&self.rotation, p), self.translation)
+        self.rotation * p + self.translation
     }
 
     /// Rotate a direction.
+    #[inline]
     pub fn apply_vector(&self, v: V3) -> V3 {
-        mat_vec(&self.rotation, v)
+        self.rotation * v
     }
 
     /// `self * other` (`c_from_a = c_from_b * b_from_a`).
     #[must_use]
     pub fn compose(&self, other: &Self) -> Self {
         Self {
-            rotation: mat_mul(&self.rotation, &other.rotation),
+            rotation: self.rotation * other.rotation,
             translation: self.apply(other.translation),
         }
     }
@@ -203,10 +249,10 @@ impl Pose {
     /// The inverse transform.
     #[must_use]
     pub fn inverse(&self) -> Self {
-        let rt = transpose(&self.rotation);
+        let rt = self.rotation.transpose();
         Self {
             rotation: rt,
-            translation: scale(mat_vec(&rt, self.translation), -1.0),
+            translation: scale(rt * self.translation, -1.0),
         }
     }
 
@@ -219,10 +265,10 @@ impl Pose {
     /// along the geodesic.
     #[must_use]
     pub fn interpolate(&self, other: &Self, s: f64) -> Self {
-        let delta = mat_mul(&transpose(&self.rotation), &other.rotation);
+        let delta = self.rotation.transpose() * other.rotation;
         let r = scale(log_so3(&delta), s);
         Self {
-            rotation: mat_mul(&self.rotation, &exp_so3(r)),
+            rotation: self.rotation * exp_so3(r),
             translation: add(
                 self.translation,
                 scale(sub(other.translation, self.translation), s),
@@ -232,7 +278,8 @@ impl Pose {
 }
 
 /// Solve the symmetric positive definite system `a x = b` (n <= 6) by Cholesky. `None` when `a`
-/// is not positive definite.
+/// is not positive definite. Written out rather than nalgebra's `Cholesky`, which accumulates each
+/// entry's sum in another order (and so rounds differently).
 pub fn solve_spd<const N: usize>(a: &[[f64; N]; N], b: &[f64; N]) -> Option<[f64; N]> {
     let mut l = [[0.0; N]; N];
     for i in 0..N {
@@ -260,23 +307,35 @@ pub fn solve_spd<const N: usize>(a: &[[f64; N]; N], b: &[f64; N]) -> Option<[f64
 }
 
 /// Eigenvalues (ascending) and eigenvectors (as columns: `vectors[k][i]` is component k of vector
-/// i) of a symmetric matrix. 3x3 matrices (every covariance in the pipeline) take the closed form
-/// of [`symmetric_eigen3`]; other sizes, and 3x3 input with non-finite entries, take cyclic Jacobi
-/// rotations ([`symmetric_eigen_jacobi`]).
+/// i) of a symmetric matrix given as rows (the 6x6 normal equations). 3x3 input takes the closed
+/// form of [`symmetric_eigen3`]; other sizes, and 3x3 input with non-finite entries, take cyclic
+/// Jacobi rotations ([`symmetric_eigen_jacobi`]).
 pub fn symmetric_eigen<const N: usize>(m: &[[f64; N]; N]) -> ([f64; N], [[f64; N]; N]) {
     if N == 3 {
-        let m3: M3 = std::array::from_fn(|i| std::array::from_fn(|j| m[i][j]));
+        let m3 = M3::from_fn(|i, j| m[i][j]);
         if let Some((values, vectors)) = symmetric_eigen3(&m3) {
             return (
                 std::array::from_fn(|i| values[i]),
-                std::array::from_fn(|i| std::array::from_fn(|j| vectors[i][j])),
+                std::array::from_fn(|i| std::array::from_fn(|j| vectors[(i, j)])),
             );
         }
     }
     symmetric_eigen_jacobi(m)
 }
 
-/// [`symmetric_eigen`] of a 3x3 symmetric matrix without iteration (D. Eberly, "A Robust
+/// [`symmetric_eigen`] of a 3x3 matrix (a covariance): eigenvalues ascending, eigenvectors as the
+/// columns of the matrix (`vectors.column(0)` belongs to the smallest). The closed form of
+/// [`symmetric_eigen3`], or Jacobi for input with non-finite entries.
+pub fn symmetric_eigen_m3(m: &M3) -> (V3, M3) {
+    symmetric_eigen3(m).unwrap_or_else(|| {
+        let rows: [[f64; 3]; 3] = std::array::from_fn(|i| std::array::from_fn(|j| m[(i, j)]));
+        let (values, vectors) = symmetric_eigen_jacobi(&rows);
+        (V3::from(values), M3::from_fn(|i, j| vectors[i][j]))
+    })
+}
+
+/// Eigenvalues (ascending) and eigenvectors (as the columns of the matrix returned) of a 3x3
+/// symmetric matrix without iteration (D. Eberly, "A Robust
 /// Eigensolver for 3x3 Symmetric Matrices", Geometric Tools, 2014): the eigenvalues from the
 /// trigonometric solution of the characteristic cubic of the shifted, scaled matrix; the
 /// eigenvector of the eigenvalue farther from the other two from the largest cross product of
@@ -284,32 +343,32 @@ pub fn symmetric_eigen<const N: usize>(m: &[[f64; N]; N]) -> ([f64; N], [[f64; N
 /// (see `refine3`). Eigenvalues carry an absolute error of a few ulps of the largest entry
 /// (Jacobi is more accurate for eigenvalues far below that, which nothing here needs);
 /// eigenvectors an angle error of about that over the eigenvalue gap. `None` when an entry is not
-/// finite.
+/// finite. Kept beside nalgebra's iterative `SymmetricEigen` because it is faster on the
+/// pipeline's covariances (docs/decisions/032-geometry-on-nalgebra.md).
 pub fn symmetric_eigen3(m: &M3) -> Option<(V3, M3)> {
-    if m.iter().flatten().any(|v| !v.is_finite()) {
+    if m.iter().any(|v| !v.is_finite()) {
         return None;
     }
-    let max = m.iter().flatten().fold(0.0_f64, |a, &v| a.max(v.abs()));
+    let max = m.iter().fold(0.0_f64, |a, &v| a.max(v.abs()));
     if max == 0.0 {
-        return Some(([0.0; 3], IDENTITY));
+        return Some((V3::zeros(), IDENTITY));
     }
     // Scale to entries in [-1, 1] so the cubic's terms neither overflow nor underflow.
-    let a = m.map(|row| row.map(|v| v / max));
-    let off = a[0][1] * a[0][1] + a[0][2] * a[0][2] + a[1][2] * a[1][2];
+    let a = m.map(|v| v / max);
+    let off = a[(0, 1)] * a[(0, 1)] + a[(0, 2)] * a[(0, 2)] + a[(1, 2)] * a[(1, 2)];
     let (values, columns) = if off > 0.0 {
         refine3(&a, eigenvalues3(&a))
     } else {
         diagonal3(&a)
     };
-    let vectors = std::array::from_fn(|k| std::array::from_fn(|i| columns[i][k]));
-    Some((scale(values, max), vectors))
+    Some((scale(values, max), M3::from_columns(&columns)))
 }
 
 /// Ascending eigenvalues of a scaled symmetric 3x3 matrix with a non-zero off-diagonal part.
 fn eigenvalues3(a: &M3) -> V3 {
-    let q = (a[0][0] + a[1][1] + a[2][2]) / 3.0;
-    let (b00, b11, b22) = (a[0][0] - q, a[1][1] - q, a[2][2] - q);
-    let (a01, a02, a12) = (a[0][1], a[0][2], a[1][2]);
+    let q = (a[(0, 0)] + a[(1, 1)] + a[(2, 2)]) / 3.0;
+    let (b00, b11, b22) = (a[(0, 0)] - q, a[(1, 1)] - q, a[(2, 2)] - q);
+    let (a01, a02, a12) = (a[(0, 1)], a[(0, 2)], a[(1, 2)]);
     let p = ((b00 * b00 + b11 * b11 + b22 * b22 + 2.0 * (a01 * a01 + a02 * a02 + a12 * a12)) / 6.0)
         .sqrt();
     let c00 = b11 * b22 - a12 * a12;
@@ -322,11 +381,11 @@ fn eigenvalues3(a: &M3) -> V3 {
     // 2 cos(angle + 2 pi / 3).
     let beta0 = -cos - 1.732_050_807_568_877_2 * sin;
     let beta1 = -(beta0 + beta2);
-    [q + p * beta0, q + p * beta1, q + p * beta2]
+    V3::new(q + p * beta0, q + p * beta1, q + p * beta2)
 }
 
-/// Refined eigenvalues and unit eigenvectors (one per row, ascending) of a scaled symmetric 3x3
-/// matrix from its approximate eigenvalues `values`.
+/// Refined eigenvalues and unit eigenvectors (ascending) of a scaled symmetric 3x3 matrix from
+/// its approximate eigenvalues `values`.
 ///
 /// The trigonometric eigenvalues lose accuracy where two of them nearly coincide (the arc cosine
 /// is steep next to +-1: a relative error up to about 1e-8). So only the eigenvalue farther from
@@ -362,24 +421,20 @@ fn refine3(a: &M3, values: V3) -> (V3, [V3; 3]) {
     let low = add(scale(u, -y), scale(v, x));
     let mut pairs = [(w_value, w), (mean - radius, low), (mean + radius, high)];
     pairs.sort_by(|p, q| p.0.total_cmp(&q.0));
-    (pairs.map(|p| p.0), pairs.map(|p| p.1))
+    (V3::from(pairs.map(|p| p.0)), pairs.map(|p| p.1))
 }
 
 /// The eigenvector of a simple eigenvalue: the longest cross product of two rows of
 /// `A - value I` (the rows span the plane orthogonal to it).
 fn eigenvector_isolated(a: &M3, value: f64) -> V3 {
-    let r0 = [a[0][0] - value, a[0][1], a[0][2]];
-    let r1 = [a[0][1], a[1][1] - value, a[1][2]];
-    let r2 = [a[0][2], a[1][2], a[2][2] - value];
+    let r0 = V3::new(a[(0, 0)] - value, a[(0, 1)], a[(0, 2)]);
+    let r1 = V3::new(a[(0, 1)], a[(1, 1)] - value, a[(1, 2)]);
+    let r2 = V3::new(a[(0, 2)], a[(1, 2)], a[(2, 2)] - value);
     let candidates = [cross(r0, r1), cross(r0, r2), cross(r1, r2)];
-    let (best, len2) =
-        candidates
-            .iter()
-            .map(|&c| (c, dot(c, c)))
-            .fold(
-                ([1.0, 0.0, 0.0], 0.0),
-                |acc, c| if c.1 > acc.1 { c } else { acc },
-            );
+    let (best, len2) = candidates
+        .iter()
+        .map(|&c| (c, dot(c, c)))
+        .fold((V3::x(), 0.0), |acc, c| if c.1 > acc.1 { c } else { acc });
     if len2 > 0.0 {
         scale(best, 1.0 / len2.sqrt())
     } else {
@@ -390,9 +445,15 @@ fn eigenvector_isolated(a: &M3, value: f64) -> V3 {
 /// Two unit vectors completing the unit vector `w` to an orthonormal basis.
 fn orthogonal_complement(w: V3) -> (V3, V3) {
     let u = if w[0].abs() > w[1].abs() {
-        scale([-w[2], 0.0, w[0]], 1.0 / (w[0] * w[0] + w[2] * w[2]).sqrt())
+        scale(
+            V3::new(-w[2], 0.0, w[0]),
+            1.0 / (w[0] * w[0] + w[2] * w[2]).sqrt(),
+        )
     } else {
-        scale([0.0, w[2], -w[1]], 1.0 / (w[1] * w[1] + w[2] * w[2]).sqrt())
+        scale(
+            V3::new(0.0, w[2], -w[1]),
+            1.0 / (w[1] * w[1] + w[2] * w[2]).sqrt(),
+        )
     };
     (u, cross(w, u))
 }
@@ -400,9 +461,9 @@ fn orthogonal_complement(w: V3) -> (V3, V3) {
 /// Eigen-decomposition of a diagonal matrix: its entries, ascending, with the axes.
 fn diagonal3(a: &M3) -> (V3, [V3; 3]) {
     let mut order = [0, 1, 2];
-    order.sort_by(|&i, &j| a[i][i].total_cmp(&a[j][j]));
-    let values = order.map(|i| a[i][i]);
-    let vectors = order.map(|i| IDENTITY[i]);
+    order.sort_by(|&i, &j| a[(i, i)].total_cmp(&a[(j, j)]));
+    let values = V3::from(order.map(|i| a[(i, i)]));
+    let vectors = order.map(|i| IDENTITY.column(i).into_owned());
     (values, vectors)
 }
 
@@ -472,7 +533,7 @@ pub fn symmetric_eigen_jacobi<const N: usize>(m: &[[f64; N]; N]) -> ([f64; N], [
 /// Centroid and covariance of points; `None` for an empty set.
 pub fn centroid_covariance(points: impl Iterator<Item = V3> + Clone) -> Option<(V3, M3)> {
     let mut n = 0.0;
-    let mut c = [0.0; 3];
+    let mut c = V3::zeros();
     for p in points.clone() {
         c = add(c, p);
         n += 1.0;
@@ -495,7 +556,7 @@ pub fn centroid_covariance(points: impl Iterator<Item = V3> + Clone) -> Option<(
     let s = s.map(|v| v / n);
     Some((
         c,
-        [[s[0], s[1], s[2]], [s[1], s[3], s[4]], [s[2], s[4], s[5]]],
+        M3::new(s[0], s[1], s[2], s[1], s[3], s[4], s[2], s[4], s[5]),
     ))
 }
 
@@ -510,7 +571,11 @@ pub type VoxelMap<T> = HashMap<[i32; 3], T, BuildHasherDefault<FxHasher>>;
 /// ends of `i32` (NaN gives 0).
 #[inline]
 pub fn voxel_of(p: V3, size_m: f64) -> [i32; 3] {
-    p.map(|c| floor_i32(c / size_m))
+    [
+        floor_i32(p.x / size_m),
+        floor_i32(p.y / size_m),
+        floor_i32(p.z / size_m),
+    ]
 }
 
 /// `x.floor() as i32` without the libm call that `floor` becomes on targets without SSE4.1:
@@ -800,8 +865,8 @@ impl VoxelIndex {
     /// outnumber the occupied voxels (then a scan of every cell is cheaper and always terminates).
     fn voxel_range(&self, q: V3, radius_m: f64) -> Option<([i32; 3], [i32; 3])> {
         let reach = radius_m + BOUND_SLACK_M;
-        let lo = voxel_of(sub(q, [reach; 3]), self.voxel_m);
-        let hi = voxel_of(add(q, [reach; 3]), self.voxel_m);
+        let lo = voxel_of(sub(q, V3::repeat(reach)), self.voxel_m);
+        let hi = voxel_of(add(q, V3::repeat(reach)), self.voxel_m);
         let count: f64 = (0..3)
             .map(|k| f64::from(hi[k]) - f64::from(lo[k]) + 1.0)
             .product();
@@ -892,7 +957,11 @@ mod tests {
 
     #[test]
     fn exp_log_round_trip() {
-        for r in [[0.1, -0.2, 0.3], [0.0, 0.0, 1e-12], [1.5, 0.2, -0.7]] {
+        for r in [
+            V3::new(0.1, -0.2, 0.3),
+            V3::new(0.0, 0.0, 1e-12),
+            V3::new(1.5, 0.2, -0.7),
+        ] {
             let back = log_so3(&exp_so3(r));
             for k in 0..3 {
                 assert!(close(back[k], r[k], 1e-9), "{r:?} -> {back:?}");
@@ -908,7 +977,7 @@ mod tests {
         assert!(close(rpy[2], 2.0, 1e-12));
         let id = pose.compose(&pose.inverse());
         assert!(norm(id.translation) < 1e-12);
-        let p = [0.3, 0.4, -0.2];
+        let p = V3::new(0.3, 0.4, -0.2);
         let q = pose.inverse().apply(pose.apply(p));
         assert!(dist2(p, q) < 1e-24);
     }
@@ -944,11 +1013,11 @@ mod tests {
         let points: Vec<V3> = (0..500)
             .map(|i| {
                 let f = f64::from(i);
-                [(f * 0.37).sin(), (f * 0.11).cos(), (f * 0.05).sin() * 0.5]
+                V3::new((f * 0.37).sin(), (f * 0.11).cos(), (f * 0.05).sin() * 0.5)
             })
             .collect();
         let index = VoxelIndex::new(points.clone(), 0.3);
-        let q = [0.1, 0.2, 0.0];
+        let q = V3::new(0.1, 0.2, 0.0);
         let mut out = [(0.0, 0); 5];
         let n = index.nearest(q, 0.3, &mut out);
         let mut brute: Vec<(f64, u32)> = points
@@ -965,19 +1034,15 @@ mod tests {
     /// A seeded random symmetric matrix: `R diag(values) R^T` with a random rotation.
     fn random_symmetric(rng: &mut rand_chacha::ChaCha8Rng, values: V3) -> M3 {
         use rand::Rng;
-        let r = exp_so3([
+        let r = exp_so3(V3::new(
             rng.random_range(-3.0..3.0),
             rng.random_range(-3.0..3.0),
             rng.random_range(-3.0..3.0),
-        ]);
-        let d = [
-            [values[0], 0.0, 0.0],
-            [0.0, values[1], 0.0],
-            [0.0, 0.0, values[2]],
-        ];
+        ));
+        let d = M3::from_diagonal(&values);
         let m = mat_mul(&r, &mat_mul(&d, &transpose(&r)));
         // Exactly symmetric, as a covariance is.
-        std::array::from_fn(|i| std::array::from_fn(|j| 0.5 * (m[i][j] + m[j][i])))
+        M3::from_fn(|i, j| 0.5 * (m[(i, j)] + m[(j, i)]))
     }
 
     #[test]
@@ -999,18 +1064,19 @@ mod tests {
                     s * rng.random_range(0.0..1.0),
                 ],
             };
-            let m = random_symmetric(&mut rng, values);
+            let m = random_symmetric(&mut rng, V3::from(values));
             let (fast, fast_vectors) = symmetric_eigen3(&m).unwrap();
-            let scale_m = m.iter().flatten().fold(0.0_f64, |a, v| a.max(v.abs()));
+            let scale_m = m.iter().fold(0.0_f64, |a, v| a.max(v.abs()));
             // Jacobi stops on an absolute off-diagonal size: give it entries of order one.
-            let (slow, slow_vectors) = symmetric_eigen_jacobi(&m.map(|r| r.map(|v| v / scale_m)));
-            let slow = scale(slow, scale_m);
+            let rows = std::array::from_fn(|i| std::array::from_fn(|j| m[(i, j)] / scale_m));
+            let (slow, slow_vectors) = symmetric_eigen_jacobi(&rows);
+            let slow = scale(V3::from(slow), scale_m);
             for i in 0..3 {
                 assert!(
                     close(fast[i], slow[i], 1e-13 * scale_m),
                     "{m:?}: {fast:?} {slow:?}"
                 );
-                let v = [fast_vectors[0][i], fast_vectors[1][i], fast_vectors[2][i]];
+                let v: V3 = fast_vectors.column(i).into_owned();
                 assert!(close(norm(v), 1.0, 1e-12), "{m:?}: |v{i}| = {}", norm(v));
                 let residual = sub(mat_vec(&m, v), scale(v, fast[i]));
                 assert!(norm(residual) <= 1e-12 * scale_m, "{m:?}: {residual:?}");
@@ -1020,13 +1086,13 @@ mod tests {
                     .map(|j| (slow[j] - slow[i]).abs())
                     .fold(f64::INFINITY, f64::min);
                 if gap > 1e-3 * scale_m {
-                    let w = [slow_vectors[0][i], slow_vectors[1][i], slow_vectors[2][i]];
+                    let w = V3::new(slow_vectors[0][i], slow_vectors[1][i], slow_vectors[2][i]);
                     assert!(close(dot(v, w).abs(), 1.0, 1e-9), "{m:?}: {v:?} vs {w:?}");
                 }
             }
             let (v0, v1) = (
-                [fast_vectors[0][0], fast_vectors[1][0], fast_vectors[2][0]],
-                [fast_vectors[0][1], fast_vectors[1][1], fast_vectors[2][1]],
+                fast_vectors.column(0).into_owned(),
+                fast_vectors.column(1).into_owned(),
             );
             assert!(dot(v0, v1).abs() < 1e-12, "{m:?}");
         }
@@ -1039,8 +1105,21 @@ mod tests {
             symmetric_eigen(&[[3.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, 2.0]]);
         assert_eq!(values, [-1.0, 2.0, 3.0]);
         assert_eq!(vectors, [[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]);
-        assert_eq!(symmetric_eigen(&[[0.0; 3]; 3]), ([0.0; 3], IDENTITY));
-        assert!(symmetric_eigen3(&[[f64::NAN, 0.0, 0.0], [0.0; 3], [0.0; 3]]).is_none());
+        assert_eq!(
+            symmetric_eigen(&[[0.0; 3]; 3]),
+            (
+                [0.0; 3],
+                [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]
+            )
+        );
+        assert_eq!(
+            symmetric_eigen3(&M3::zeros()),
+            Some((V3::zeros(), IDENTITY))
+        );
+        let nan = M3::new(f64::NAN, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
+        assert!(symmetric_eigen3(&nan).is_none());
+        // The 3x3 entry point falls back to Jacobi without panicking.
+        let _ = symmetric_eigen_m3(&nan);
         // The generic entry point still answers (by Jacobi) without panicking.
         let _ = symmetric_eigen(&[[f64::INFINITY, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0; 3]]);
         // Other sizes take Jacobi.
@@ -1069,16 +1148,16 @@ mod tests {
         // Random points plus a grid (exact ties in distance) plus duplicates.
         let mut points: Vec<V3> = (0..1500)
             .map(|_| {
-                [
+                V3::new(
                     rng.random_range(-2.0..2.0),
                     rng.random_range(-1.0..1.0),
                     rng.random_range(-0.5..0.5),
-                ]
+                )
             })
             .collect();
         for i in 0..10 {
             for j in 0..10 {
-                points.push([f64::from(i) * 0.1, f64::from(j) * 0.1, 0.0]);
+                points.push(V3::new(f64::from(i) * 0.1, f64::from(j) * 0.1, 0.0));
             }
         }
         points.extend_from_within(0..50);
@@ -1092,17 +1171,17 @@ mod tests {
             for case in 0..300 {
                 let q = if case % 3 == 0 {
                     // On the grid: many equal distances.
-                    [
+                    V3::new(
                         f64::from(rng.random_range(0..10)) * 0.1,
                         f64::from(rng.random_range(0..10)) * 0.1,
                         0.0,
-                    ]
+                    )
                 } else {
-                    [
+                    V3::new(
                         rng.random_range(-2.2..2.2),
                         rng.random_range(-1.2..1.2),
                         rng.random_range(-0.6..0.6),
-                    ]
+                    )
                 };
                 let r = [0.0, 0.05, 0.1, 0.2, 0.35, 1.0, 10.0][case % 7];
                 let want = brute_nearest(&points, q, r, 5);
@@ -1129,10 +1208,10 @@ mod tests {
             }
         }
         let mut out = [(0.0, 0); 3];
-        assert_eq!(index_of_nothing().nearest([0.0; 3], 1.0, &mut out), 0);
+        assert_eq!(index_of_nothing().nearest(V3::zeros(), 1.0, &mut out), 0);
         let index = VoxelIndex::new(points, 0.2);
-        assert_eq!(index.nearest([f64::NAN; 3], 1.0, &mut out), 0);
-        assert_eq!(index.nearest([0.0; 3], f64::NAN, &mut out), 0);
+        assert_eq!(index.nearest(V3::repeat(f64::NAN), 1.0, &mut out), 0);
+        assert_eq!(index.nearest(V3::zeros(), f64::NAN, &mut out), 0);
     }
 
     fn index_of_nothing() -> VoxelIndex {
@@ -1142,14 +1221,14 @@ mod tests {
     #[test]
     fn for_each_within_visits_voxels_in_ascending_order() {
         let points = vec![
-            [0.25, 0.0, 0.0],
-            [-0.05, 0.0, 0.0],
-            [0.05, 0.0, 0.0],
-            [0.06, 0.01, 0.0],
+            V3::new(0.25, 0.0, 0.0),
+            V3::new(-0.05, 0.0, 0.0),
+            V3::new(0.05, 0.0, 0.0),
+            V3::new(0.06, 0.01, 0.0),
         ];
         let index = VoxelIndex::new(points, 0.1);
         let mut seen = Vec::new();
-        index.for_each_within([0.0; 3], 0.2, |i, _| seen.push(i));
+        index.for_each_within(V3::zeros(), 0.2, |i, _| seen.push(i));
         // Voxel x = -1 first, then x = 0 in insertion order; the point 0.25 m away is left out.
         assert_eq!(seen, vec![1, 2, 3]);
     }
@@ -1176,7 +1255,7 @@ mod tests {
         ] {
             assert_eq!(floor_i32(x), x.floor() as i32, "{x}");
         }
-        let p = [0.31, -0.01, -0.2];
+        let p = V3::new(0.31, -0.01, -0.2);
         assert_eq!(voxel_of(p, 0.1), [3, -1, -2]);
     }
 }

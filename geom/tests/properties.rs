@@ -2,12 +2,12 @@
 //! persistence; failures print the minimal case).
 
 use passangle_geom::{
-    Pose, V3, VoxelIndex, dist2, mat_mul, mat_vec, norm, symmetric_eigen3, transpose, voxel_of,
+    M3, Pose, V3, VoxelIndex, dist2, mat_mul, mat_vec, norm, symmetric_eigen3, transpose, voxel_of,
 };
 use proptest::prelude::*;
 
 fn v3(range: f64) -> impl Strategy<Value = V3> {
-    [-range..range, -range..range, -range..range]
+    [-range..range, -range..range, -range..range].prop_map(V3::from)
 }
 
 fn pose() -> impl Strategy<Value = Pose> {
@@ -38,10 +38,10 @@ proptest! {
     fn rotations_stay_orthonormal_and_keep_lengths(a in pose(), b in pose(), v in v3(10.0)) {
         let r = a.compose(&b).rotation;
         let rtr = mat_mul(&transpose(&r), &r);
-        for (i, row) in rtr.iter().enumerate() {
-            for (j, &e) in row.iter().enumerate() {
+        for i in 0..3 {
+            for j in 0..3 {
                 let want = if i == j { 1.0 } else { 0.0 };
-                prop_assert!((e - want).abs() < 1e-12, "R^T R = {rtr:?}");
+                prop_assert!((rtr[(i, j)] - want).abs() < 1e-12, "R^T R = {rtr:?}");
             }
         }
         prop_assert!((norm(mat_vec(&r, v)) - norm(v)).abs() < 1e-9);
@@ -64,16 +64,16 @@ proptest! {
         diag in v3(5.0),
         off in v3(5.0),
     ) {
-        let m = [
-            [diag[0], off[0], off[1]],
-            [off[0], diag[1], off[2]],
-            [off[1], off[2], diag[2]],
-        ];
+        let m = M3::new(
+            diag[0], off[0], off[1],
+            off[0], diag[1], off[2],
+            off[1], off[2], diag[2],
+        );
         let (values, vectors) = symmetric_eigen3(&m).expect("finite input");
         // Eigenvectors are the columns: m v = lambda v for each, and they are orthonormal.
-        let scale = m.iter().flatten().fold(1.0_f64, |a, &v| a.max(v.abs()));
+        let scale = m.iter().fold(1.0_f64, |a, &v| a.max(v.abs()));
         for k in 0..3 {
-            let v = [vectors[0][k], vectors[1][k], vectors[2][k]];
+            let v: V3 = vectors.column(k).into_owned();
             prop_assert!((norm(v) - 1.0).abs() < 1e-9, "|v{k}| = {}", norm(v));
             let mv = mat_vec(&m, v);
             let lv = v.map(|c| c * values[k]);

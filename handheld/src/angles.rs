@@ -13,7 +13,7 @@ use angles::profiles::{
     Thresholds, Unit, classify_all, compute_profiles,
 };
 use angles::{
-    AngleFinding, AnglesConfig, AnglesResult, Band, ExclusionBox, Quantity, Uncertainty, Zone,
+    AngleFinding, AnglesConfig, AnglesResult, Band, ExclusionBox, Quantity, Uncertainty, V3, Zone,
     compute_angles, side_view_svg,
 };
 use anyhow::{Context, bail};
@@ -95,7 +95,7 @@ impl Profiles {
     /// Compute the profiles of `standards` (reusing `known`, the result of `points` with
     /// `config`) and, if asked, decide on `thresholds`.
     pub fn compute(
-        points: &[[f64; 3]],
+        points: &[V3],
         config: &AnglesConfig,
         known: &AnglesResult,
         standards: &[Standard],
@@ -128,7 +128,8 @@ pub fn run(args: &AnglesArgs, out: &mut impl Write) -> anyhow::Result<()> {
         ..ParseLimits::default()
     };
     let (cloud, stats) = read_cloud_with(&args.cloud, &limits)?;
-    let result = compute_angles(&cloud.points_m, &config)
+    let points: Vec<V3> = cloud.points_m.iter().map(|&p| p.into()).collect();
+    let result = compute_angles(&points, &config)
         .with_context(|| format!("{}: computing the angles", args.cloud.display()))?;
     if let Some(path) = &args.report {
         std::fs::write(path, side_view_svg(&result))
@@ -136,7 +137,7 @@ pub fn run(args: &AnglesArgs, out: &mut impl Write) -> anyhow::Result<()> {
     }
     let standards = parse_standards(&args.standard)?;
     let thresholds: &[Thresholds] = if args.decide { &Thresholds::ALL } else { &[] };
-    let profiles = Profiles::compute(&cloud.points_m, &config, &result, &standards, thresholds);
+    let profiles = Profiles::compute(&points, &config, &result, &standards, thresholds);
     if args.json {
         let v = to_json(args, &stats, &result, &profiles);
         writeln!(out, "{}", serde_json::to_string_pretty(&v)?)?;
@@ -239,8 +240,8 @@ fn parse_box(s: &str) -> anyhow::Result<ExclusionBox> {
         }
     }
     Ok(ExclusionBox {
-        min_in_cloud: [x0, y0, z0],
-        max_in_cloud: [x1, y1, z1],
+        min_in_cloud: V3::new(x0, y0, z0),
+        max_in_cloud: V3::new(x1, y1, z1),
     })
 }
 
@@ -283,7 +284,7 @@ fn round(v: f64, digits: i32) -> f64 {
     (v * k).round() / k
 }
 
-fn v3(p: [f64; 3]) -> Value {
+fn v3(p: V3) -> Value {
     json!([round(p[0], 4), round(p[1], 4), round(p[2], 4)])
 }
 
@@ -816,7 +817,7 @@ mod tests {
     #[test]
     fn parses_boxes_bands_and_rejects_bad_ones() {
         let b = parse_box("-3.3,-2.6, -0.1,0.1,0.3,0.56").unwrap();
-        let close = |a: [f64; 3], b: [f64; 3]| a.iter().zip(b).all(|(x, y)| (x - y).abs() < 1e-12);
+        let close = |a: V3, b: [f64; 3]| a.iter().zip(b).all(|(x, y)| (x - y).abs() < 1e-12);
         assert!(close(b.min_in_cloud, [-3.3, -0.1, 0.3]), "{b:?}");
         assert!(close(b.max_in_cloud, [-2.6, 0.1, 0.56]), "{b:?}");
         let e = parse_box("1,2,3").unwrap_err().to_string();

@@ -18,7 +18,7 @@ use angles::profiles::{
     Thresholds, classify_all, compute_profiles,
 };
 use angles::{
-    AngleFinding, AnglesConfig, AnglesResult, Quantity, Zone, compute_angles, side_view_svg,
+    AngleFinding, AnglesConfig, AnglesResult, Quantity, V3, Zone, compute_angles, side_view_svg,
 };
 use anyhow::Context;
 use cloud_io::read_cloud;
@@ -170,7 +170,7 @@ pub struct Recomputed {
     /// What it found.
     pub angles: AnglesResult,
     /// The cloud, in its own (cloud) frame.
-    pub points_m: Vec<[f64; 3]>,
+    pub points_m: Vec<V3>,
     /// The calculator's settings used.
     pub config: AnglesConfig,
 }
@@ -233,7 +233,7 @@ fn profile_of_record(p: &ProfileRecord) -> Option<ProfileResult> {
                     value,
                     u,
                     // result.json does not keep the witness.
-                    witness_in_vehicle: [f64::NAN; 3],
+                    witness_in_vehicle: V3::repeat(f64::NAN),
                 },
                 _ => Measure::NotMeasured(
                     q.not_measured
@@ -377,10 +377,11 @@ fn recompute(dir: &Path, meta: &RunMeta, enter_at_front: bool) -> Result<Recompu
         range_accuracy_m: Some(vlp16::RANGE_ACCURACY_M),
         ..AnglesConfig::default()
     };
-    let angles = compute_angles(&cloud.points_m, &config).map_err(|e| format!("angles: {e}"))?;
+    let points_m: Vec<V3> = cloud.points_m.into_iter().map(V3::from).collect();
+    let angles = compute_angles(&points_m, &config).map_err(|e| format!("angles: {e}"))?;
     Ok(Recomputed {
         angles,
-        points_m: cloud.points_m,
+        points_m,
         config,
     })
 }
@@ -1143,7 +1144,7 @@ fn floor_section(h: &mut String, a: &AnglesResult) {
 /// A witness's neighbourhood in side view (front to the right) as an inline SVG: one drawing,
 /// kept in one piece so its coordinates read top to bottom.
 #[allow(clippy::too_many_lines)]
-fn close_up(rc: &Recomputed, q: Quantity, w: [f64; 3], f: Option<&AngleFinding>) -> String {
+fn close_up(rc: &Recomputed, q: Quantity, w: V3, f: Option<&AngleFinding>) -> String {
     let a = &rc.angles;
     let (x0, x1) = (w[0] - CLOSE_UP_HALF_X_M, w[0] + CLOSE_UP_HALF_X_M);
     let (z0, z1) = (0.0, CLOSE_UP_Z_M.max(w[2] + 0.1));

@@ -11,7 +11,7 @@ use std::io::{BufWriter, Cursor};
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use angles::{AnglesConfig, AnglesResult, compute_angles};
+use angles::{AnglesConfig, AnglesResult, V3, compute_angles};
 use cloud_io::{Cloud, PlyEncoding, read_cloud, write_e57, write_las, write_ply};
 use e57::{E57Writer, Quaternion, Record, RecordValue, Transform, Translation};
 
@@ -22,6 +22,11 @@ use e57::{E57Writer, Quaternion, Record, RecordValue, Transform, Translation};
 /// witness won), while 1 micrometre moved them by at most 1.1e-5 deg.
 const LAS_RESOLUTION_M: f64 = 1e-6;
 const TOLERANCE_DEG: f64 = 0.001;
+
+/// A cloud file's points as the calculator's vectors.
+fn vectors(points: &[[f64; 3]]) -> Vec<V3> {
+    points.iter().map(|&p| p.into()).collect()
+}
 
 fn temp_dir() -> PathBuf {
     let dir = std::env::temp_dir().join(format!("passangle-formats-{}", std::process::id()));
@@ -150,7 +155,7 @@ fn ply_e57_las_and_laz_copies_give_the_same_angles() {
     let config = AnglesConfig::default();
     let reference = {
         let (c, _) = read_cloud(&ply).unwrap();
-        angles_deg(&compute_angles(&c.points_m, &config).unwrap())
+        angles_deg(&compute_angles(&vectors(&c.points_m), &config).unwrap())
     };
     println!(
         "{} points; PLY angles approach {:.6}, departure {:.6}, breakover {:.6} deg",
@@ -162,7 +167,7 @@ fn ply_e57_las_and_laz_copies_give_the_same_angles() {
     for path in [&e57, &e57_two, &las, &laz, &utm] {
         let (c, stats) = read_cloud(path).unwrap();
         assert_eq!(c.points_m.len(), cloud.points_m.len(), "{}", path.display());
-        let got = angles_deg(&compute_angles(&c.points_m, &config).unwrap());
+        let got = angles_deg(&compute_angles(&vectors(&c.points_m), &config).unwrap());
         let diff: Vec<f64> = got.iter().zip(reference).map(|(g, r)| g - r).collect();
         println!(
             "{:>20} ({} {}): difference from PLY approach {:+.2e}, departure {:+.2e}, breakover \

@@ -13,7 +13,7 @@ use common::temp_root;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use angles::{AnglesConfig, compute_angles};
+use angles::{AnglesConfig, V3, compute_angles};
 use cloud_io::{Cloud, PlyEncoding, write_ply};
 use onboard::recorder::{RecordedOutcome, ResultRecord, RunRecorder};
 use onboard::signed::{Signer, write_signed};
@@ -52,7 +52,8 @@ fn signed_run(root: &Path, key: DeviceKey) -> PathBuf {
         front_is_positive_x: false,
         ..AnglesConfig::default()
     };
-    let a = compute_angles(&cloud.points_m, &config).unwrap();
+    let points: Vec<V3> = cloud.points_m.iter().map(|&p| p.into()).collect();
+    let a = compute_angles(&points, &config).unwrap();
     let (ap, br, gc) = (
         a.approach.as_ref().unwrap(),
         a.breakover.as_ref().unwrap(),

@@ -144,21 +144,19 @@ fn variants(mode: Mode, depth: bool, base: &PipelineConfig) -> Vec<Variant> {
     }
 }
 
+/// The simulator's transform as the pipeline's pose (both are `passangle_geom::Pose`).
 fn pose_of(iso: &Isometry) -> Pose {
-    Pose {
-        rotation: iso.rotation.0,
-        translation: [iso.translation.x, iso.translation.y, iso.translation.z],
-    }
+    *iso
 }
 
 /// The pipeline's mounts from the scenario's sensor configs.
 fn mounts_from(scenario: &Scenario, config: &mut PipelineConfig) {
     let lidar = pose_of(&scenario.file.lidar.robot_from_lidar());
     let camera = pose_of(&scenario.file.depth.robot_from_camera());
-    config.mounts.lidar_xyz_m = lidar.translation;
-    config.mounts.lidar_rpy_rad = rpy_of(&lidar.rotation);
-    config.mounts.camera_xyz_m = camera.translation;
-    config.mounts.camera_rpy_rad = rpy_of(&camera.rotation);
+    config.mounts.lidar_xyz_m = lidar.translation.into();
+    config.mounts.lidar_rpy_rad = rpy_of(&lidar.rotation).into();
+    config.mounts.camera_xyz_m = camera.translation.into();
+    config.mounts.camera_rpy_rad = rpy_of(&camera.rotation).into();
 }
 
 /// Depth frames at 10 Hz (every 3rd of the 30 Hz stream).
@@ -247,7 +245,7 @@ fn path_in_vehicle(scenario: &Scenario, built: &BuiltCloud, t0: &Pose) -> Vec<[f
     built
         .lidar_path(lidar.translation)
         .into_iter()
-        .map(|p| t0.apply(p))
+        .map(|p| t0.apply(p).into())
         .collect()
 }
 
@@ -306,7 +304,11 @@ fn evaluate(scenario: &Scenario, scene: &Scene, built: &BuiltCloud, time: &Timin
     let last = built.trajectory.last().map_or(0.0, |l| l.stamp_s);
     let t_last = t0.inverse().compose(&truth(last)).translation;
     let travelled = t_last.iter().map(|v| v * v).sum::<f64>().sqrt();
-    let in_vehicle: Vec<[f64; 3]> = built.points_in_world.iter().map(|&p| t0.apply(p)).collect();
+    let in_vehicle: Vec<[f64; 3]> = built
+        .points_in_world
+        .iter()
+        .map(|&p| t0.apply(p).into())
+        .collect();
     let mut dist: Vec<f64> = in_vehicle
         .iter()
         .step_by(7)
@@ -320,11 +322,17 @@ fn evaluate(scenario: &Scenario, scene: &Scene, built: &BuiltCloud, time: &Timin
         true_a.departure.angle_rad,
     ];
     let config = AnglesConfig {
-        scan_path_in_cloud: path_in_vehicle(scenario, built, &t0),
+        scan_path_in_cloud: path_in_vehicle(scenario, built, &t0)
+            .into_iter()
+            .map(Into::into)
+            .collect(),
         range_accuracy_m: Some(vlp16::RANGE_ACCURACY_M),
         ..AnglesConfig::default()
     };
-    let angle_error_deg = match compute_angles(&in_vehicle, &config) {
+    let angle_error_deg = match compute_angles(
+        &in_vehicle.iter().map(|&p| p.into()).collect::<Vec<_>>(),
+        &config,
+    ) {
         Ok(r) => {
             let m = [&r.approach, &r.breakover, &r.departure]
                 .map(|a| a.as_ref().map_or(f64::NAN, |a| a.angle_rad));
@@ -352,7 +360,7 @@ fn evaluate(scenario: &Scenario, scene: &Scene, built: &BuiltCloud, time: &Timin
 fn kitti_row(p: &Pose) -> String {
     let (r, t) = (&p.rotation, &p.translation);
     (0..3)
-        .map(|i| format!("{} {} {} {}", r[i][0], r[i][1], r[i][2], t[i]))
+        .map(|i| format!("{} {} {} {}", r[(i, 0)], r[(i, 1)], r[(i, 2)], t[i]))
         .collect::<Vec<_>>()
         .join(" ")
 }
@@ -422,13 +430,13 @@ fn export_frames(
             samples.push((
                 i,
                 j,
-                world_from_lidar.apply(p.xyz_in_lidar_m.map(f64::from)),
+                world_from_lidar.apply(pipeline::geom::V3::from(p.xyz_in_lidar_m.map(f64::from))),
             ));
         }
     }
     let mut distances: Vec<f64> = samples
         .iter()
-        .map(|&(_, _, v)| surface_distance(scene, v))
+        .map(|&(_, _, v)| surface_distance(scene, v.into()))
         .collect();
     distances.sort_by(f64::total_cmp);
     let median_mm = percentile(&distances, 0.5) * 1e3;
@@ -516,7 +524,11 @@ fn save_cloud(
     let truth = |t: f64| pose_of(&motion.pose_at(t).to_isometry());
     let t0 = truth(built.trajectory.first().map_or(0.0, |t| t.stamp_s));
     let cloud = Cloud {
-        points_m: built.points_in_world.iter().map(|&p| t0.apply(p)).collect(),
+        points_m: built
+            .points_in_world
+            .iter()
+            .map(|&p| t0.apply(p).into())
+            .collect(),
     };
     let file = std::fs::File::create(stem.with_extension("ply"))?;
     write_ply(

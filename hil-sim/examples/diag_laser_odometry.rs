@@ -60,11 +60,9 @@ use pipeline::map::FeatureMap;
 use pipeline::registration::{JointProblem, register_joint};
 use pipeline::{Candidates, LidarFrame, step1_planes, tagged_index};
 
+/// The simulator's transform as the pipeline's pose (both are `passangle_geom::Pose`).
 fn pose_of(iso: &Isometry) -> Pose {
-    Pose {
-        rotation: iso.rotation.0,
-        translation: [iso.translation.x, iso.translation.y, iso.translation.z],
-    }
+    *iso
 }
 
 struct Prepared {
@@ -90,7 +88,7 @@ fn prepare(
     let mut times = Vec::new();
     let mut ranges = Vec::new();
     for p in &frame.points {
-        let l = p.xyz_in_lidar_m.map(f64::from);
+        let l = V3::from(p.xyz_in_lidar_m.map(f64::from));
         points.push(robot_from_lidar.apply(l));
         times.push(f64::from(p.time_offset_s));
         ranges.push(norm(l));
@@ -217,14 +215,14 @@ fn main() -> anyhow::Result<()> {
         None => PipelineConfig::default(),
     };
     let robot_from_lidar = pose_of(&scenario.file.lidar.robot_from_lidar());
-    config.mounts.lidar_xyz_m = robot_from_lidar.translation;
+    config.mounts.lidar_xyz_m = robot_from_lidar.translation.into();
     let truth = |t: f64| pose_of(&scenario.run.pose_at(t).to_isometry());
     let true_increment = |a: f64, b: f64| truth(a).inverse().compose(&truth(b));
     let velocity_at = |t: f64| {
         let inc = true_increment(t, t + 0.01).to_increment();
         Velocity {
-            linear_mps: [inc[3] / 0.01, inc[4] / 0.01, inc[5] / 0.01],
-            angular_radps: [inc[0] / 0.01, inc[1] / 0.01, inc[2] / 0.01],
+            linear_mps: V3::new(inc[3] / 0.01, inc[4] / 0.01, inc[5] / 0.01),
+            angular_radps: V3::new(inc[0] / 0.01, inc[1] / 0.01, inc[2] / 0.01),
         }
     };
     let mut sum = [0.0; 6];
@@ -284,7 +282,7 @@ fn main() -> anyhow::Result<()> {
                 let v = velocity_at(frame.stamp_s + 0.05);
                 Velocity {
                     linear_mps: v.linear_mps,
-                    angular_radps: [0.0; 3],
+                    angular_radps: V3::zeros(),
                 }
             } else {
                 velocity_at(frame.stamp_s + 0.05)

@@ -122,11 +122,9 @@ fn entries(dir: &Path, groups: &[Group]) -> Vec<Entry> {
     out
 }
 
+/// The simulator's transform as the pipeline's pose (both are `passangle_geom::Pose`).
 fn pose_of(iso: &Isometry) -> Pose {
-    Pose {
-        rotation: iso.rotation.0,
-        translation: [iso.translation.x, iso.translation.y, iso.translation.z],
-    }
+    *iso
 }
 
 /// The scenario of one run: the template with the run's vehicle, world and seed, the robot from
@@ -168,10 +166,10 @@ fn run_pipeline(
     config.visual.enabled = false;
     let lidar_mount = pose_of(&scenario.file.lidar.robot_from_lidar());
     let camera_mount = pose_of(&scenario.file.depth.robot_from_camera());
-    config.mounts.lidar_xyz_m = lidar_mount.translation;
-    config.mounts.lidar_rpy_rad = rpy_of(&lidar_mount.rotation);
-    config.mounts.camera_xyz_m = camera_mount.translation;
-    config.mounts.camera_rpy_rad = rpy_of(&camera_mount.rotation);
+    config.mounts.lidar_xyz_m = lidar_mount.translation.into();
+    config.mounts.lidar_rpy_rad = rpy_of(&lidar_mount.rotation).into();
+    config.mounts.camera_xyz_m = camera_mount.translation.into();
+    config.mounts.camera_rpy_rad = rpy_of(&camera_mount.rotation).into();
     let mut events: Vec<(f64, Result<&LidarFrame, &WheelOdometry>)> = lidar
         .iter()
         .map(|f| (f.stamp_s + 0.1, Ok(f)))
@@ -279,12 +277,16 @@ fn run(
         };
         let motion = scenario.motion();
         let t0 = pose_of(&motion.pose_at(first.stamp_s).to_isometry());
-        let cloud: Vec<[f64; 3]> = built.points_in_world.iter().map(|&p| t0.apply(p)).collect();
+        let cloud: Vec<[f64; 3]> = built
+            .points_in_world
+            .iter()
+            .map(|&p| t0.apply(p).into())
+            .collect();
         let lidar_mount = pose_of(&scenario.file.lidar.robot_from_lidar());
         let path = built
             .lidar_path(lidar_mount.translation)
             .into_iter()
-            .map(|p| t0.apply(p))
+            .map(|p| t0.apply(p).into())
             .collect();
         detail.push(trajectory_errors(&built, &t0, &motion));
         let x_sigma_per_m = built.x_sigma_per_m(&PipelineConfig::default().fusion);
@@ -294,12 +296,15 @@ fn run(
         save_cloud(dir, entry, oracle, &cloud, &path)?;
     }
     let config = AnglesConfig {
-        scan_path_in_cloud: path,
+        scan_path_in_cloud: path.into_iter().map(Into::into).collect(),
         trajectory_x_sigma_per_m: x_sigma_per_m,
         range_accuracy_m: Some(vlp16::RANGE_ACCURACY_M),
         ..AnglesConfig::default()
     };
-    let (error_deg, u_deg, missing) = match compute_angles(&cloud, &config) {
+    let (error_deg, u_deg, missing) = match compute_angles(
+        &cloud.iter().map(|&p| p.into()).collect::<Vec<_>>(),
+        &config,
+    ) {
         Ok(r) => {
             let names = ["approach", "breakover", "departure"];
             detail.extend(witness_detail(&r, &truth, &scenario.vehicle));

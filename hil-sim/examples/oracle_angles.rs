@@ -272,11 +272,14 @@ fn main() -> anyhow::Result<()> {
             save(dir, &format!("{name}-oracle"), &cloud, t, &path)?;
         }
         let config = AnglesConfig {
-            scan_path_in_cloud: path,
+            scan_path_in_cloud: path.into_iter().map(Into::into).collect(),
             range_accuracy_m: Some(vlp16::RANGE_ACCURACY_M),
             ..AnglesConfig::default()
         };
-        match compute_angles(&cloud, &config) {
+        match compute_angles(
+            &cloud.iter().map(|&p| p.into()).collect::<Vec<_>>(),
+            &config,
+        ) {
             Ok(r) => {
                 let m = [&r.approach, &r.breakover, &r.departure]
                     .map(|a| a.as_ref().map_or(f64::NAN, |a| a.angle_rad.to_degrees()));

@@ -32,7 +32,7 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
-use crate::geometry::{Isometry, Rot3, Vec3};
+use crate::geometry::{Isometry, Rot3, Vec3, rot_from_rpy};
 use crate::trajectory::Trajectory;
 use crate::world::{Scene, SurfaceKind};
 
@@ -209,15 +209,14 @@ impl D435Config {
     /// `robot_from_camera` for the optical frame (x right, y down, z forward).
     pub fn robot_from_camera(&self) -> Isometry {
         // Optical axes in a level, forward-looking robot frame: z -> +x, x -> -y, y -> -z.
-        let optical = Rot3([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]]);
+        let optical = Rot3::new(0.0, 0.0, 1.0, -1.0, 0.0, 0.0, 0.0, -1.0, 0.0);
         let [x, y, z] = self.mount_xyz_m;
         Isometry {
-            rotation: Rot3::from_rpy(
+            rotation: rot_from_rpy(
                 0.0,
                 -self.mount_pitch_up_deg.to_radians(),
                 self.mount_yaw_deg.to_radians(),
-            )
-            .compose(&optical),
+            ) * optical,
             translation: Vec3::new(x, y, z),
         }
     }
@@ -311,7 +310,7 @@ impl<'a, T: Trajectory> D435Sim<'a, T> {
                     .map_or(0, |hit| {
                         let z = hit.range_m * inv_norm;
                         let z_noisy = z + noise * c.noise_k_per_m * z * z;
-                        let cos_incidence = -hit.normal.dot(dir);
+                        let cos_incidence = -hit.normal.dot(&dir);
                         let grazing = cos_incidence < c.min_cos_incidence;
                         if grazing
                             || u_drop < c.invalid_probability
@@ -398,7 +397,7 @@ pub(crate) fn gaussian(rng: &mut ChaCha8Rng) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::geometry::Pose;
+    use crate::geometry::{Normalized, Pose};
     use crate::trajectory::SampledTrajectory;
     use crate::vehicle::tests::test_sedan;
 

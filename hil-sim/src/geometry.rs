@@ -1,194 +1,55 @@
-//! Small, dependency-free 3-D geometry for the simulator: vectors, rotations and rigid transforms.
+//! The simulator's 3-D geometry on passangle-geom's nalgebra types: vectors, rotation matrices and
+//! rigid transforms, with the simulator's closed-form roll-pitch-yaw rotation and the robot's pose
+//! on the ground.
 //!
 //! Everything is `f64` and `Copy`. Frames follow docs/architecture.md section 8: right-handed, z up, metres and
 //! radians. A transform named `world_from_robot` maps points expressed in the robot frame into the
 //! world frame (`world_from_robot.apply(p_in_robot) == p_in_world`).
 
-use std::ops::{Add, Mul, Neg, Sub};
+/// A 3-D vector or point, metres unless the name says otherwise (`v.x`, `v.y`, `v.z`).
+pub type Vec3 = passangle_geom::V3;
 
-/// A 3-D vector or point, metres unless the name says otherwise.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub struct Vec3 {
-    /// x component.
-    pub x: f64,
-    /// y component.
-    pub y: f64,
-    /// z component.
-    pub z: f64,
+/// A 3x3 rotation matrix (`m[(row, column)]`).
+pub type Rot3 = passangle_geom::M3;
+
+/// A rigid transform `p -> rotation * p + translation`: passangle-geom's [`passangle_geom::Pose`].
+pub type Isometry = passangle_geom::Pose;
+
+/// Rotation from roll (about x), pitch (about y) and yaw (about z), applied in that order to a
+/// vector: `R = Rz(yaw) * Ry(pitch) * Rx(roll)` (the usual aerospace/ROS convention), each entry
+/// from the angles' sines and cosines (nalgebra's `Rotation3::from_euler_angles`). The pipeline's
+/// [`passangle_geom::rot_from_rpy`] is the same rotation as a product of three exponentials, which
+/// rounds differently; the simulator's scenes and sensors are built with this one.
+pub fn rot_from_rpy(roll_rad: f64, pitch_rad: f64, yaw_rad: f64) -> Rot3 {
+    passangle_geom::nalgebra::Rotation3::from_euler_angles(roll_rad, pitch_rad, yaw_rad)
+        .into_inner()
 }
 
-impl Vec3 {
-    /// The zero vector.
-    pub const ZERO: Self = Self::new(0.0, 0.0, 0.0);
-
-    /// A vector from its components.
-    pub const fn new(x: f64, y: f64, z: f64) -> Self {
-        Self { x, y, z }
+/// A transform from a translation and roll/pitch/yaw (see [`rot_from_rpy`]).
+pub fn isometry_from_xyz_rpy(
+    translation: Vec3,
+    roll_rad: f64,
+    pitch_rad: f64,
+    yaw_rad: f64,
+) -> Isometry {
+    Isometry {
+        rotation: rot_from_rpy(roll_rad, pitch_rad, yaw_rad),
+        translation,
     }
+}
 
-    /// Dot product.
-    pub fn dot(self, o: Self) -> f64 {
-        self.x * o.x + self.y * o.y + self.z * o.z
-    }
-
-    /// Cross product.
+/// The vector scaled to unit length by multiplying with the reciprocal of its norm (nalgebra's
+/// `normalize` divides, which rounds differently); a zero vector is returned unchanged.
+pub trait Normalized {
+    /// This vector at unit length, or unchanged if it is zero.
     #[must_use]
-    pub fn cross(self, o: Self) -> Self {
-        Self::new(
-            self.y * o.z - self.z * o.y,
-            self.z * o.x - self.x * o.z,
-            self.x * o.y - self.y * o.x,
-        )
-    }
+    fn normalized(self) -> Self;
+}
 
-    /// Euclidean length.
-    pub fn norm(self) -> f64 {
-        self.dot(self).sqrt()
-    }
-
-    /// This vector scaled to unit length (returns the input unchanged if it is zero).
-    #[must_use]
-    pub fn normalized(self) -> Self {
+impl Normalized for Vec3 {
+    fn normalized(self) -> Self {
         let n = self.norm();
         if n > 0.0 { self * (1.0 / n) } else { self }
-    }
-}
-
-impl Add for Vec3 {
-    type Output = Self;
-    fn add(self, o: Self) -> Self {
-        Self::new(self.x + o.x, self.y + o.y, self.z + o.z)
-    }
-}
-
-impl Sub for Vec3 {
-    type Output = Self;
-    fn sub(self, o: Self) -> Self {
-        Self::new(self.x - o.x, self.y - o.y, self.z - o.z)
-    }
-}
-
-impl Neg for Vec3 {
-    type Output = Self;
-    fn neg(self) -> Self {
-        Self::new(-self.x, -self.y, -self.z)
-    }
-}
-
-impl Mul<f64> for Vec3 {
-    type Output = Self;
-    fn mul(self, s: f64) -> Self {
-        Self::new(self.x * s, self.y * s, self.z * s)
-    }
-}
-
-/// A 3x3 rotation matrix, row-major.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Rot3(pub [[f64; 3]; 3]);
-
-impl Rot3 {
-    /// The identity rotation.
-    pub const IDENTITY: Self = Self([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]);
-
-    /// Rotation from roll (about x), pitch (about y) and yaw (about z), applied in that order to a
-    /// vector: `R = Rz(yaw) * Ry(pitch) * Rx(roll)` (the usual aerospace/ROS convention).
-    pub fn from_rpy(roll_rad: f64, pitch_rad: f64, yaw_rad: f64) -> Self {
-        let (sr, cr) = roll_rad.sin_cos();
-        let (sp, cp) = pitch_rad.sin_cos();
-        let (sy, cy) = yaw_rad.sin_cos();
-        Self([
-            [cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
-            [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
-            [-sp, cp * sr, cp * cr],
-        ])
-    }
-
-    /// Rotate a vector.
-    pub fn apply(&self, v: Vec3) -> Vec3 {
-        let m = &self.0;
-        Vec3::new(
-            m[0][0] * v.x + m[0][1] * v.y + m[0][2] * v.z,
-            m[1][0] * v.x + m[1][1] * v.y + m[1][2] * v.z,
-            m[2][0] * v.x + m[2][1] * v.y + m[2][2] * v.z,
-        )
-    }
-
-    /// Matrix product `self * o`.
-    #[must_use]
-    pub fn compose(&self, o: &Self) -> Self {
-        let (a, b) = (&self.0, &o.0);
-        let mut out = [[0.0; 3]; 3];
-        for (i, row) in out.iter_mut().enumerate() {
-            for (j, cell) in row.iter_mut().enumerate() {
-                *cell = a[i][0] * b[0][j] + a[i][1] * b[1][j] + a[i][2] * b[2][j];
-            }
-        }
-        Self(out)
-    }
-
-    /// The inverse rotation (the transpose).
-    #[must_use]
-    pub fn transpose(&self) -> Self {
-        let m = &self.0;
-        Self([
-            [m[0][0], m[1][0], m[2][0]],
-            [m[0][1], m[1][1], m[2][1]],
-            [m[0][2], m[1][2], m[2][2]],
-        ])
-    }
-}
-
-/// A rigid transform `p -> rotation * p + translation`.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Isometry {
-    /// Rotation part.
-    pub rotation: Rot3,
-    /// Translation part, metres.
-    pub translation: Vec3,
-}
-
-impl Isometry {
-    /// The identity transform.
-    pub const IDENTITY: Self = Self {
-        rotation: Rot3::IDENTITY,
-        translation: Vec3::ZERO,
-    };
-
-    /// A transform from a translation and roll/pitch/yaw (see [`Rot3::from_rpy`]).
-    pub fn from_xyz_rpy(translation: Vec3, roll_rad: f64, pitch_rad: f64, yaw_rad: f64) -> Self {
-        Self {
-            rotation: Rot3::from_rpy(roll_rad, pitch_rad, yaw_rad),
-            translation,
-        }
-    }
-
-    /// Map a point.
-    pub fn apply(&self, p: Vec3) -> Vec3 {
-        self.rotation.apply(p) + self.translation
-    }
-
-    /// Map a direction (rotation only).
-    pub fn apply_vector(&self, v: Vec3) -> Vec3 {
-        self.rotation.apply(v)
-    }
-
-    /// `a_from_c = a_from_b.compose(&b_from_c)`.
-    #[must_use]
-    pub fn compose(&self, o: &Self) -> Self {
-        Self {
-            rotation: self.rotation.compose(&o.rotation),
-            translation: self.rotation.apply(o.translation) + self.translation,
-        }
-    }
-
-    /// The inverse transform.
-    #[must_use]
-    pub fn inverse(&self) -> Self {
-        let rt = self.rotation.transpose();
-        Self {
-            rotation: rt,
-            translation: -rt.apply(self.translation),
-        }
     }
 }
 
@@ -208,7 +69,7 @@ pub struct Pose {
 impl Pose {
     /// This pose as the transform `world_from_robot`.
     pub fn to_isometry(&self) -> Isometry {
-        Isometry::from_xyz_rpy(self.position_m, self.roll_rad, self.pitch_rad, self.yaw_rad)
+        isometry_from_xyz_rpy(self.position_m, self.roll_rad, self.pitch_rad, self.yaw_rad)
     }
 }
 
@@ -222,9 +83,9 @@ mod tests {
 
     #[test]
     fn yaw_quarter_turn_maps_x_to_y() {
-        let r = Rot3::from_rpy(0.0, 0.0, std::f64::consts::FRAC_PI_2);
+        let r = rot_from_rpy(0.0, 0.0, std::f64::consts::FRAC_PI_2);
         assert!(close(
-            r.apply(Vec3::new(1.0, 0.0, 0.0)),
+            r * Vec3::new(1.0, 0.0, 0.0),
             Vec3::new(0.0, 1.0, 0.0)
         ));
     }
@@ -232,14 +93,14 @@ mod tests {
     #[test]
     fn positive_pitch_tips_x_down() {
         // Right-handed rotation about +y turns +x toward -z.
-        let r = Rot3::from_rpy(0.0, 0.1, 0.0);
-        assert!(r.apply(Vec3::new(1.0, 0.0, 0.0)).z < 0.0);
+        let r = rot_from_rpy(0.0, 0.1, 0.0);
+        assert!((r * Vec3::new(1.0, 0.0, 0.0)).z < 0.0);
     }
 
     #[test]
     fn inverse_and_compose_round_trip() {
-        let a = Isometry::from_xyz_rpy(Vec3::new(1.0, -2.0, 0.5), 0.1, -0.2, 2.5);
-        let b = Isometry::from_xyz_rpy(Vec3::new(-0.3, 0.7, 0.1), -0.05, 0.3, -1.0);
+        let a = isometry_from_xyz_rpy(Vec3::new(1.0, -2.0, 0.5), 0.1, -0.2, 2.5);
+        let b = isometry_from_xyz_rpy(Vec3::new(-0.3, 0.7, 0.1), -0.05, 0.3, -1.0);
         let p = Vec3::new(0.4, 0.9, -1.3);
         assert!(close(a.inverse().apply(a.apply(p)), p));
         assert!(close(a.compose(&b).apply(p), a.apply(b.apply(p))));

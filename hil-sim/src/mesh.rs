@@ -14,7 +14,7 @@
 
 use std::path::{Path, PathBuf};
 
-use crate::geometry::Vec3;
+use crate::geometry::{Normalized, Vec3};
 
 /// Largest mesh file the loaders read, bytes (a vehicle part is far smaller).
 pub const MAX_MESH_FILE_BYTES: u64 = 256 * 1024 * 1024;
@@ -240,8 +240,8 @@ impl Mesh {
             // Padding keeps the slab test conservative for flat (axis-aligned) leaves, whose
             // zero-thickness boxes rounding could otherwise miss.
             let pad = 1e-9 * (1.0 + (bounds.max - bounds.min).norm());
-            bounds.min = bounds.min - Vec3::new(pad, pad, pad);
-            bounds.max = bounds.max + Vec3::new(pad, pad, pad);
+            bounds.min -= Vec3::new(pad, pad, pad);
+            bounds.max += Vec3::new(pad, pad, pad);
             self.nodes[node].bounds = bounds;
             if hi - lo <= LEAF_TRIANGLES {
                 self.nodes[node].first = lo as u32;
@@ -308,8 +308,8 @@ impl Mesh {
         }
         best.map(|(dist, t)| {
             let [a, b, c] = self.corners(t);
-            let n = (b - a).cross(c - a).normalized();
-            (dist, if n.dot(d) > 0.0 { -n } else { n })
+            let n = (b - a).cross(&(c - a)).normalized();
+            (dist, if n.dot(&d) > 0.0 { -n } else { n })
         })
     }
 
@@ -344,24 +344,24 @@ impl Mesh {
 /// edges included), if positive.
 fn moller_trumbore([a, b, c]: [Vec3; 3], o: Vec3, d: Vec3) -> Option<f64> {
     let (e1, e2) = (b - a, c - a);
-    let p = d.cross(e2);
-    let det = e1.dot(p);
+    let p = d.cross(&e2);
+    let det = e1.dot(&p);
     // Parallel to the plane, or a degenerate triangle.
     if det.abs() <= 1e-14 * e1.norm() * e2.norm() || det == 0.0 {
         return None;
     }
     let inv = 1.0 / det;
     let s = o - a;
-    let u = s.dot(p) * inv;
+    let u = s.dot(&p) * inv;
     if !(0.0..=1.0).contains(&u) {
         return None;
     }
-    let q = s.cross(e1);
-    let v = d.dot(q) * inv;
+    let q = s.cross(&e1);
+    let v = d.dot(&q) * inv;
     if v < 0.0 || u + v > 1.0 {
         return None;
     }
-    let t = e2.dot(q) * inv;
+    let t = e2.dot(&q) * inv;
     (t > 0.0).then_some(t)
 }
 
@@ -369,12 +369,12 @@ fn moller_trumbore([a, b, c]: [Vec3; 3], o: Vec3, d: Vec3) -> Option<f64> {
 /// 5.1.5, by Voronoi regions).
 fn point_triangle_distance(p: Vec3, [a, b, c]: [Vec3; 3]) -> f64 {
     let (ab, ac, ap) = (b - a, c - a, p - a);
-    let (d1, d2) = (ab.dot(ap), ac.dot(ap));
+    let (d1, d2) = (ab.dot(&ap), ac.dot(&ap));
     if d1 <= 0.0 && d2 <= 0.0 {
         return ap.norm();
     }
     let bp = p - b;
-    let (d3, d4) = (ab.dot(bp), ac.dot(bp));
+    let (d3, d4) = (ab.dot(&bp), ac.dot(&bp));
     if d3 >= 0.0 && d4 <= d3 {
         return bp.norm();
     }
@@ -384,7 +384,7 @@ fn point_triangle_distance(p: Vec3, [a, b, c]: [Vec3; 3]) -> f64 {
         return (p - (a + ab * v)).norm();
     }
     let cp = p - c;
-    let (d5, d6) = (ab.dot(cp), ac.dot(cp));
+    let (d5, d6) = (ab.dot(&cp), ac.dot(&cp));
     if d6 >= 0.0 && d5 <= d6 {
         return cp.norm();
     }
@@ -412,9 +412,9 @@ fn point_triangle_distance(p: Vec3, [a, b, c]: [Vec3; 3]) -> f64 {
 
 fn point_segment_distance(p: Vec3, a: Vec3, b: Vec3) -> f64 {
     let ab = b - a;
-    let len2 = ab.dot(ab);
+    let len2 = ab.dot(&ab);
     let t = if len2 > 0.0 {
-        ((p - a).dot(ab) / len2).clamp(0.0, 1.0)
+        ((p - a).dot(&ab) / len2).clamp(0.0, 1.0)
     } else {
         0.0
     };
@@ -1357,7 +1357,7 @@ mod tests {
                     hits += 1;
                     assert_eq!(dist.to_bits(), brute.to_bits());
                     assert!(m.distance(o + d * dist) < 1e-12);
-                    assert!(normal.dot(d) <= 0.0);
+                    assert!(normal.dot(&d) <= 0.0);
                     assert!((normal.norm() - 1.0).abs() < 1e-12);
                 }
                 None => assert!(brute.is_infinite()),

@@ -406,7 +406,9 @@ fn camera_toml(scenario: &Scenario) -> anyhow::Result<String> {
         clock_offset_us: c.clock_offset_us,
         intrinsics: c.intrinsics(),
         robot_from_camera_xyz_m: [m.translation.x, m.translation.y, m.translation.z],
-        robot_from_camera_rotation: m.rotation.0,
+        robot_from_camera_rotation: std::array::from_fn(|i| {
+            std::array::from_fn(|j| m.rotation[(i, j)])
+        }),
     };
     let header = "# passangle-sim D435 stream: frames are <width>x<height> little-endian u16, row-major, depth in\n\
                   # depth_unit_m, 0 = invalid. Optical frame x right, y down, z forward; robot_from_camera maps it into\n\

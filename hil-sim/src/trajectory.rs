@@ -392,12 +392,12 @@ impl SampledTrajectory {
             .iter()
             .map(|(t, p, w)| {
                 let m = world_from_start.compose(&p.to_isometry());
-                let r = &m.rotation.0;
+                let r = &m.rotation;
                 let pose = Pose {
                     position_m: m.translation,
-                    roll_rad: r[2][1].atan2(r[2][2]),
-                    pitch_rad: (-r[2][0]).clamp(-1.0, 1.0).asin(),
-                    yaw_rad: r[1][0].atan2(r[0][0]),
+                    roll_rad: r[(2, 1)].atan2(r[(2, 2)]),
+                    pitch_rad: (-r[(2, 0)]).clamp(-1.0, 1.0).asin(),
+                    yaw_rad: r[(1, 0)].atan2(r[(0, 0)]),
                 };
                 (*t, pose, *w)
             })

@@ -54,7 +54,7 @@ use vlp16::{
     BlockRepr, ChannelRepr, DataPacketRepr, PositionPacketRepr, PpsStatus, Product, ReturnMode,
 };
 
-use crate::geometry::{Isometry, Rot3, Vec3};
+use crate::geometry::{Isometry, Normalized, Vec3, rot_from_rpy};
 use crate::trajectory::Trajectory;
 use crate::world::{Candidates, Hit, Scene, SurfaceId, SurfaceKind, base_reflectivity};
 
@@ -203,9 +203,9 @@ impl Vlp16Config {
     pub fn robot_from_lidar(&self) -> Isometry {
         let [x, y, z] = self.mount_xyz_m;
         let [r, p, w] = self.mount_rpy_deg.map(f64::to_radians);
-        let sensor_to_robot_axes = Rot3::from_rpy(0.0, 0.0, -std::f64::consts::FRAC_PI_2);
+        let sensor_to_robot_axes = rot_from_rpy(0.0, 0.0, -std::f64::consts::FRAC_PI_2);
         Isometry {
-            rotation: Rot3::from_rpy(r, p, w).compose(&sensor_to_robot_axes),
+            rotation: rot_from_rpy(r, p, w) * sensor_to_robot_axes,
             translation: Vec3::new(x, y, z),
         }
     }
@@ -392,7 +392,7 @@ impl<'a, T: Trajectory> Vlp16Sim<'a, T> {
     /// rays, at most 15 degrees off its equator, bend sideways by less than 0.27 x the tilt). No
     /// culling when the head is tilted more than 0.3 rad.
     fn packet_candidates(&self, start: &Isometry, end: &Isometry, t0: f64) -> Candidates {
-        let tilt = |m: &Isometry| m.rotation.0[2][2].clamp(-1.0, 1.0).acos();
+        let tilt = |m: &Isometry| m.rotation[(2, 2)].clamp(-1.0, 1.0).acos();
         let tilt_rad = tilt(start).max(tilt(end));
         if tilt_rad > 0.3 {
             return Candidates::ALL;
@@ -478,7 +478,7 @@ impl<'a, T: Trajectory> Vlp16Sim<'a, T> {
         {
             return (none, truth);
         }
-        let cos_incidence = -hit.normal.dot(hit_dir);
+        let cos_incidence = -hit.normal.dot(&hit_dir);
         let s50 = self.config.tyre_return_s50_per_m;
         if s50 > 0.0 && hit.surface.kind == SurfaceKind::Tyre {
             let s = cos_incidence.max(0.0) / echo_range_m.max(1e-3);
@@ -526,7 +526,7 @@ impl<'a, T: Trajectory> Vlp16Sim<'a, T> {
         let mut echoes: Vec<(Hit, Vec3, f64)> = Vec::with_capacity(5);
         for (d, w) in rays {
             if let Some(hit) = self.scene.cast_among(origin, d, max_cast, candidates) {
-                let cos = (-hit.normal.dot(d)).max(0.0);
+                let cos = (-hit.normal.dot(&d)).max(0.0);
                 let energy = w * base_reflectivity(hit.surface.kind) * cos.max(0.01)
                     / hit.range_m.max(0.1).powi(2);
                 echoes.push((hit, d, energy));
@@ -591,14 +591,8 @@ impl<'a, T: Trajectory> Vlp16Sim<'a, T> {
 /// transforms a tiny rotation apart (here: one packet, 1.3 ms, apart), where the result stays
 /// orthonormal to second order in the rotation between them.
 fn lerp_isometry(a: &Isometry, b: &Isometry, f: f64) -> Isometry {
-    let mut rotation = a.rotation;
-    for (row, row_b) in rotation.0.iter_mut().zip(&b.rotation.0) {
-        for (x, y) in row.iter_mut().zip(row_b) {
-            *x += f * (y - *x);
-        }
-    }
     Isometry {
-        rotation,
+        rotation: a.rotation + (b.rotation - a.rotation) * f,
         translation: a.translation + (b.translation - a.translation) * f,
     }
 }
@@ -896,7 +890,7 @@ mod tests {
                     let dir = (point - origin) * (1.0 / range);
                     let cos = scene
                         .cast(origin, dir, range + 1.0)
-                        .map_or(0.0, |h| -h.normal.dot(dir));
+                        .map_or(0.0, |h| -h.normal.dot(&dir));
                     out.push((surface.kind, range, cos, f.distance_raw, laser));
                 }
             });

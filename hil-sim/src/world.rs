@@ -20,7 +20,7 @@
 
 use std::sync::Arc;
 
-use crate::geometry::Vec3;
+use crate::geometry::{Normalized, Vec3};
 // The primitives' bounding boxes are the meshes' (one slab test for both).
 use crate::mesh::{Bounds as Aabb, Mesh};
 use crate::vehicle::{Axis, Part, RIM_INSET_M, Tyre, Vehicle};
@@ -319,7 +319,7 @@ impl Scene {
         let mut keep = |t: f64, normal: Vec3, kind: SurfaceKind, index: usize, t_max: &mut f64| {
             if t > 0.0 && t < *t_max {
                 *t_max = t;
-                let normal = if normal.dot(dir) > 0.0 {
+                let normal = if normal.dot(&dir) > 0.0 {
                     -normal
                 } else {
                     normal
@@ -805,7 +805,7 @@ fn hit_prism(pr: &Prism, o: Vec3, d: Vec3, t_max: f64) -> Option<(f64, Vec3)> {
 
 fn hit_box(min: Vec3, max: Vec3, o: Vec3, d: Vec3) -> Option<(f64, Vec3)> {
     let (mut t0, mut t1) = (0.0f64, f64::INFINITY);
-    let mut normal = Vec3::ZERO;
+    let mut normal = Vec3::zeros();
     let axes = [
         (o.x, d.x, min.x, max.x, Vec3::new(1.0, 0.0, 0.0)),
         (o.y, d.y, min.y, max.y, Vec3::new(0.0, 1.0, 0.0)),
@@ -1055,7 +1055,7 @@ mod tests {
                 let p = o + d * hit.range_m;
                 let dist = s.distance_to_surface(hit.surface, p);
                 assert!(dist < 1e-9, "{:?} at {p:?}: {dist}", hit.surface);
-                assert!(hit.normal.dot(d) <= 0.0);
+                assert!(hit.normal.dot(&d) <= 0.0);
                 kinds.insert(hit.surface.kind);
             }
         }

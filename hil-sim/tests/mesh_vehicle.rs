@@ -5,7 +5,7 @@
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
-use hil_sim::geometry::Vec3;
+use hil_sim::geometry::{Normalized, Vec3};
 use hil_sim::truth::{TrueAngles, TruthOptions, closed_form_rad, true_angles};
 use hil_sim::vehicle::{Part, Vehicle};
 use hil_sim::world::{Candidates, Scene, SurfaceKind};
@@ -251,7 +251,7 @@ fn hits_on_mesh_parts_lie_on_them_and_wedge_culling_keeps_them() {
             let p = o + d * h.range_m;
             let dist = s.distance_to_surface(h.surface, p);
             assert!(dist < 1e-9, "{:?} at {p:?}: {dist}", h.surface);
-            assert!(h.normal.dot(d) <= 0.0);
+            assert!(h.normal.dot(&d) <= 0.0);
             mesh_hits += usize::from(h.surface.kind == SurfaceKind::Part);
         }
     }

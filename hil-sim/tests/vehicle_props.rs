@@ -4,7 +4,7 @@
 
 use std::path::Path;
 
-use hil_sim::geometry::Vec3;
+use hil_sim::geometry::{Normalized, Vec3};
 use hil_sim::truth::{TruthOptions, true_angles};
 use hil_sim::vehicle::{Axis, Part, Section, Tyre, Underside, Vehicle};
 use hil_sim::world::Scene;

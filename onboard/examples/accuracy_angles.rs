@@ -93,6 +93,7 @@ fn main() {
                 .into_iter()
                 .map(|p| pose.apply(p))
                 .collect();
+            let cloud: Vec<angles::V3> = cloud.iter().map(|&p| p.into()).collect();
             let r = compute_angles(&cloud, &AnglesConfig::default()).unwrap();
             let got =
                 [&r.approach, &r.departure, &r.breakover].map(|f| f.as_ref().unwrap().angle_rad);
@@ -315,10 +316,14 @@ mod saved {
                     Vec::new()
                 } else {
                     read_path(&path.with_extension("path"))
+                        .into_iter()
+                        .map(Into::into)
+                        .collect()
                 },
                 ..AnglesConfig::default()
             };
-            let errors = match compute_angles(&cloud.points_m, &config) {
+            let points: Vec<angles::V3> = cloud.points_m.iter().map(|&p| p.into()).collect();
+            let errors = match compute_angles(&points, &config) {
                 Ok(r) => {
                     let m = [&r.approach, &r.breakover, &r.departure]
                         .map(|a| a.as_ref().map_or(f64::NAN, |a| a.angle_rad.to_degrees()));

@@ -143,7 +143,7 @@ fn surface_point(rng: &mut ChaCha8Rng) -> V3 {
             ]
         }
     };
-    [p[0] + noise(rng), p[1] + noise(rng), p[2] + noise(rng)]
+    V3::new(p[0] + noise(rng), p[1] + noise(rng), p[2] + noise(rng))
 }
 
 /// The brute-force answer: the K nearest within the radius, by distance then index.
@@ -249,7 +249,7 @@ fn main() {
         .map(|_| {
             let p = surface_point(&mut rng);
             let mut jitter = || rng.random_range(-0.03..0.03);
-            [p[0] + jitter(), p[1] + jitter(), p[2] + jitter()]
+            V3::new(p[0] + jitter(), p[1] + jitter(), p[2] + jitter())
         })
         .collect();
     println!("points={} queries={}", target.len(), queries.len());

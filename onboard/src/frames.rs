@@ -28,6 +28,6 @@ pub fn lidar_frame(frame: &Frame, stamp_s: f64) -> LidarFrame {
 /// impl: neither type is this crate's).
 pub fn cloud_of(built: &BuiltCloud) -> Cloud {
     Cloud {
-        points_m: built.points_in_world.clone(),
+        points_m: built.points_in_world.iter().map(|&p| p.into()).collect(),
     }
 }

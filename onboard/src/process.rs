@@ -588,7 +588,7 @@ fn cloud_and_path(
     pipeline: &PipelineConfig,
 ) -> Result<(Cloud, Scan), String> {
     let x_sigma_per_m = built.x_sigma_per_m(&pipeline.fusion);
-    let path = built.lidar_path(pipeline.mounts.lidar_xyz_m);
+    let path = built.lidar_path(pipeline.mounts.lidar_xyz_m.into());
     if built.points_in_world.len() < min_points {
         return Err(format!(
             "the fused cloud has {} points, fewer than {min_points}",
@@ -596,7 +596,7 @@ fn cloud_and_path(
         ));
     }
     let cloud = Cloud {
-        points_m: built.points_in_world,
+        points_m: built.points_in_world.into_iter().map(Into::into).collect(),
     };
     Ok((
         cloud,
@@ -679,8 +679,8 @@ fn angles_of(
         range_accuracy_m: Some(vlp16::RANGE_ACCURACY_M),
         ..AnglesConfig::default()
     };
-    let found =
-        compute_angles(&cloud.points_m, &angles_config).map_err(|e| format!("angles: {e}"))?;
+    let points: Vec<V3> = cloud.points_m.iter().map(|&p| p.into()).collect();
+    let found = compute_angles(&points, &angles_config).map_err(|e| format!("angles: {e}"))?;
     let mut result = wire_result(&found, cloud.points_m.len());
     if short_run {
         result.warnings.insert(ResultWarnings::SHORT_RUN);
@@ -697,7 +697,7 @@ fn angles_of(
     }
     let svg = side_view_svg(&found);
     let profiles = profile_records(&compute_profiles(
-        &cloud.points_m,
+        &points,
         &angles_config,
         Some(&found),
         &config.standards,
@@ -896,7 +896,7 @@ mod tests {
                     measure: Measure::Value {
                         value: 21.5,
                         u: 0.4,
-                        witness_in_vehicle: [0.0, 0.0, 0.3],
+                        witness_in_vehicle: V3::new(0.0, 0.0, 0.3),
                     },
                 },
                 ProfileQuantity {

@@ -5,9 +5,15 @@ mod synth;
 
 use angles::{
     AngleFinding, AnglesConfig, AnglesError, AnglesResult, ExclusionBox, Quantity, TyrePosition,
-    Zone, compute_angles,
+    V3, Zone,
 };
 use synth::{Pose, Scan, Truth, Vehicle};
+
+/// The calculator on a synthetic cloud of `[x, y, z]` points.
+fn compute_angles(points: &[[f64; 3]], config: &AnglesConfig) -> Result<AnglesResult, AnglesError> {
+    let points: Vec<V3> = points.iter().map(|&p| p.into()).collect();
+    angles::compute_angles(&points, config)
+}
 
 fn run(v: &Vehicle, scan: Scan, pose: Pose, config: &AnglesConfig) -> AnglesResult {
     let cloud: Vec<[f64; 3]> = synth::sample(v, scan)
@@ -171,7 +177,7 @@ fn tyre_fits_geometry_and_frame() {
     assert!((r.yaw_rad - 0.14).abs() < 1e-3 && (r.ground.tilt_rad - 0.07).abs() < 1e-4);
     // Witness in the cloud frame is the witness in the vehicle frame, placed by the pose.
     let a = r.approach.as_ref().unwrap();
-    let expect = TILTED.apply(a.witness_in_vehicle);
+    let expect = TILTED.apply(a.witness_in_vehicle.into());
     assert!(
         (0..3).all(|k| (expect[k] - a.witness_in_cloud[k]).abs() < 3e-3),
         "{a:?}"
@@ -192,8 +198,8 @@ fn exclusion_box_removes_the_tow_hitch() {
     );
     let cfg = AnglesConfig {
         exclude: vec![ExclusionBox {
-            min_in_cloud: [-3.3, -0.1, 0.3],
-            max_in_cloud: [-2.6, 0.1, 0.56],
+            min_in_cloud: V3::new(-3.3, -0.1, 0.3),
+            max_in_cloud: V3::new(-2.6, 0.1, 0.56),
         }],
         ..AnglesConfig::default()
     };
@@ -293,11 +299,11 @@ fn a_scan_that_stops_short_leaves_that_end_not_measured_and_a_hitch_end_is_not()
 
 /// A lidar path along the centre line, 12 cm up, from `from_x` to `to_x` (vehicle frame), moved
 /// by `pose` like the cloud.
-fn path(from_x: f64, to_x: f64, pose: Pose) -> Vec<[f64; 3]> {
+fn path(from_x: f64, to_x: f64, pose: Pose) -> Vec<V3> {
     (0..=100)
         .map(|i| {
             let t = f64::from(i) / 100.0;
-            pose.apply([from_x + (to_x - from_x) * t, 0.0, 0.12])
+            pose.apply([from_x + (to_x - from_x) * t, 0.0, 0.12]).into()
         })
         .collect()
 }

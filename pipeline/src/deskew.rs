@@ -68,15 +68,15 @@ mod tests {
     /// start-frame coordinates whatever its firing time.
     #[test]
     fn static_point_is_restored_for_both_models() {
-        let world_point = [2.0, 0.5, 0.3];
+        let world_point = V3::new(2.0, 0.5, 0.3);
         for velocity in [
             Velocity {
-                linear_mps: [0.3, 0.0, 0.0],
-                angular_radps: [0.0; 3],
+                linear_mps: V3::new(0.3, 0.0, 0.0),
+                angular_radps: V3::zeros(),
             },
             Velocity {
-                linear_mps: [0.3, 0.05, 0.0],
-                angular_radps: [0.0, 0.0, 0.4],
+                linear_mps: V3::new(0.3, 0.05, 0.0),
+                angular_radps: V3::new(0.0, 0.0, 0.4),
             },
         ] {
             let times: Vec<f64> = (0..10).map(|i| f64::from(i) * 0.01).collect();
@@ -100,16 +100,16 @@ mod tests {
 
     #[test]
     fn disabled_does_nothing() {
-        let mut points = vec![[1.0, 0.0, 0.0]];
+        let mut points = vec![V3::new(1.0, 0.0, 0.0)];
         let c = DeskewConfig {
             enabled: false,
             ..DeskewConfig::default()
         };
         let v = Velocity {
-            linear_mps: [1.0, 0.0, 0.0],
-            angular_radps: [0.0; 3],
+            linear_mps: V3::new(1.0, 0.0, 0.0),
+            angular_radps: V3::zeros(),
         };
         assert_eq!(deskew(&mut points, &[0.1], v, &c), DeskewModel::None);
-        assert_eq!(points, vec![[1.0, 0.0, 0.0]]);
+        assert_eq!(points, vec![V3::new(1.0, 0.0, 0.0)]);
     }
 }

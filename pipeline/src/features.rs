@@ -147,10 +147,10 @@ fn score_ring(
             continue;
         }
         let centre = pos[k];
-        let mut sum = [0.0; 3];
+        let mut sum = V3::zeros();
         for &q in &pos[k - n_half..=k + n_half] {
             let d = sub(q, centre);
-            sum = [sum[0] + d[0], sum[1] + d[1], sum[2] + d[2]];
+            sum = V3::new(sum[0] + d[0], sum[1] + d[1], sum[2] + d[2]);
         }
         // |p_j - p_k| for j = k - n_half .. k - 1 (stored ahead of p_j, `n_half - 1` apart),
         // then for j = k + 1 ..= k + n_half (ahead of p_k): the direct loop's order, without
@@ -282,7 +282,7 @@ mod tests {
                     r *= 0.6;
                 }
                 RingPoint {
-                    p: [r * c, r * s, 0.0],
+                    p: V3::new(r * c, r * s, 0.0),
                     range_m: r,
                     azimuth_rad: a,
                     ring: 3,
@@ -326,11 +326,11 @@ mod tests {
                 continue;
             }
             let centre = points[ring[k]];
-            let mut sum = [0.0; 3];
+            let mut sum = V3::zeros();
             let mut total_distance = 0.0;
             for &j in &ring[k - n_half..=k + n_half] {
                 let d = sub(points[j].p, centre.p);
-                sum = [sum[0] + d[0], sum[1] + d[1], sum[2] + d[2]];
+                sum = V3::new(sum[0] + d[0], sum[1] + d[1], sum[2] + d[2]);
                 total_distance += norm(d);
             }
             let w = (2 * n_half) as f64;
@@ -353,11 +353,11 @@ mod tests {
         for _ in 0..2000 {
             azimuth_rad += if rng.random_bool(0.02) { 0.4 } else { 0.003 };
             let range_m = rng.random_range(0.3..6.0);
-            let p = [
+            let p = V3::new(
                 range_m * azimuth_rad.cos(),
                 range_m * azimuth_rad.sin(),
                 rng.random_range(-0.5..0.5),
-            ];
+            );
             points.push(RingPoint {
                 p,
                 range_m,

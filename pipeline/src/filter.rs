@@ -11,7 +11,7 @@
 
 use super::config::FilterConfig;
 use super::geom::{
-    V3, add, centroid_covariance, dist2, dot, scale, sub, symmetric_eigen, voxel_of,
+    V3, add, centroid_covariance, dist2, dot, scale, sub, symmetric_eigen_m3, voxel_of,
 };
 
 /// Filter `points`; returns the filtered cloud (same order and length).
@@ -123,8 +123,8 @@ fn filter_one(p: V3, neighbours: &[V3], config: &FilterConfig) -> V3 {
     let Some((_, cov)) = centroid_covariance(neighbours.iter().copied()) else {
         return p;
     };
-    let (_, vectors) = symmetric_eigen(&cov);
-    let n = [vectors[0][0], vectors[1][0], vectors[2][0]];
+    let (_, vectors) = symmetric_eigen_m3(&cov);
+    let n = vectors.column(0).into_owned();
     let (two_ss, two_sn) = (
         2.0 * config.sigma_spatial_m.powi(2),
         2.0 * config.sigma_normal_m.powi(2),
@@ -161,7 +161,7 @@ mod tests {
                 let x = f64::from(i) * 0.01;
                 let z = if x < 0.0 { 0.0 } else { 0.1 };
                 let noise: f64 = (0..6).map(|_| rng.random_range(-0.005..0.005)).sum::<f64>();
-                pts.push([x, f64::from(j) * 0.01, z + noise]);
+                pts.push(V3::new(x, f64::from(j) * 0.01, z + noise));
                 truth.push(z);
             }
         }
@@ -206,7 +206,7 @@ mod tests {
                 f64::from(i % 20) * 0.013 - 0.2,
                 f64::from(i / 20) * 0.017 - 0.3,
             );
-            [x, y, 0.5 * x + 0.05]
+            V3::new(x, y, 0.5 * x + 0.05)
         }));
         assert_eq!(
             bilateral(&pts, &FilterConfig::default()),

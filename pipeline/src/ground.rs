@@ -141,8 +141,8 @@ fn refit(points: &[V3], plane: Plane, threshold_m: f64) -> Option<Plane> {
         .copied()
         .filter(move |&p| plane.distance(p).abs() <= threshold_m);
     let (c, cov) = super::geom::centroid_covariance(inliers)?;
-    let (_, vectors) = super::geom::symmetric_eigen(&cov);
-    let mut normal = [vectors[0][0], vectors[1][0], vectors[2][0]];
+    let (_, vectors) = super::geom::symmetric_eigen_m3(&cov);
+    let mut normal = vectors.column(0).into_owned();
     if normal[2] < 0.0 {
         normal = scale(normal, -1.0);
     }
@@ -187,12 +187,20 @@ mod tests {
             let r = 0.5 * f64::from(ring);
             for k in 0..300 {
                 let a = f64::from(k) * std::f64::consts::TAU / 300.0;
-                points.push([r * a.cos(), r * a.sin(), 0.004 * (f64::from(k) * 0.7).sin()]);
+                points.push(V3::new(
+                    r * a.cos(),
+                    r * a.sin(),
+                    0.004 * (f64::from(k) * 0.7).sin(),
+                ));
             }
         }
         for i in 0..40 {
             for j in 0..50 {
-                points.push([f64::from(i) * 0.1 - 2.0, f64::from(j) * 0.05 - 1.2, 0.3]);
+                points.push(V3::new(
+                    f64::from(i) * 0.1 - 2.0,
+                    f64::from(j) * 0.05 - 1.2,
+                    0.3,
+                ));
             }
         }
         points
@@ -226,16 +234,16 @@ mod tests {
         for i in 0..60 {
             for j in 0..60 {
                 let (x, y) = (f64::from(i) * 0.1 - 3.0, f64::from(j) * 0.1 - 3.0);
-                points.push([x, y, 0.002 * (x * 7.0).sin()]);
+                points.push(V3::new(x, y, 0.002 * (x * 7.0).sin()));
             }
         }
         // Clutter: twice as many points off the floor (walls, a tyre's face, an underbody).
         for k in 0..7200 {
             let t = f64::from(k);
             points.push(match k % 3 {
-                0 => [4.0, (t * 0.37) % 6.0 - 3.0, (t * 0.013) % 2.0],
-                1 => [1.0 + (t * 0.011) % 0.3, 0.8, (t * 0.017) % 0.6],
-                _ => [(t * 0.29) % 4.0 - 2.0, (t * 0.31) % 1.6 - 0.8, 0.3],
+                0 => V3::new(4.0, (t * 0.37) % 6.0 - 3.0, (t * 0.013) % 2.0),
+                1 => V3::new(1.0 + (t * 0.011) % 0.3, 0.8, (t * 0.017) % 0.6),
+                _ => V3::new((t * 0.29) % 4.0 - 2.0, (t * 0.31) % 1.6 - 0.8, 0.3),
             });
         }
         let c = GroundConfig::default();
@@ -258,9 +266,9 @@ mod tests {
             segment_ground(&points, 0.12, &c, 3)
         );
         let wall: Vec<V3> = (0..200)
-            .map(|i| [1.0, f64::from(i % 20) * 0.1, f64::from(i / 20) * 0.1])
+            .map(|i| V3::new(1.0, f64::from(i % 20) * 0.1, f64::from(i / 20) * 0.1))
             .collect();
         assert!(segment_ground(&wall, 0.12, &c, 0).is_none());
-        assert!(segment_ground(&[[0.0; 3]; 2], 0.12, &c, 0).is_none());
+        assert!(segment_ground(&[V3::zeros(); 2], 0.12, &c, 0).is_none());
     }
 }

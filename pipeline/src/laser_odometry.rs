@@ -28,7 +28,7 @@ pub use super::registration::{Registration, Scan, register_joint, register_two_s
 
 use super::geom::{
     Neighbour, Pose, Twist6, V3, VoxelIndex, add, centroid_covariance, cross, dist2, dot, mat_vec,
-    norm, scale, solve_spd, sub, symmetric_eigen,
+    norm, scale, solve_spd, sub, symmetric_eigen_m3,
 };
 use super::registration::{DegeneracyThresholds, determined_projection};
 
@@ -105,11 +105,11 @@ fn plane_at(index: &VoxelIndex, q: V3, radius_m: f64) -> Option<(V3, V3)> {
         return None;
     }
     let (c, cov) = centroid_covariance(nn.iter().map(|n| n.p))?;
-    let (values, vectors) = symmetric_eigen(&cov);
+    let (values, vectors) = symmetric_eigen_m3(&cov);
     if values[0] > 0.1 * values[1] || values[1] < 0.01 * values[2] {
         return None;
     }
-    Some(([vectors[0][0], vectors[1][0], vectors[2][0]], c))
+    Some((vectors.column(0).into_owned(), c))
 }
 
 /// Line through the five nearest target corners, if they are linear: `(direction, point)`.
@@ -119,11 +119,11 @@ fn line_at(index: &VoxelIndex, q: V3, radius_m: f64) -> Option<(V3, V3)> {
         return None;
     }
     let (c, cov) = centroid_covariance(nn.iter().map(|n| n.p))?;
-    let (values, vectors) = symmetric_eigen(&cov);
+    let (values, vectors) = symmetric_eigen_m3(&cov);
     if values[2] < 3.0 * values[1] {
         return None;
     }
-    Some(([vectors[0][2], vectors[1][2], vectors[2][2]], c))
+    Some((vectors.column(2).into_owned(), c))
 }
 
 fn correspondences(
@@ -721,7 +721,8 @@ fn lm_step(
 /// True when increment `d` (`[rx, ry, rz, tx, ty, tz]`) is below [`CONVERGED_STEP`] in both
 /// rotation and translation.
 fn is_converged(d: &Twist6) -> bool {
-    norm([d[0], d[1], d[2]]) < CONVERGED_STEP && norm([d[3], d[4], d[5]]) < CONVERGED_STEP
+    norm(V3::new(d[0], d[1], d[2])) < CONVERGED_STEP
+        && norm(V3::new(d[3], d[4], d[5])) < CONVERGED_STEP
 }
 
 #[cfg(test)]
@@ -881,7 +882,7 @@ mod tests {
         for &(cx, cy) in &[(1.4_f64, 0.8_f64), (1.4, -0.8), (-1.4, 0.8), (-1.4, -0.8)] {
             for k in 0..60 {
                 let z = 0.01 + f64::from(k) * 0.006;
-                source_corners.push([cx + 0.3 + 0.12, cy, z]);
+                source_corners.push(V3::new(cx + 0.3 + 0.12, cy, z));
             }
         }
         let (planes, source_corners) = (moved(&planes, &truth), moved(&source_corners, &truth));
@@ -926,7 +927,7 @@ mod tests {
             &pose,
             config.max_correspondence_m,
         );
-        let (fresh, _, weighted) = normal_equations(&corr, &pose, [0.0; 3], Kernel::of(&config));
+        let (fresh, _, weighted) = normal_equations(&corr, &pose, V3::zeros(), Kernel::of(&config));
         let n = weighted as f64;
         let largest = (0..6).map(|a| h[a][a]).fold(0.0, f64::max);
         for a in 0..6 {
@@ -954,19 +955,19 @@ mod tests {
             tags.push(tag);
         };
         for y in [-0.12, 0.0, 0.12] {
-            add([0.95, y, 0.17], 1);
+            add(V3::new(0.95, y, 0.17), 1);
         }
         for y in [-0.1, 0.0, 0.1] {
-            add([0.80, y, 0.17], 2);
+            add(V3::new(0.80, y, 0.17), 2);
         }
         for y in [-0.08, 0.0, 0.08] {
-            add([0.98, y, 0.0], 3 | GROUND_TAG_BIT);
+            add(V3::new(0.98, y, 0.0), 3 | GROUND_TAG_BIT);
         }
         let index = VoxelIndex::new_tagged(points, tags, 0.2);
         // The five nearest include the ground point below; a fit over them is not the underbody.
-        let (normal, _) = plane_at(&index, [0.95, 0.0, 0.17], 0.2).expect("underbody plane");
+        let (normal, _) = plane_at(&index, V3::new(0.95, 0.0, 0.17), 0.2).expect("underbody plane");
         assert!(normal[2].abs() > 0.999, "normal {normal:?}");
         // From the ground side, the ground ring alone is one scan line: no plane.
-        assert_eq!(plane_at(&index, [0.98, 0.0, 0.0], 0.2), None);
+        assert_eq!(plane_at(&index, V3::new(0.98, 0.0, 0.0), 0.2), None);
     }
 }

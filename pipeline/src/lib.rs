@@ -595,8 +595,8 @@ impl Pipeline {
             && (w.stamp_s - t0_s).abs() < 0.2
         {
             return Velocity {
-                linear_mps: [w.vx_mps, w.vy_mps, 0.0],
-                angular_radps: [0.0, 0.0, w.wz_radps],
+                linear_mps: V3::new(w.vx_mps, w.vy_mps, 0.0),
+                angular_radps: V3::new(0.0, 0.0, w.wz_radps),
             };
         }
         // The ten-frame constant-velocity reference, not the last frame's rate: deskewing with the
@@ -604,8 +604,8 @@ impl Pipeline {
         // between long and short increments); the mean damps it.
         let r = self.fusion.reference().unwrap_or(self.last_rate);
         Velocity {
-            linear_mps: [r[3], r[4], r[5]],
-            angular_radps: [r[0], r[1], r[2]],
+            linear_mps: V3::new(r[3], r[4], r[5]),
+            angular_radps: V3::new(r[0], r[1], r[2]),
         }
     }
 
@@ -672,7 +672,7 @@ impl Pipeline {
             ranges_m: Vec::with_capacity(n),
         };
         for p in &frame.points {
-            let l = p.xyz_in_lidar_m.map(f64::from);
+            let l = V3::from(p.xyz_in_lidar_m.map(f64::from));
             robot.points.push(self.robot_from_lidar.apply(l));
             robot.times_s.push(f64::from(p.time_offset_s));
             robot.ranges_m.push(norm(l));
@@ -1092,7 +1092,7 @@ fn level_with_ground(world_from_robot: &Pose, plane: (V3, f64), world: (V3, f64)
     let fix = if norm(axis) > 1e-12 {
         geom::scale(axis, angle / norm(axis))
     } else {
-        [0.0; 3]
+        V3::zeros()
     };
     let rotation = geom::mat_mul(&geom::exp_so3(fix), &world_from_robot.rotation);
     let mut translation = world_from_robot.translation;

@@ -142,7 +142,7 @@ impl Block {
             },
             Blocking::Sheets => Self {
                 slots: None,
-                cells: vec![([0.0; 3], 0); BLOCK_VOXELS],
+                cells: vec![(V3::zeros(), 0); BLOCK_VOXELS],
             },
         }
     }
@@ -154,7 +154,7 @@ impl Block {
             Some(slots) => {
                 let slot = &mut slots[local];
                 if *slot == 0 {
-                    self.cells.push(([0.0; 3], 0));
+                    self.cells.push((V3::zeros(), 0));
                     // At most BLOCK_VOXELS (512) cells per block: fits u16.
                     *slot = self.cells.len() as u16;
                 }
@@ -216,7 +216,7 @@ impl FloorAccumulator {
     /// Add a world-frame ground point.
     pub fn add(&mut self, p: V3) {
         self.columns
-            .add([p[0], p[1], 0.5 * self.cell_m + p[2] * self.squash]);
+            .add(V3::new(p[0], p[1], 0.5 * self.cell_m + p[2] * self.squash));
     }
 
     /// Number of occupied columns.
@@ -234,7 +234,7 @@ impl FloorAccumulator {
         self.columns
             .points()
             .into_iter()
-            .map(|[x, y, z]| [x, y, (z - 0.5 * self.cell_m) / self.squash])
+            .map(|p| V3::new(p.x, p.y, (p.z - 0.5 * self.cell_m) / self.squash))
             .collect()
     }
 }
@@ -464,10 +464,10 @@ mod tests {
         // Four hits on the floor and one lifted 3 cm by a tilted frame, in one 2 cm column: one
         // point at the mean (as 3D voxels they were two, the lifted one kept at 3 cm).
         for z in [0.0, 0.001, -0.001, 0.0, 0.03] {
-            floor.add([0.011, 0.013, z]);
+            floor.add(V3::new(0.011, 0.013, z));
         }
         // A second column, behind the first in x.
-        floor.add([-0.005, 0.013, 0.002]);
+        floor.add(V3::new(-0.005, 0.013, 0.002));
         assert_eq!(floor.len(), 2);
         let points = floor.points();
         assert_eq!(points.len(), 2);
@@ -482,9 +482,9 @@ mod tests {
     #[test]
     fn accumulator_averages_within_a_voxel() {
         let mut acc = CloudAccumulator::new(0.1);
-        acc.add([0.01, 0.01, 0.01]);
-        acc.add([0.03, 0.05, 0.07]);
-        acc.add([0.25, 0.0, 0.0]);
+        acc.add(V3::new(0.01, 0.01, 0.01));
+        acc.add(V3::new(0.03, 0.05, 0.07));
+        acc.add(V3::new(0.25, 0.0, 0.0));
         let pts = acc.points();
         assert_eq!(pts.len(), 2);
         assert!((pts[0][0] - 0.02).abs() < 1e-12 && (pts[0][2] - 0.04).abs() < 1e-12);
@@ -495,12 +495,12 @@ mod tests {
         let mut acc = CloudAccumulator::new(0.1);
         // Back and forth between voxels, then a voxel below the others.
         for p in [
-            [0.31, 0.0, 0.0],
-            [0.01, 0.0, 0.0],
-            [0.33, 0.0, 0.0],
-            [0.03, 0.0, 0.0],
-            [0.05, 0.0, 0.0],
-            [-0.05, 0.0, 0.0],
+            V3::new(0.31, 0.0, 0.0),
+            V3::new(0.01, 0.0, 0.0),
+            V3::new(0.33, 0.0, 0.0),
+            V3::new(0.03, 0.0, 0.0),
+            V3::new(0.05, 0.0, 0.0),
+            V3::new(-0.05, 0.0, 0.0),
         ] {
             acc.add(p);
         }
@@ -537,11 +537,11 @@ mod tests {
                 k if k % 2 == 0 => 0.03,
                 _ => 0.1,
             };
-            let p: V3 = std::array::from_fn(|_| rng.random_range(-spread..spread));
+            let p = V3::from_fn(|_, _| rng.random_range(-spread..spread));
             acc.add(p);
             let cell = reference
                 .entry(voxel_of(p, voxel_m))
-                .or_insert(([0.0; 3], 0));
+                .or_insert((V3::zeros(), 0));
             cell.0 = add(cell.0, p);
             cell.1 += 1;
             if i == 1000 || i == BATCH - 1 || i == BATCH {
@@ -609,7 +609,7 @@ mod tests {
                 0 => rng.random_range(-0.1..0.1),
                 _ => rng.random_range(0.0..0.02),
             };
-            let p = [rng.random_range(-3.0..3.0), rng.random_range(-2.0..2.0), z];
+            let p = V3::new(rng.random_range(-3.0..3.0), rng.random_range(-2.0..2.0), z);
             cubes.add(p);
             sheets.add(p);
             if i == 1000 || i == BATCH + 7 {
@@ -627,14 +627,14 @@ mod tests {
     fn feature_map_caps_points_per_voxel() {
         let mut map = FeatureMap::new(0.5, 3, 0.0);
         let planes: Vec<(V3, u32)> = (0..10)
-            .map(|i| ([f64::from(i) * 0.01, 0.0, 0.0], 0))
+            .map(|i| (V3::new(f64::from(i) * 0.01, 0.0, 0.0), 0))
             .collect();
         map.add(&Pose::IDENTITY, &planes, &[]);
         assert_eq!(map.len(), 3);
         map.add(
             &Pose::from_xyz_rpy([5.0, 0.0, 0.0], [0.0; 3]),
             &planes,
-            &[([0.0; 3], 1)],
+            &[(V3::zeros(), 1)],
         );
         assert_eq!(map.len(), 7);
     }
@@ -645,7 +645,7 @@ mod tests {
         // apart. Then its near side, 10 cm away in the same 0.2 m voxel.
         let line = |z: f64, tag: u32| -> Vec<(V3, u32)> {
             (1..20)
-                .map(|i| ([f64::from(i) * 0.01, 0.05, z], tag))
+                .map(|i| (V3::new(f64::from(i) * 0.01, 0.05, z), tag))
                 .collect()
         };
         let (far, near) = (line(0.05, 0), line(0.15, 1));

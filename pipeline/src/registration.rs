@@ -547,7 +547,7 @@ mod tests {
         let (mut planes, corners) = scene(false);
         for i in 0..6 {
             for j in 0..6 {
-                planes.push([2.0, f64::from(i) * 0.05, 0.1 + f64::from(j) * 0.04]);
+                planes.push(V3::new(2.0, f64::from(i) * 0.05, 0.1 + f64::from(j) * 0.04));
             }
         }
         let target = target_of(&planes, &corners);

@@ -13,8 +13,8 @@ pub(crate) fn scene(with_tyres: bool) -> (Vec<V3>, Vec<V3>) {
     for i in -40..40 {
         for j in -10..10 {
             let (x, y) = (f64::from(i) * 0.1, f64::from(j) * 0.1);
-            planes.push([x, y, 0.0]);
-            planes.push([x + 0.05, y + 0.05, 0.35]);
+            planes.push(V3::new(x, y, 0.0));
+            planes.push(V3::new(x + 0.05, y + 0.05, 0.35));
         }
     }
     if with_tyres {
@@ -25,16 +25,16 @@ pub(crate) fn scene(with_tyres: bool) -> (Vec<V3>, Vec<V3>) {
                 // Tyre sidewall (a vertical disc facing the robot) and its edges.
                 for w in 0..4 {
                     let r = 0.3 - 0.06 * f64::from(w);
-                    planes.push([cx + r * a.cos(), cy, 0.3 + r * a.sin()]);
+                    planes.push(V3::new(cx + r * a.cos(), cy, 0.3 + r * a.sin()));
                 }
-                corners.push([x, cy, z]);
-                corners.push([x, cy - 0.2 * cy.signum(), z]);
+                corners.push(V3::new(x, cy, z));
+                corners.push(V3::new(x, cy - 0.2 * cy.signum(), z));
             }
             // Vertical edge lines at the tyre fronts and backs.
             for k in 0..20 {
                 let z = f64::from(k) * 0.02;
-                corners.push([cx + 0.3, cy, z]);
-                corners.push([cx - 0.3, cy, z]);
+                corners.push(V3::new(cx + 0.3, cy, z));
+                corners.push(V3::new(cx - 0.3, cy, z));
             }
         }
     }

@@ -64,7 +64,11 @@ impl DepthImage {
             return None;
         }
         let [fx, fy, cx, cy] = self.intrinsics_px;
-        Some([(u as f64 - cx) * d / fx, (v as f64 - cy) * d / fy, d])
+        Some(V3::new(
+            (u as f64 - cx) * d / fx,
+            (v as f64 - cy) * d / fy,
+            d,
+        ))
     }
 
     /// Unit normal at `(u, v)` from the neighbours `step` pixels away, facing the camera.
@@ -272,8 +276,8 @@ fn degenerate_robot_axes(
         }
         // Rotate the camera-frame direction's rotation and translation parts into the robot frame
         // (the lever arm of the mount is ignored: only which axes are weak matters here).
-        let w = super::geom::mat_vec(&r, [vectors[0][e], vectors[1][e], vectors[2][e]]);
-        let t = super::geom::mat_vec(&r, [vectors[3][e], vectors[4][e], vectors[5][e]]);
+        let w = super::geom::mat_vec(&r, V3::new(vectors[0][e], vectors[1][e], vectors[2][e]));
+        let t = super::geom::mat_vec(&r, V3::new(vectors[3][e], vectors[4][e], vectors[5][e]));
         for k in 0..3 {
             weight[k] += w[k] * w[k];
             weight[k + 3] += t[k] * t[k];
@@ -294,7 +298,7 @@ pub(crate) mod tests {
         let mut depth = vec![0u16; width * height];
         for v in 0..height {
             for u in 0..width {
-                let dir_cam = [(u as f64 - 80.0) / 120.0, (v as f64 - 60.0) / 120.0, 1.0];
+                let dir_cam = V3::new((u as f64 - 80.0) / 120.0, (v as f64 - 60.0) / 120.0, 1.0);
                 let o = camera_in_world.translation;
                 let d = camera_in_world.apply_vector(dir_cam);
                 // Scene: a ceiling at z = 0.5 with shallow panels hanging 2-4 cm below it (the
@@ -355,7 +359,7 @@ pub(crate) mod tests {
     }
 
     fn add3(o: V3, d: V3, t: f64) -> V3 {
-        [o[0] + d[0] * t, o[1] + d[1] * t, o[2] + d[2] * t]
+        V3::new(o[0] + d[0] * t, o[1] + d[1] * t, o[2] + d[2] * t)
     }
 
     #[test]

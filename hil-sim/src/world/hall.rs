@@ -34,7 +34,9 @@ use rand_chacha::ChaCha8Rng;
 use serde::Deserialize;
 
 use super::{Aabb, Scene, SurfaceId, SurfaceKind, hit_box, hit_cylinder};
-use crate::geometry::{Isometry, Pose, Rot3, Vec3};
+use crate::geometry::{
+    Isometry, Normalized, Pose, Rot3, Vec3, isometry_from_xyz_rpy, rot_from_rpy,
+};
 use crate::trajectory::Trajectory;
 use crate::vehicle::{Axis, Vehicle};
 
@@ -399,7 +401,7 @@ impl Hall {
         let room_max = Vec3::new(walls[0], walls[2], spec.ceiling_m);
         let tilt_dir: f64 = rng.random_range(0.0..std::f64::consts::TAU);
         let tilt = spec.tilt_deg.to_radians();
-        let hall_from_vehicle = Rot3::from_rpy(tilt * tilt_dir.sin(), tilt * tilt_dir.cos(), 0.0);
+        let hall_from_vehicle = rot_from_rpy(tilt * tilt_dir.sin(), tilt * tilt_dir.cos(), 0.0);
         let rows = spec
             .pillar_rows
             .iter()
@@ -452,7 +454,7 @@ impl Hall {
                 );
             let (s, c) = yaw.sin_cos();
             let half_wb = v.wheelbase_m / 2.0;
-            let vehicle_from_other = Isometry::from_xyz_rpy(
+            let vehicle_from_other = isometry_from_xyz_rpy(
                 centre + Vec3::new(c * half_wb, s * half_wb, 0.0),
                 0.0,
                 0.0,
@@ -510,20 +512,15 @@ impl Hall {
         d: Vec3,
         t_max: f64,
     ) -> Option<(f64, Vec3, SurfaceKind, usize)> {
-        let ho = self.hall_from_vehicle.apply(o - self.origin);
-        let hd = self.hall_from_vehicle.apply(d);
+        let ho = self.hall_from_vehicle * (o - self.origin);
+        let hd = self.hall_from_vehicle * d;
         let mut best: Option<(f64, Vec3, SurfaceKind, usize)> = None;
         let mut limit = t_max;
         if let Some((t, n, i)) = self.cast_room(ho, hd)
             && t < limit
         {
             limit = t;
-            best = Some((
-                t,
-                self.vehicle_from_hall.apply(n),
-                SurfaceKind::Structure,
-                i,
-            ));
+            best = Some((t, self.vehicle_from_hall * n, SurfaceKind::Structure, i));
         }
         for (r, row) in self.rows.iter().enumerate() {
             if let Some((t, n, k)) = cast_row(row, ho, hd, limit, self.room_min.z, self.room_max.z)
@@ -531,7 +528,7 @@ impl Hall {
                 limit = t;
                 best = Some((
                     t,
-                    self.vehicle_from_hall.apply(n),
+                    self.vehicle_from_hall * n,
                     SurfaceKind::Structure,
                     usize::from(PILLAR_INDEX_BASE) + 1000 * r + k,
                 ));
@@ -592,7 +589,7 @@ impl Hall {
                     .distance_to_nearest_vehicle(o.other_from_vehicle.apply(p))
             }),
             SurfaceKind::Structure => {
-                let h = self.hall_from_vehicle.apply(p - self.origin);
+                let h = self.hall_from_vehicle * (p - self.origin);
                 let (lo, hi) = (self.room_min, self.room_max);
                 match i {
                     0 => (h.x - hi.x).abs(),
@@ -627,7 +624,7 @@ impl Hall {
                 p,
             ));
         }
-        let h = self.hall_from_vehicle.apply(p - self.origin);
+        let h = self.hall_from_vehicle * (p - self.origin);
         for row in &self.rows {
             for &x in &row.xs {
                 best = best.min(pillar_distance(row, x, h));
@@ -709,7 +706,7 @@ fn cast_row(
         if let Some((t, n)) = hit
             && t < best.map_or(t_max, |b| b.0)
         {
-            let n = if n.dot(d) > 0.0 { -n } else { n };
+            let n = if n.dot(&d) > 0.0 { -n } else { n };
             best = Some((t, n, k));
         }
     }
