@@ -146,7 +146,8 @@ fn verify_accepts_the_robots_records_with_a_key_from_the_user() {
     assert_eq!(code, 0, "{text}");
 
     // The handheld's copy (`passangle measure`/`fetch` saves it from the radio's result) has the
-    // robot's bytes, so the robot's signature verifies it.
+    // robot's bytes when the record has no standards' profiles (the radio does not carry them),
+    // so the robot's signature verifies it.
     let saved = link::client::save(
         &root.join("handheld"),
         &Measured {
