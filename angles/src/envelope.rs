@@ -430,8 +430,9 @@ impl Envelope {
 /// Noise fringe: range noise smears a surface's edge beyond it (mostly along x, since a low
 /// sensor sees the underside and the bumpers' lower edges along the vehicle), into bins that hold
 /// fewer points than the surface. A bin is fringe if a bin within 4 noise sigma (at most
-/// `FRINGE_REACH_M`; none without noise) along x has at
-/// least `FRINGE_RATIO` x its support and a mode no higher than its own plus `max(3 sigma, 2 mm)`:
+/// `FRINGE_REACH_M`; none without noise) along x has at least `FRINGE_RATIO` x its density
+/// (points per metre along x, so that bins of different widths compare) and a mode no higher
+/// than its own plus `max(3 sigma, 2 mm)`:
 /// a sparser bin beside a denser surface at about the same height or lower. Ratio 2 is the
 /// half-density point where a blurred edge truly ends: on lidar-only simulator clouds (VLP-16,
 /// 1.5 cm range noise) the off-roader's bumper edge was smeared 2 cm forward and its approach

@@ -100,15 +100,26 @@ pub fn run(args: &ReplayArgs, out: &mut impl Write) -> anyhow::Result<()> {
         PlyEncoding::BinaryLittleEndian,
     )
     .with_context(|| format!("writing {}", path.display()))?;
-    let x_sigma_per_m = built.x_sigma_per_m(&config.pipeline.fusion);
-    report(&built, &path, args, x_sigma_per_m, &notes, out)
+    let scan = Scan {
+        lidar_path: built.lidar_path(config.pipeline.mounts.lidar_xyz_m.into()),
+        x_sigma_per_m: built.x_sigma_per_m(&config.pipeline.fusion),
+    };
+    report(&built, &path, args, scan, &notes, out)
+}
+
+/// What the calculator needs of the scan besides its cloud, as the service gives it.
+struct Scan {
+    /// The lidar's optical centre along the trajectory (the coverage check's path).
+    lidar_path: Vec<pipeline::geom::V3>,
+    /// The trajectory's stated error along x per metre.
+    x_sigma_per_m: f64,
 }
 
 fn report(
     built: &BuiltCloud,
     path: &Path,
     args: &ReplayArgs,
-    x_sigma_per_m: f64,
+    scan: Scan,
     notes: &[String],
     out: &mut impl Write,
 ) -> anyhow::Result<()> {
@@ -123,13 +134,9 @@ fn report(
             "-x" => false,
             other => bail!("--front {other}: expected +x or -x"),
         },
-        // The robot's path: what the scan did not cover is not measured.
-        scan_path_in_cloud: built
-            .trajectory
-            .iter()
-            .map(|t| t.world_from_robot.translation)
-            .collect(),
-        trajectory_x_sigma_per_m: x_sigma_per_m,
+        // The lidar's path: what the scan did not cover is not measured.
+        scan_path_in_cloud: scan.lidar_path,
+        trajectory_x_sigma_per_m: scan.x_sigma_per_m,
         range_accuracy_m: Some(vlp16::RANGE_ACCURACY_M),
         ..AnglesConfig::default()
     };
@@ -157,7 +164,7 @@ fn report(
             "depth_frames": s.depth_frames,
             "wheel_messages": s.wheel_messages,
             "travelled_m": (travelled * 1e4).round() / 1e4,
-            "trajectory_x_sigma_per_m": x_sigma_per_m,
+            "trajectory_x_sigma_per_m": config.trajectory_x_sigma_per_m,
             "notes": notes,
         });
         match &r {
