@@ -54,11 +54,13 @@ pub mod profiles;
 mod svg;
 mod tyres;
 mod uncertainty;
+mod visibility;
 
 pub use envelope::EnvelopeSample;
 pub use geom::{V3, VehicleFrame};
 pub use svg::side_view_svg;
 pub use uncertainty::Uncertainty;
+pub use visibility::ScannerView;
 
 use envelope::{EnvelopeParams, lower_envelope};
 use geom::{sub, unit};
@@ -170,6 +172,11 @@ pub struct AnglesConfig {
     /// cloud whose scanner's uncertainty is not known here (the results' uncertainties then
     /// leave it out, `uncertainty`).
     pub trajectory_x_sigma_per_m: f64,
+    /// What the scanner could see from each position of [`Self::scan_path_in_cloud`]; `None`:
+    /// not known. With it and the path, an approach or departure witness's part may reach beyond
+    /// it only as far as the scanner did not see empty, and the angle and its uncertainty say so
+    /// (`visibility`).
+    pub scanner_view: Option<ScannerView>,
 }
 
 impl Default for AnglesConfig {
@@ -193,6 +200,7 @@ impl Default for AnglesConfig {
             skip_faces_across_path: true,
             scan_path_in_cloud: Vec::new(),
             trajectory_x_sigma_per_m: 0.0,
+            scanner_view: None,
         }
     }
 }
@@ -281,7 +289,7 @@ pub struct Tyre {
 /// One limiting angle and what limits it.
 #[derive(Debug, Clone, PartialEq)]
 pub struct AngleFinding {
-    /// The angle (radians).
+    /// The angle (radians), at the witness.
     pub angle_rad: f64,
     /// For the breakover angle, the front and the rear tangent slopes that sum to it.
     pub parts_rad: Option<(f64, f64)>,
@@ -507,6 +515,11 @@ impl AnglesConfig {
         if self.min_support == 0 {
             return bad("min support must be >= 1");
         }
+        if self.scanner_view.is_some_and(|v| !v.is_valid()) {
+            return bad(
+                "scanner view: elevations must be finite with min < max, min range finite and >= 0",
+            );
+        }
         for (i, b) in self.exclude.iter().enumerate() {
             if (0..3).any(|k| b.min_in_cloud[k] > b.max_in_cloud[k] || b.min_in_cloud[k].is_nan()) {
                 return Err(AnglesError::InvalidConfig(format!(
@@ -538,15 +551,7 @@ pub fn compute_angles(
         .fold(0.0, f64::max);
     let noise_m = config.noise_m.unwrap_or(settled.sigma.max(tyre_sigma));
     let (front, rear) = axles(&fits, config, noise_m);
-    for front in [true, false] {
-        if let (_, Some(left_out)) = axle_members(&fits, front) {
-            warnings.push(format!(
-                "tyre {} left out of its axle's position and radii: they disagree with the other \
-                 three tyres, which agree with each other (a misfit)",
-                left_out.label()
-            ));
-        }
-    }
+    warnings.extend(left_out_warnings(&fits));
     let band_y_m = band(&fits, config.band, &mut warnings);
     // The overhangs, where faces across the path are left out of the envelope's modes.
     let (front_x, rear_x) = zone_limits(front, rear, Zone::Axle);
@@ -581,6 +586,13 @@ pub fn compute_angles(
         trajectory_per_m: config.trajectory_x_sigma_per_m,
     };
     let mut findings = find_angles(&body.samples, front, rear, config.zone, &frame, inputs);
+    end_reaches(
+        &mut findings,
+        (&settled.in_frame, &frame),
+        config,
+        (front, rear),
+        (body.noise_sigma_m, body_floor_m(config, noise_m)),
+    );
     let not_measured = not_measured(&mut findings, not_covered);
     let plane = settled.plane;
     let heading = frame.x_axis_in_cloud;
@@ -745,6 +757,24 @@ struct Body {
     unsupported_bins: usize,
 }
 
+/// A warning for each tyre left out of its axle's position and radii ([`axle_members`]).
+fn left_out_warnings(fits: &[(TyrePosition, TyreFit)]) -> impl Iterator<Item = String> + '_ {
+    [true, false].into_iter().filter_map(|front| {
+        axle_members(fits, front).1.map(|left_out| {
+            format!(
+                "tyre {} left out of its axle's position and radii: they disagree with the other \
+                 three tyres, which agree with each other (a misfit)",
+                left_out.label()
+            )
+        })
+    })
+}
+
+/// Height (metres, vehicle frame) below which points are floor, not underside (`classify`).
+fn body_floor_m(config: &AnglesConfig, noise_sigma_m: f64) -> f64 {
+    (1.5 * config.ground_threshold_m).max(4.0 * noise_sigma_m)
+}
+
 /// Split points into ground, tyre and body; build the body's lower envelope inside the band.
 fn classify(
     in_frame: &[V3],
@@ -769,7 +799,7 @@ fn classify(
     // above the floor, 7 of its points fell into one envelope bin, and it became the breakover
     // witness (-16 degrees). No road vehicle's rigid underside comes that low, and the tyre
     // seeds above assume no body part below `seed_high_m` (8 cm) anyway.
-    let ground_cut_m = (1.5 * config.ground_threshold_m).max(4.0 * noise_sigma_m);
+    let ground_cut_m = body_floor_m(config, noise_sigma_m);
     let mut band_points = Vec::new();
     for p in in_frame {
         if p[2] < ground_cut_m {
@@ -1505,6 +1535,79 @@ fn find_angles(
         f.uncertainty = uncertainty::of_breakover(xz(f), (&front, &rear), inputs);
     }
     out
+}
+
+/// How far the approach's and the departure's witness parts may go on beyond the witnesses
+/// (`visibility`), into their uncertainties. Needs the scanner's view and the scan's path (else the findings stay as
+/// they are). `in_frame`: every usable point, vehicle frame; `noise`: the body's noise sigma and
+/// the floor's cut-off height.
+fn end_reaches(
+    findings: &mut Findings,
+    (in_frame, frame): (&[V3], &VehicleFrame),
+    config: &AnglesConfig,
+    (front, rear): (Axle, Axle),
+    (noise_sigma_m, floor_m): (f64, f64),
+) {
+    let Some(view) = config.scanner_view else {
+        return;
+    };
+    let path = visibility::thin_path(
+        &config
+            .scan_path_in_cloud
+            .iter()
+            .map(|p| frame.vehicle_from_cloud(*p))
+            .collect::<Vec<_>>(),
+    );
+    let path = path.as_slice();
+    let Some((path_lo, path_hi)) = path
+        .iter()
+        .map(|p| p[0])
+        .fold(None, |r: Option<(f64, f64)>, x| {
+            Some(r.map_or((x, x), |(a, b)| (a.min(x), b.max(x))))
+        })
+    else {
+        return;
+    };
+    // The rays of interest run from the path to the vehicle's underside: the map covers the path
+    // and the vehicle's width beside it.
+    let half_width_m = path.iter().map(|p| p[1].abs()).fold(0.0, f64::max) + 2.0;
+    let map = visibility::HeightMap::new(
+        in_frame,
+        floor_m,
+        [path_lo - 1.0, path_hi + 1.0],
+        [-half_width_m, half_width_m],
+    );
+    let mut body_by_x: Vec<V3> = in_frame
+        .iter()
+        .filter(|p| p[2] > floor_m)
+        .copied()
+        .collect();
+    body_by_x.sort_by(|a, b| a[0].total_cmp(&b[0]));
+    let sight = visibility::Sight {
+        map: &map,
+        body_by_x: &body_by_x,
+        path,
+        view,
+        tolerance_m: 3.0 * noise_sigma_m,
+    };
+    for (finding, axle, outward, path_end) in [
+        (&mut findings.approach, front, 1.0, path_hi),
+        (&mut findings.departure, rear, -1.0, path_lo),
+    ] {
+        let Some(f) = finding else { continue };
+        let w = f.witness_in_vehicle;
+        let reach = visibility::end_reach(&sight, w, outward, outward * (path_end - w[0]));
+        let angle_at = |beyond: f64| {
+            tangent_slope(
+                outward * (w[0] - axle.x_m) + beyond,
+                w[2],
+                axle.loaded_radius_m,
+            )
+        };
+        if let (Some(far), Some(seen)) = (angle_at(reach), angle_at(0.0)) {
+            f.uncertainty = f.uncertainty.with_end_reach(seen - far);
+        }
+    }
 }
 
 fn tyres_out(fits: &[(TyrePosition, TyreFit)], frame: &VehicleFrame) -> Vec<Tyre> {

@@ -17,12 +17,16 @@
 //!   silhouette's outward bias (a slice's outermost point is the largest of noisy samples);
 //! - **ground**: the floor's own noise sigma about its plane (flatness and range noise), as an
 //!   offset of the witness's height above the floor;
+//! - **end reach** (approach and departure, with the scanner's view): the witness's part may
+//!   go on beyond it, among returns at its height or unseen, up to the first place at its height
+//!   the scanner saw empty (`visibility`), which would make the angle lower by up to `span`:
+//!   half of `span`, so that `U` reaches the far end (the reported angle stays the witness's);
 //! - **trajectory**: the scan's error along the path, `trajectory_x_sigma_per_m` times the
 //!   distance between the witness and the axle (the robot travelled that far between seeing the
 //!   two). Zero for a cloud from another scanner, whose own uncertainty the caller must add.
 //!
 //! What this does not cover, and the held-out evaluation measures: a part the scan missed
-//! entirely (then the angle is wrong by more than any local statistic says) and systematic
+//! entirely and not joined to a seen one at the witness's height (then the angle is wrong by more than any local statistic says) and systematic
 //! errors the model above does not name.
 
 use crate::{Axle, tangent_slope};
@@ -43,12 +47,16 @@ pub struct Uncertainty {
     pub axle_position: f64,
     /// From the floor (its flatness and noise about the fitted plane).
     pub ground: f64,
+    /// From the stretch beyond an approach or departure witness where its part may go on
+    /// (`visibility`): half the angle's change over it; 0 for the breakover, the clearance, and
+    /// without the scanner's view.
+    pub end_reach: f64,
     /// From the scan's trajectory along the path.
     pub trajectory: f64,
 }
 
 impl Uncertainty {
-    fn from_parts(parts: [f64; 6]) -> Self {
+    fn from_parts(parts: [f64; 7]) -> Self {
         let u = parts.iter().map(|p| p * p).sum::<f64>().sqrt();
         Self {
             expanded: 2.0 * u,
@@ -58,7 +66,20 @@ impl Uncertainty {
             axle_position: parts[3],
             ground: parts[4],
             trajectory: parts[5],
+            end_reach: parts[6],
         }
+    }
+
+    /// This budget with the end reach's term: `angle_span` (radians) is how much lower the
+    /// angle would be at the far end of the stretch. The truth lies anywhere in
+    /// `[angle - span, angle]`, one-sided about the reported angle; a term of `span / 2` makes
+    /// `U = 2 u` reach the far end when it dominates (conservative: a uniform distribution over
+    /// the stretch has a standard deviation of `span / sqrt(12)` about its middle, but the
+    /// reported angle is its end).
+    pub(crate) fn with_end_reach(self, angle_span: f64) -> Self {
+        let mut parts = self.parts();
+        parts[6] = 0.5 * angle_span.abs();
+        Self::from_parts(parts)
     }
 }
 
@@ -110,6 +131,7 @@ pub(crate) fn of_overhang(
         dd * axle.u_x_m,
         dz * inputs.ground_m,
         dd * inputs.trajectory_per_m * d.abs(),
+        0.0,
     ])
     .abs()
 }
@@ -144,17 +166,18 @@ pub(crate) fn of_breakover(
         (dxf * front.u_x_m).hypot(dxr * rear.u_x_m),
         dz * inputs.ground_m,
         (dxf * per_m * (xf - x)).hypot(dxr * per_m * (x - xr)),
+        0.0,
     ])
     .abs()
 }
 
 /// Ground clearance: the witness's height above the floor.
 pub(crate) fn of_clearance(inputs: Inputs) -> Uncertainty {
-    Uncertainty::from_parts([inputs.noise_m, 0.0, 0.0, 0.0, inputs.ground_m, 0.0])
+    Uncertainty::from_parts([inputs.noise_m, 0.0, 0.0, 0.0, inputs.ground_m, 0.0, 0.0])
 }
 
 impl Uncertainty {
-    fn parts(self) -> [f64; 6] {
+    fn parts(self) -> [f64; 7] {
         [
             self.witness_height,
             self.witness_position,
@@ -162,6 +185,7 @@ impl Uncertainty {
             self.axle_position,
             self.ground,
             self.trajectory,
+            self.end_reach,
         ]
     }
 

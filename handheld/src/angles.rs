@@ -267,6 +267,7 @@ fn budget(u: &Uncertainty, to_unit: impl Fn(f64) -> f64) -> Value {
         "axle_position": round(to_unit(u.axle_position), 5),
         "ground": round(to_unit(u.ground), 5),
         "trajectory": round(to_unit(u.trajectory), 5),
+        "end_reach": round(to_unit(u.end_reach), 5),
     })
 }
 

@@ -138,6 +138,7 @@ fn report(
         scan_path_in_cloud: scan.lidar_path,
         trajectory_x_sigma_per_m: scan.x_sigma_per_m,
         range_accuracy_m: Some(vlp16::RANGE_ACCURACY_M),
+        scanner_view: Some(angles::ScannerView::VLP16),
         ..AnglesConfig::default()
     };
     // The cloud is written either way; the command fails when the angles were not all measured,

@@ -375,6 +375,7 @@ fn recompute(dir: &Path, meta: &RunMeta, enter_at_front: bool) -> Result<Recompu
             Zone::Tyre
         },
         range_accuracy_m: Some(vlp16::RANGE_ACCURACY_M),
+        scanner_view: Some(angles::ScannerView::VLP16),
         ..AnglesConfig::default()
     };
     let points_m: Vec<V3> = cloud.points_m.into_iter().map(V3::from).collect();

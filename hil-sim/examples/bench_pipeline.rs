@@ -327,6 +327,7 @@ fn evaluate(scenario: &Scenario, scene: &Scene, built: &BuiltCloud, time: &Timin
             .map(Into::into)
             .collect(),
         range_accuracy_m: Some(vlp16::RANGE_ACCURACY_M),
+        scanner_view: Some(angles::ScannerView::VLP16),
         ..AnglesConfig::default()
     };
     let angle_error_deg = match compute_angles(

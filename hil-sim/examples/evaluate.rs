@@ -3,13 +3,16 @@
 //! per set.
 //!
 //! Run: `cargo run --release -p hil-sim --example evaluate -- [--set tuning|held-out|both]
-//! [--protocol FILE] [--jobs N] [--only TEXT] [--oracle] [--detail]` (defaults: both sets,
+//! [--protocol FILE] [--jobs N] [--only TEXT] [--oracle] [--detail] [--save-clouds DIR |
+//! --from-clouds DIR]` (defaults: both sets,
 //! `hil-sim/evaluation.toml`, two worker threads; `--only` keeps the runs whose `vehicle/world/seed`
 //! contains TEXT; `--oracle` replaces the pipeline by the true poses: every simulated return
 //! placed with the exact pose of its firing, one centroid per 5 mm voxel as the pipeline's output,
 //! the true path as the scan's path, so the tables show the calculator alone on the same runs;
 //! `--detail` adds, per run, each witness and its uncertainty budget against the truth's witness,
-//! the fitted axles against the true tyre and, for the pipeline, the trajectory's largest errors).
+//! the fitted axles against the true tyre and, for the pipeline, the trajectory's largest errors;
+//! `--save-clouds` keeps each run's cloud, path and trajectory error, and `--from-clouds` runs the
+//! calculator alone on them, in seconds instead of the pipeline's minutes).
 //!
 //! Per run (all seeded; the same command prints the same tables): the protocol's template
 //! scenario with the run's vehicle, world and seed, the robot starting 1 m ahead of the vehicle's
@@ -263,7 +266,10 @@ fn run(
     .map(f64::to_degrees);
     let scene = scenario.scene();
     let mut detail = Vec::new();
-    let (cloud, path, frames, cpu_s, x_sigma_per_m) = if oracle {
+    let (cloud, path, frames, cpu_s, x_sigma_per_m) = if let Some(dir) = &args.from_clouds {
+        let (cloud, path, x_sigma_per_m) = load_cloud(dir, entry, oracle)?;
+        (cloud, path, 0, 0.0, x_sigma_per_m)
+    } else if oracle {
         let (cloud, path, packets) = oracle_cloud(&scenario, &scene);
         (cloud, path, packets, 0.0, 0.0)
     } else {
@@ -293,12 +299,13 @@ fn run(
         (cloud, path, lidar.len(), cpu_s, x_sigma_per_m)
     };
     if let Some(dir) = &args.save_clouds {
-        save_cloud(dir, entry, oracle, &cloud, &path)?;
+        save_cloud(dir, entry, oracle, (&cloud, &path, x_sigma_per_m))?;
     }
     let config = AnglesConfig {
         scan_path_in_cloud: path.into_iter().map(Into::into).collect(),
         trajectory_x_sigma_per_m: x_sigma_per_m,
         range_accuracy_m: Some(vlp16::RANGE_ACCURACY_M),
+        scanner_view: Some(angles::ScannerView::VLP16),
         ..AnglesConfig::default()
     };
     let (error_deg, u_deg, missing) = match compute_angles(
@@ -342,22 +349,30 @@ fn run(
     })
 }
 
-/// `--save-clouds`: the cloud as binary PLY and the path as text, one `x y z` line per pose.
-fn save_cloud(
-    dir: &Path,
-    entry: &Entry,
-    oracle: bool,
-    cloud: &[[f64; 3]],
-    path: &[[f64; 3]],
-) -> anyhow::Result<()> {
-    std::fs::create_dir_all(dir).with_context(|| dir.display().to_string())?;
-    let stem = format!(
+/// The file stem of a run's saved cloud.
+fn cloud_stem(entry: &Entry, oracle: bool) -> String {
+    format!(
         "{}-{}-{}{}",
         entry.vehicle_name(),
         entry.world_name(),
         entry.seed,
         if oracle { "-oracle" } else { "" }
-    );
+    )
+}
+
+/// `--save-clouds`: the cloud as binary PLY, the path as text, one `x y z` line per pose, and the
+/// trajectory's stated error along x per metre in `.x-sigma`.
+fn save_cloud(
+    dir: &Path,
+    entry: &Entry,
+    oracle: bool,
+    (cloud, path, x_sigma_per_m): (&[[f64; 3]], &[[f64; 3]], f64),
+) -> anyhow::Result<()> {
+    std::fs::create_dir_all(dir).with_context(|| dir.display().to_string())?;
+    let stem = cloud_stem(entry, oracle);
+    let sigma = dir.join(format!("{stem}.x-sigma"));
+    std::fs::write(&sigma, format!("{x_sigma_per_m:e}\n"))
+        .with_context(|| sigma.display().to_string())?;
     let ply = dir.join(format!("{stem}.ply"));
     let file = std::fs::File::create(&ply).with_context(|| ply.display().to_string())?;
     cloud_io::write_ply(
@@ -375,6 +390,36 @@ fn save_cloud(
     }
     std::fs::write(&xyz, text).with_context(|| xyz.display().to_string())?;
     Ok(())
+}
+
+/// `--from-clouds`: a run's cloud, path and trajectory error as `--save-clouds` wrote them.
+type Saved = (Vec<[f64; 3]>, Vec<[f64; 3]>, f64);
+
+fn load_cloud(dir: &Path, entry: &Entry, oracle: bool) -> anyhow::Result<Saved> {
+    let stem = cloud_stem(entry, oracle);
+    let ply = dir.join(format!("{stem}.ply"));
+    let (cloud, _) = cloud_io::read_cloud(&ply).with_context(|| ply.display().to_string())?;
+    let xyz = dir.join(format!("{stem}.path.xyz"));
+    let text = std::fs::read_to_string(&xyz).with_context(|| xyz.display().to_string())?;
+    let mut path = Vec::new();
+    for (i, line) in text.lines().enumerate() {
+        let v: Vec<f64> = line
+            .split_whitespace()
+            .map(str::parse)
+            .collect::<Result<_, _>>()
+            .with_context(|| format!("{}:{}", xyz.display(), i + 1))?;
+        let [x, y, z] = v[..] else {
+            bail!("{}:{}: expected x y z", xyz.display(), i + 1);
+        };
+        path.push([x, y, z]);
+    }
+    let sigma = dir.join(format!("{stem}.x-sigma"));
+    let x_sigma_per_m = std::fs::read_to_string(&sigma)
+        .with_context(|| sigma.display().to_string())?
+        .trim()
+        .parse()
+        .with_context(|| sigma.display().to_string())?;
+    Ok((cloud.points_m, path, x_sigma_per_m))
 }
 
 /// `--detail`: each angle's witness and uncertainty budget against the truth's witness, the axles
@@ -398,7 +443,7 @@ fn witness_detail(
                 let w = f.witness_in_cloud;
                 let u = &f.uncertainty;
                 format!(
-                    "x {:+.3} z {:.3} support {}, U {:.2} deg (u: height {:.2}, position {:.2}, radius {:.2}, axle {:.2}, ground {:.2}, trajectory {:.2})",
+                    "x {:+.3} z {:.3} support {}, U {:.2} deg (u: height {:.2}, position {:.2}, radius {:.2}, axle {:.2}, ground {:.2}, trajectory {:.2}, end reach {:.2})",
                     w[0],
                     w[2],
                     f.support,
@@ -408,7 +453,8 @@ fn witness_detail(
                     u.tyre_radius.to_degrees(),
                     u.axle_position.to_degrees(),
                     u.ground.to_degrees(),
-                    u.trajectory.to_degrees()
+                    u.trajectory.to_degrees(),
+                    u.end_reach.to_degrees()
                 )
             },
         );
@@ -668,6 +714,11 @@ struct Args {
     /// scan path as `.path.xyz` beside it, for `passangle angles` and a look by eye.
     #[arg(long, value_name = "DIR")]
     save_clouds: Option<PathBuf>,
+    /// Read each run's cloud, path and trajectory error from DIR, as `--save-clouds` wrote them,
+    /// instead of simulating and running the pipeline: the calculator alone on the same clouds
+    /// (no trajectory detail, no CPU figures).
+    #[arg(long, value_name = "DIR", conflicts_with = "save_clouds")]
+    from_clouds: Option<PathBuf>,
 }
 
 fn main() -> anyhow::Result<()> {

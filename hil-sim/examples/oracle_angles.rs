@@ -274,6 +274,7 @@ fn main() -> anyhow::Result<()> {
         let config = AnglesConfig {
             scan_path_in_cloud: path.into_iter().map(Into::into).collect(),
             range_accuracy_m: Some(vlp16::RANGE_ACCURACY_M),
+            scanner_view: Some(angles::ScannerView::VLP16),
             ..AnglesConfig::default()
         };
         match compute_angles(

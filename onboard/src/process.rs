@@ -677,6 +677,7 @@ fn angles_of(
         scan_path_in_cloud: scan.path,
         trajectory_x_sigma_per_m: scan.x_sigma_per_m,
         range_accuracy_m: Some(vlp16::RANGE_ACCURACY_M),
+        scanner_view: Some(angles::ScannerView::VLP16),
         ..AnglesConfig::default()
     };
     let points: Vec<V3> = cloud.points_m.iter().map(|&p| p.into()).collect();
