@@ -572,7 +572,7 @@ pub fn compute_angles(
         ));
     }
     refine_ends(&mut body, front, rear, config.zone);
-    let not_covered = check_coverage(
+    let mut not_covered = check_coverage(
         &body.samples,
         (front, rear),
         &frame,
@@ -586,13 +586,13 @@ pub fn compute_angles(
         trajectory_per_m: config.trajectory_x_sigma_per_m,
     };
     let mut findings = find_angles(&body.samples, front, rear, config.zone, &frame, inputs);
-    end_reaches(
+    not_covered.extend(end_reaches(
         &mut findings,
         (&settled.in_frame, &frame),
         config,
         (front, rear),
         (body.noise_sigma_m, body_floor_m(config, noise_m)),
-    );
+    ));
     let not_measured = not_measured(&mut findings, not_covered);
     let plane = settled.plane;
     let heading = frame.x_axis_in_cloud;
@@ -1538,18 +1538,20 @@ fn find_angles(
 }
 
 /// How far the approach's and the departure's witness parts may go on beyond the witnesses
-/// (`visibility`), into their uncertainties. Needs the scanner's view and the scan's path (else the findings stay as
-/// they are). `in_frame`: every usable point, vehicle frame; `noise`: the body's noise sigma and
-/// the floor's cut-off height.
+/// (`visibility`), into their uncertainties; a part the scan does not show ending within
+/// [`visibility::MAX_REACH_M`] leaves its angle not measured (returned). Needs the scanner's view
+/// and the scan's path (else the findings stay as they are). `in_frame`: every usable point,
+/// vehicle frame; `noise`: the body's noise sigma and the floor's cut-off height.
 fn end_reaches(
     findings: &mut Findings,
     (in_frame, frame): (&[V3], &VehicleFrame),
     config: &AnglesConfig,
     (front, rear): (Axle, Axle),
     (noise_sigma_m, floor_m): (f64, f64),
-) {
+) -> Vec<NotMeasured> {
+    let mut out = Vec::new();
     let Some(view) = config.scanner_view else {
-        return;
+        return out;
     };
     let path = visibility::thin_path(
         &config
@@ -1566,7 +1568,7 @@ fn end_reaches(
             Some(r.map_or((x, x), |(a, b)| (a.min(x), b.max(x))))
         })
     else {
-        return;
+        return out;
     };
     // The rays of interest run from the path to the vehicle's underside: the map covers the path
     // and the vehicle's width beside it.
@@ -1590,13 +1592,37 @@ fn end_reaches(
         view,
         tolerance_m: 3.0 * noise_sigma_m,
     };
-    for (finding, axle, outward, path_end) in [
-        (&mut findings.approach, front, 1.0, path_hi),
-        (&mut findings.departure, rear, -1.0, path_lo),
+    for (finding, quantity, axle, outward, name) in [
+        (
+            &mut findings.approach,
+            Quantity::Approach,
+            front,
+            1.0,
+            "front",
+        ),
+        (
+            &mut findings.departure,
+            Quantity::Departure,
+            rear,
+            -1.0,
+            "rear",
+        ),
     ] {
         let Some(f) = finding else { continue };
         let w = f.witness_in_vehicle;
-        let reach = visibility::end_reach(&sight, w, outward, outward * (path_end - w[0]));
+        let Some(reach) = visibility::end_reach(&sight, w, outward) else {
+            out.push(NotMeasured {
+                quantity,
+                kind: Absence::NotCovered,
+                reason: format!(
+                    "the {name} overhang's lowest part (x {:.2}, z {:.2} m, vehicle frame) was not seen to end: no place at its height within {} m beyond it was in the lidar's view without returns",
+                    w[0],
+                    w[2],
+                    visibility::MAX_REACH_M
+                ),
+            });
+            continue;
+        };
         let angle_at = |beyond: f64| {
             tangent_slope(
                 outward * (w[0] - axle.x_m) + beyond,
@@ -1608,6 +1634,7 @@ fn end_reaches(
             f.uncertainty = f.uncertainty.with_end_reach(seen - far);
         }
     }
+    out
 }
 
 fn tyres_out(fits: &[(TyrePosition, TyreFit)], frame: &VehicleFrame) -> Vec<Tyre> {

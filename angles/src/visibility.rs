@@ -77,8 +77,10 @@ const LATERAL_M: f64 = 0.02;
 /// range the VLP-16's rings are 0.35 m apart and a part's end falls between them.
 const MAX_SIGHT_M: f64 = 10.0;
 
-/// Longest walk beyond a witness (metres): a part that may go on a metre beyond the last place
-/// seen leaves an angle whose uncertainty says as much; walking further only costs time.
+/// Longest walk beyond a witness (metres). A part that goes on further than this without a place
+/// seen empty at its height has no end in the scan: over a metre the angle can change by tens
+/// of degrees, and the calculator reports it as not measured rather than as a number with such
+/// an uncertainty.
 pub(crate) const MAX_REACH_M: f64 = 1.0;
 
 /// Path positions nearer than this (metres) to the last one kept are not tried again: a path
@@ -207,27 +209,19 @@ impl Sight<'_> {
 /// How far (metres, along x in the direction `outward`, +1 or -1) the part under `witness` may
 /// go on beyond it: walking outward at the witness's height in steps of [`WALK_M`] to the first
 /// place in the scanner's view with no return at or below that height, the length of the walk
-/// less the [`ALONG_M`] of the last returns' neighbourhood; at most `limit_m` and
-/// [`MAX_REACH_M`], at least 0.
+/// less the [`ALONG_M`] of the last returns' neighbourhood, at least 0. `None` when no such
+/// place lies within [`MAX_REACH_M`]: the scan does not show where the part ends.
 ///
 /// Two things lengthen it: returns beyond the witness at its height (the envelope's end
 /// estimate weighed them as the range noise's smear, but the surface may go on among them), and
 /// places out of view (the part may go on unseen).
-pub(crate) fn end_reach(sight: &Sight<'_>, witness: V3, outward: f64, limit_m: f64) -> f64 {
-    let limit_m = if limit_m.is_finite() {
-        limit_m.clamp(0.0, MAX_REACH_M)
-    } else {
-        0.0
-    };
-    let steps = (limit_m / WALK_M).ceil() as usize;
-    for k in 1..=steps {
+pub(crate) fn end_reach(sight: &Sight<'_>, witness: V3, outward: f64) -> Option<f64> {
+    let steps = (MAX_REACH_M / WALK_M).round() as usize;
+    (1..=steps).find_map(|k| {
         let walked = k as f64 * WALK_M;
         let c = V3::new(witness[0] + outward * walked, witness[1], witness[2]);
-        if !sight.returns_at(c) && sight.seen(c) {
-            return (walked - ALONG_M).clamp(0.0, limit_m);
-        }
-    }
-    limit_m
+        (!sight.returns_at(c) && sight.seen(c)).then(|| (walked - ALONG_M).max(0.0))
+    })
 }
 
 #[cfg(test)]
@@ -259,7 +253,7 @@ mod tests {
             .collect()
     }
 
-    fn reach(points: &[V3], path: &[V3], witness: V3, limit_m: f64) -> f64 {
+    fn reach(points: &[V3], path: &[V3], witness: V3) -> Option<f64> {
         let map = HeightMap::new(points, 0.03, [-4.0, 5.0], [-2.0, 2.0]);
         let mut by_x = points.to_vec();
         by_x.sort_by(|a, b| a[0].total_cmp(&b[0]));
@@ -270,7 +264,7 @@ mod tests {
             view: ScannerView::VLP16,
             tolerance_m: 0.01,
         };
-        end_reach(&sight, witness, 1.0, limit_m)
+        end_reach(&sight, witness, 1.0)
     }
 
     /// Within a walk step of the end.
@@ -280,23 +274,24 @@ mod tests {
     fn an_end_seen_from_below_reaches_no_further_than_the_resolution() {
         // A plate's end at 0.7 m is grazed from behind, through the free space below the plate.
         let plate = block([0.0, 1.0], [0.7, 0.71]);
-        let r = reach(&plate, &path(-3.0, 2.0), V3::new(1.0, 0.0, 0.7), 1.0);
-        assert!(r <= RESOLUTION_M, "{r}");
+        let r = reach(&plate, &path(-3.0, 2.0), V3::new(1.0, 0.0, 0.7));
+        assert!(r.is_some_and(|r| r <= RESOLUTION_M), "{r:?}");
     }
 
     #[test]
-    fn an_end_hidden_from_behind_and_above_the_view_from_ahead_reaches_the_limit() {
-        // A lower part behind the plate (down to 0.3 m) blocks the rays from behind in the field
-        // of view to the 0.4 m beyond the plate's end; from ahead the top beam (15 deg from
-        // 0.25 m) reaches 0.55 m only 1.12 m away, so a path ending 0.5 m beyond the plate sees
-        // nothing at that height beyond its end, and a path ending 3 m beyond it does.
-        let mut points = block([0.0, 1.0], [0.55, 0.56]);
-        points.extend(block([0.3, 0.6], [0.3, 0.56]));
-        let witness = V3::new(1.0, 0.0, 0.55);
-        let r = reach(&points, &path(-3.0, 1.5), witness, 0.4);
-        assert!((r - 0.4).abs() < 1e-9, "{r}");
-        let r = reach(&points, &path(-3.0, 4.0), witness, 0.4);
-        assert!(r <= RESOLUTION_M, "{r}");
+    fn an_end_hidden_from_behind_and_above_the_view_from_ahead_has_no_reach() {
+        // A lower part under the plate (down to 0.26 m, just above the scanner) blocks every ray
+        // from behind it; from the path's positions beyond it the top beam (15 deg from 0.25 m)
+        // climbs to the plate's 0.65 m only 1.49 m further on, more than a metre beyond the
+        // plate's end; from ahead, a path ending 0.5 m beyond the plate sees nothing that high
+        // there: the scan does not show where the plate ends. A path ending 3 m beyond it does.
+        let mut points = block([0.0, 1.0], [0.65, 0.66]);
+        points.extend(block([0.0, 1.0], [0.26, 0.66]));
+        let witness = V3::new(1.0, 0.0, 0.65);
+        let r = reach(&points, &path(-3.0, 1.5), witness);
+        assert!(r.is_none(), "{r:?}");
+        let r = reach(&points, &path(-3.0, 4.0), witness);
+        assert!(r.is_some_and(|r| r <= RESOLUTION_M), "{r:?}");
     }
 
     #[test]
@@ -306,8 +301,11 @@ mod tests {
         let mut points = block([0.0, 1.0], [0.55, 0.56]);
         points.extend(block([0.3, 0.6], [0.3, 0.56]));
         points.extend(block([1.3, 1.4], [0.1, 0.7]));
-        let r = reach(&points, &path(-3.0, 4.0), V3::new(1.0, 0.0, 0.55), 1.0);
-        assert!((0.3..=0.4 + RESOLUTION_M).contains(&r), "{r}");
+        let r = reach(&points, &path(-3.0, 4.0), V3::new(1.0, 0.0, 0.55));
+        assert!(
+            r.is_some_and(|r| (0.3..=0.4 + RESOLUTION_M).contains(&r)),
+            "{r:?}"
+        );
     }
 
     #[test]
