@@ -38,6 +38,7 @@ fn wire() -> MeasurementResult {
         warnings: ResultWarnings::EMPTY,
         cloud_points: 1_110_755,
         preview_chunks: 3,
+        records: Default::default(),
     }
 }
 

@@ -96,6 +96,17 @@ fn result() -> radio::MeasurementResult {
         warnings: ResultWarnings::LOW_SUPPORT,
         cloud_points: 250_000,
         preview_chunks: 100,
+        records: List::from_slice(&[
+            radio::RecordInfo {
+                file: radio::RecordFile::ResultJson,
+                len: 13_837,
+            },
+            radio::RecordInfo {
+                file: radio::RecordFile::ResultSig,
+                len: 24_925,
+            },
+        ])
+        .unwrap(),
     }
 }
 
@@ -191,6 +202,14 @@ fn exemplars() -> Vec<(&'static str, u16, usize, Vec<u8>)> {
         row(&radio::StatusRequest {}, ack),
         row(&radio::FetchRun { run_id: 6 }, ack),
         row(
+            &radio::ResendRecordChunks {
+                run_id: 7,
+                file: radio::RecordFile::ResultSig,
+                indices: List::from_slice(&[0, 12]).unwrap(),
+            },
+            ack,
+        ),
+        row(
             &radio::Progress {
                 run_id: 7,
                 phase: radio::Phase::Driving,
@@ -230,6 +249,17 @@ fn exemplars() -> Vec<(&'static str, u16, usize, Vec<u8>)> {
                 seq: 9,
                 reason: radio::RefuseReason::Replay,
                 detail: Text::new("counter 5 is not above 9").unwrap(),
+            },
+            none,
+        ),
+        row(
+            &radio::RecordChunk {
+                run_id: 7,
+                file: radio::RecordFile::ResultJson,
+                index: 1,
+                count: 73,
+                total_len: 13_837,
+                bytes: List::from_slice(b"{\n  \"run_id\": 7,\n").unwrap(),
             },
             none,
         ),
@@ -397,7 +427,27 @@ fn worst_cases_fit_their_bounds_and_the_link_buffer() {
     r.vehicle_id = Text::new(&"W".repeat(32)).unwrap();
     r.cloud_points = u32::MAX;
     r.approach_support = u16::MAX;
+    r.records = List::from_slice(
+        &[radio::RecordInfo {
+            file: radio::RecordFile::ResultSig,
+            len: u32::MAX,
+        }; radio::MAX_RECORD_FILES],
+    )
+    .unwrap();
     check(&r);
+    check(&radio::RecordChunk {
+        run_id: u32::MAX,
+        file: radio::RecordFile::ResultSig,
+        index: u16::MAX,
+        count: u16::MAX,
+        total_len: u32::MAX,
+        bytes: List::from_slice(&[0xff; radio::RECORD_CHUNK_LEN]).unwrap(),
+    });
+    check(&radio::ResendRecordChunks {
+        run_id: u32::MAX,
+        file: radio::RecordFile::ResultSig,
+        indices: List::from_slice(&[u16::MAX; 32]).unwrap(),
+    });
     let pts = vec![[i16::MIN, i16::MIN, i16::MIN]; radio::CHUNK_POINTS];
     check(&radio::CloudChunk {
         run_id: u32::MAX,

@@ -119,6 +119,7 @@ impl Processor for CountingProcessor {
             warnings: ResultWarnings::EMPTY,
             cloud_points: 400,
             preview_chunks: 0,
+            records: Default::default(),
         };
         self.produced.lock().unwrap().push(result.clone());
         let cloud = Cloud {
