@@ -39,7 +39,7 @@ fn wire() -> MeasurementResult {
         warnings: ResultWarnings::EMPTY,
         cloud_points: 1_110_755,
         preview_chunks: 3,
-        records: Default::default(),
+        records: protocol::bounded::List::default(),
     }
 }
 
@@ -147,15 +147,32 @@ fn verify_accepts_the_robots_records_with_a_key_from_the_user() {
     let (code, text) = passangle(&["verify", result_s], &root);
     assert_eq!(code, 0, "{text}");
 
-    // What `passangle measure`/`fetch` save: the robot's `result.json` and its signature as the
-    // radio brought them, byte-exact, in `run-NNNNNN/`; they verify as they are. The summary
-    // rebuilt from the radio's values has the robot's bytes here too (this record has no
-    // standards' profiles), so the robot's signature verifies it with `--sig`.
+    // The summary rebuilt from the radio's values has the robot's bytes here (this record has
+    // no standards' profiles), so the robot's signature verifies it with `--sig`.
+    let saved = save_fetched(&root, &dir);
+    let (code, text) = passangle(
+        &[
+            "verify",
+            saved.json.to_str().unwrap(),
+            "--sig",
+            &format!("{result_s}.sig"),
+            "--public-key",
+            &hex,
+        ],
+        &root,
+    );
+    assert_eq!(code, 0, "{text}");
+    std::fs::remove_dir_all(&root).unwrap();
+}
+
+/// What `passangle measure`/`fetch` save under `root/handheld` for the signed run in `dir`:
+/// the robot's `result.json` and its signature as the radio brings them, byte-exact.
+fn save_fetched(root: &Path, dir: &Path) -> link::client::SavedFiles {
     let radio_files = [RecordFile::ResultJson, RecordFile::ResultSig].map(|file| ReceivedRecord {
         file,
         bytes: Ok(std::fs::read(dir.join(file.file_name())).unwrap()),
     });
-    let saved = link::client::save(
+    link::client::save(
         &root.join("handheld"),
         &Measured {
             result: wire(),
@@ -165,7 +182,16 @@ fn verify_accepts_the_robots_records_with_a_key_from_the_user() {
             preview_time: None,
         },
     )
-    .unwrap();
+    .unwrap()
+}
+
+/// The handheld's byte-exact copy in `run-NNNNNN/` verifies as it is, the file and its
+/// directory; one changed digit in it is named.
+#[test]
+fn verify_accepts_the_handhelds_copy_and_names_a_changed_digit() {
+    let (root, dir, public) = setup("verify-fetched");
+    let hex = public.to_hex();
+    let saved = save_fetched(&root, &dir);
     let fetched = saved.result_json().unwrap().to_path_buf();
     assert_eq!(
         fetched,
@@ -198,18 +224,6 @@ fn verify_accepts_the_robots_records_with_a_key_from_the_user() {
     let (code, text) = passangle(&["verify", fetched_s, "--public-key", &hex], &root);
     assert_eq!(code, 3, "a changed digit in the fetched copy: {text}");
     assert!(text.contains("changed: /approach_deg"), "{text}");
-    let (code, text) = passangle(
-        &[
-            "verify",
-            saved.json.to_str().unwrap(),
-            "--sig",
-            &format!("{result_s}.sig"),
-            "--public-key",
-            &hex,
-        ],
-        &root,
-    );
-    assert_eq!(code, 0, "{text}");
     std::fs::remove_dir_all(&root).unwrap();
 }
 

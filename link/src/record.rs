@@ -243,7 +243,7 @@ impl ResultRecord {
             warnings,
             cloud_points: self.cloud_points,
             preview_chunks: 0,
-            records: Default::default(),
+            records: protocol::bounded::List::default(),
         }
     }
 }

@@ -56,7 +56,7 @@ fn result(run_id: u32) -> MeasurementResult {
         warnings: ResultWarnings::EMPTY,
         cloud_points: 123_456,
         preview_chunks: 0,
-        records: Default::default(),
+        records: protocol::bounded::List::default(),
     }
 }
 

@@ -675,7 +675,7 @@ mod tests {
             warnings,
             cloud_points: 99,
             preview_chunks: 0,
-            records: Default::default(),
+            records: protocol::bounded::List::default(),
         }
     }
 
@@ -845,7 +845,7 @@ mod tests {
             warnings: ResultWarnings::LOW_SUPPORT,
             cloud_points: 1_322_335,
             preview_chunks: 0,
-            records: Default::default(),
+            records: protocol::bounded::List::default(),
         };
         r.save_result(&ResultRecord::from_wire(&wire));
         assert!(r.finish(RecordedOutcome::Completed).is_empty());

@@ -277,7 +277,7 @@ struct Worker {
 /// What a processing thread reports, in this order.
 enum WorkerMsg {
     /// The result and its preview (or why there is none): goes to the handheld at once.
-    Done(Result<Ready, String>),
+    Done(Result<Box<Ready>, String>),
     /// `cloud.ply` and `side_view.svg` are written (errors, e.g. a full disk, named).
     Saved(Vec<String>),
 }
@@ -364,13 +364,13 @@ fn complete(
                 .collect()
         })
         .unwrap_or_default();
-    let _ = tx.send(WorkerMsg::Done(Ok(Ready {
+    let _ = tx.send(WorkerMsg::Done(Ok(Box::new(Ready {
         result: processed.result,
         preview_mm,
         not_measured,
         profiles: processed.profiles,
         records: Vec::new(),
-    })));
+    }))));
     let mut errors = Vec::new();
     let mut ply = Vec::new();
     match cloud_io::write_ply(
@@ -423,7 +423,7 @@ enum IoDone {
     Fetched {
         run_id: u32,
         seq: u16,
-        ready: Option<Ready>,
+        ready: Option<Box<Ready>>,
     },
     Marked {
         run_id: u32,
@@ -445,7 +445,8 @@ fn run_io_job(root: &std::path::Path, preview: config::PreviewConfig, job: IoJob
             seq,
             ready: Recording::open_run(root, run_id)
                 .ok()
-                .and_then(|rec| recorded_ready(&rec, preview)),
+                .and_then(|rec| recorded_ready(&rec, preview))
+                .map(Box::new),
         },
         IoJob::MarkDelivered { run_id } => IoDone::Marked {
             run_id,

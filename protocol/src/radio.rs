@@ -272,9 +272,10 @@ pub const MAX_RECORD_LEN: u32 = 256 * 1024;
 pub const RECORD_CHUNK_LEN: usize = 190;
 
 /// Chunks of a record file of `len` bytes: at least one, so an empty file is sent too.
+#[allow(clippy::cast_possible_truncation)] // RECORD_CHUNK_LEN is 190: fits a u32
 pub const fn record_chunk_count(len: u32) -> u32 {
-    let n = (len as usize).div_ceil(RECORD_CHUNK_LEN);
-    if n == 0 { 1 } else { n as u32 }
+    let n = len.div_ceil(RECORD_CHUNK_LEN as u32);
+    if n == 0 { 1 } else { n }
 }
 
 /// A record file that follows a result.

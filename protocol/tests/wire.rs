@@ -364,31 +364,56 @@ fn ids_are_unique() {
 }
 
 /// Worst-case instances: longest texts, full lists, largest varints.
+/// A worst-case message: its payload within its bound, the bound within the payload limit, its
+/// frame within the link buffer; returns the frame's length.
+fn check<M: Message>(msg: &M) -> usize {
+    let mut payload = [0u8; 1024];
+    let len = postcard::to_slice(msg, &mut payload).unwrap().len();
+    assert!(
+        len <= M::POSTCARD_MAX_SIZE,
+        "{}: {len} > bound {}",
+        M::NAME,
+        M::POSTCARD_MAX_SIZE
+    );
+    assert!(
+        M::POSTCARD_MAX_SIZE <= MAX_PAYLOAD_LEN,
+        "{} bound exceeds the payload limit",
+        M::NAME
+    );
+    let frame = frame_of(msg, Flags::ACK_REQUESTED);
+    assert!(frame.len() <= max_frame_len::<M>());
+    assert!(
+        max_frame_len::<M>() <= MAX_FRAME_LEN,
+        "{} does not fit the link buffer",
+        M::NAME
+    );
+    frame.len()
+}
+
+#[test]
+fn worst_case_record_messages_fit_their_bounds() {
+    check(&radio::RecordChunk {
+        run_id: u32::MAX,
+        file: radio::RecordFile::ResultSig,
+        index: u16::MAX,
+        count: u16::MAX,
+        total_len: u32::MAX,
+        bytes: List::from_slice(&[0xff; radio::RECORD_CHUNK_LEN]).unwrap(),
+    });
+    check(&radio::ResendRecordChunks {
+        run_id: u32::MAX,
+        file: radio::RecordFile::ResultSig,
+        indices: List::from_slice(&[u16::MAX; 32]).unwrap(),
+    });
+    // The largest record file fits the chunk count's u16.
+    assert!(u16::try_from(radio::record_chunk_count(radio::MAX_RECORD_LEN)).is_ok());
+    assert_eq!(radio::record_chunk_count(0), 1);
+    assert_eq!(radio::record_chunk_count(190), 1);
+    assert_eq!(radio::record_chunk_count(191), 2);
+}
+
 #[test]
 fn worst_cases_fit_their_bounds_and_the_link_buffer() {
-    fn check<M: Message>(msg: &M) -> usize {
-        let mut payload = [0u8; 1024];
-        let len = postcard::to_slice(msg, &mut payload).unwrap().len();
-        assert!(
-            len <= M::POSTCARD_MAX_SIZE,
-            "{}: {len} > bound {}",
-            M::NAME,
-            M::POSTCARD_MAX_SIZE
-        );
-        assert!(
-            M::POSTCARD_MAX_SIZE <= MAX_PAYLOAD_LEN,
-            "{} bound exceeds the payload limit",
-            M::NAME
-        );
-        let frame = frame_of(msg, Flags::ACK_REQUESTED);
-        assert!(frame.len() <= max_frame_len::<M>());
-        assert!(
-            max_frame_len::<M>() <= MAX_FRAME_LEN,
-            "{} does not fit the link buffer",
-            M::NAME
-        );
-        frame.len()
-    }
     let long = |n: usize| "\u{e9}".repeat(n / 2);
     check(&LogLine {
         level: LogLevel::Debug,
@@ -435,19 +460,6 @@ fn worst_cases_fit_their_bounds_and_the_link_buffer() {
     )
     .unwrap();
     check(&r);
-    check(&radio::RecordChunk {
-        run_id: u32::MAX,
-        file: radio::RecordFile::ResultSig,
-        index: u16::MAX,
-        count: u16::MAX,
-        total_len: u32::MAX,
-        bytes: List::from_slice(&[0xff; radio::RECORD_CHUNK_LEN]).unwrap(),
-    });
-    check(&radio::ResendRecordChunks {
-        run_id: u32::MAX,
-        file: radio::RecordFile::ResultSig,
-        indices: List::from_slice(&[u16::MAX; 32]).unwrap(),
-    });
     let pts = vec![[i16::MIN, i16::MIN, i16::MIN]; radio::CHUNK_POINTS];
     check(&radio::CloudChunk {
         run_id: u32::MAX,

@@ -120,7 +120,7 @@ impl Processor for CountingProcessor {
             warnings: ResultWarnings::EMPTY,
             cloud_points: 400,
             preview_chunks: 0,
-            records: Default::default(),
+            records: protocol::bounded::List::default(),
         };
         self.produced.lock().unwrap().push(result.clone());
         let cloud = Cloud {
@@ -284,7 +284,7 @@ impl Rig {
         if let Some(seed) = device_seed {
             let path = dir.join("device.key");
             onboard::config::write_device_key(&path, &seed).unwrap();
-            text.push_str(&format!("[signing]\nkey-file = {path:?}\n"));
+            text = format!("{text}[signing]\nkey-file = {path:?}\n");
         }
         let mut config = OnboardConfig::parse(&text, Path::new("e2e.toml")).unwrap();
         let fw = control::Config::default();
