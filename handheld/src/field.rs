@@ -400,6 +400,22 @@ fn save_and_print(m: &Measured, dir: &Path, out: &mut dyn Write) -> anyhow::Resu
         files.ply.display(),
         files.svg.display()
     )?;
+    if let Some(result) = files.result_json() {
+        writeln!(
+            out,
+            "the robot's record, byte-exact: {} (check it: passangle verify {})",
+            files
+                .records
+                .iter()
+                .map(|p| p.display().to_string())
+                .collect::<Vec<_>>()
+                .join(", "),
+            result.display()
+        )?;
+    }
+    for why in &files.missing {
+        writeln!(out, "not saved: {why}")?;
+    }
     // Saved either way; the command fails when a quantity was not measured, as `angles` and
     // `replay` do, so scripts see a non-zero exit.
     let missing: Vec<String> = ["approach", "departure", "breakover", "ground clearance"]

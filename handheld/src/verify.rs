@@ -53,9 +53,10 @@ pub struct VerifyArgs {
     /// A signed file (its signature is FILE.sig), or a run directory (every signed file in it).
     file: PathBuf,
     /// The signature file, when it is not FILE.sig (e.g. the robot's `result.json.sig` for a
-    /// copy of its `result.json` kept under another name). The `run-NNNNNN.json` that
-    /// `passangle measure` or `fetch` saves is rebuilt from the radio's result, without the
-    /// standards' profiles: it is not the signed file.
+    /// copy of its `result.json` kept under another name). `passangle measure` and `fetch` save
+    /// the robot's signed `result.json` with its `.sig` in `run-NNNNNN/`; the `run-NNNNNN.json`
+    /// beside it is rebuilt from the radio's values, without the standards' profiles, and is
+    /// not the signed file.
     #[arg(long, value_name = "SIG")]
     sig: Option<PathBuf>,
     /// A trusted robot public key (64 hex digits, from `passangle-onboard device-key --public`);

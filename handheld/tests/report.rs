@@ -82,6 +82,7 @@ fn signed_run(root: &Path, key: DeviceKey) -> PathBuf {
         warnings: ResultWarnings::EMPTY,
         cloud_points: cloud.points_m.len() as u32,
         preview_chunks: 0,
+        records: protocol::bounded::List::default(),
     };
     let params = StartMeasurement {
         vehicle_id: Text::truncated("AB-123"),

@@ -10,11 +10,12 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
 use link::client::Measured;
+use link::record_files::ReceivedRecord;
 use onboard::recorder::{RecordedOutcome, ResultRecord, RunRecorder};
 use onboard::signed::{Signer, write_signed};
 use onboard::signing::{DeviceKey, PublicKey, SEED_LEN};
 use protocol::bounded::Text;
-use protocol::radio::{MeasurementResult, ResultWarnings, StartMeasurement, Zone};
+use protocol::radio::{MeasurementResult, RecordFile, ResultWarnings, StartMeasurement, Zone};
 
 fn wire() -> MeasurementResult {
     MeasurementResult {
@@ -38,6 +39,7 @@ fn wire() -> MeasurementResult {
         warnings: ResultWarnings::EMPTY,
         cloud_points: 1_110_755,
         preview_chunks: 3,
+        records: protocol::bounded::List::default(),
     }
 }
 
@@ -145,19 +147,9 @@ fn verify_accepts_the_robots_records_with_a_key_from_the_user() {
     let (code, text) = passangle(&["verify", result_s], &root);
     assert_eq!(code, 0, "{text}");
 
-    // The handheld's copy (`passangle measure`/`fetch` saves it from the radio's result) has the
-    // robot's bytes when the record has no standards' profiles (the radio does not carry them),
-    // so the robot's signature verifies it.
-    let saved = link::client::save(
-        &root.join("handheld"),
-        &Measured {
-            result: wire(),
-            preview_mm: vec![[0, 0, 0]],
-            stop_to_result: None,
-            preview_time: None,
-        },
-    )
-    .unwrap();
+    // The summary rebuilt from the radio's values has the robot's bytes here (this record has
+    // no standards' profiles), so the robot's signature verifies it with `--sig`.
+    let saved = save_fetched(&root, &dir);
     let (code, text) = passangle(
         &[
             "verify",
@@ -170,6 +162,68 @@ fn verify_accepts_the_robots_records_with_a_key_from_the_user() {
         &root,
     );
     assert_eq!(code, 0, "{text}");
+    std::fs::remove_dir_all(&root).unwrap();
+}
+
+/// What `passangle measure`/`fetch` save under `root/handheld` for the signed run in `dir`:
+/// the robot's `result.json` and its signature as the radio brings them, byte-exact.
+fn save_fetched(root: &Path, dir: &Path) -> link::client::SavedFiles {
+    let radio_files = [RecordFile::ResultJson, RecordFile::ResultSig].map(|file| ReceivedRecord {
+        file,
+        bytes: Ok(std::fs::read(dir.join(file.file_name())).unwrap()),
+    });
+    link::client::save(
+        &root.join("handheld"),
+        &Measured {
+            result: wire(),
+            preview_mm: vec![[0, 0, 0]],
+            records: radio_files.to_vec(),
+            stop_to_result: None,
+            preview_time: None,
+        },
+    )
+    .unwrap()
+}
+
+/// The handheld's byte-exact copy in `run-NNNNNN/` verifies as it is, the file and its
+/// directory; one changed digit in it is named.
+#[test]
+fn verify_accepts_the_handhelds_copy_and_names_a_changed_digit() {
+    let (root, dir, public) = setup("verify-fetched");
+    let hex = public.to_hex();
+    let saved = save_fetched(&root, &dir);
+    let fetched = saved.result_json().unwrap().to_path_buf();
+    assert_eq!(
+        fetched,
+        root.join("handheld").join("run-000001").join("result.json")
+    );
+    assert!(saved.missing.is_empty(), "{:?}", saved.missing);
+    let fetched_s = fetched.to_str().unwrap();
+    let (code, text) = passangle(&["verify", fetched_s, "--public-key", &hex], &root);
+    assert_eq!(code, 0, "{text}");
+    let (code, text) = passangle(
+        &[
+            "verify",
+            fetched.parent().unwrap().to_str().unwrap(),
+            "--public-key",
+            &hex,
+        ],
+        &root,
+    );
+    assert_eq!(code, 0, "the fetched run directory: {text}");
+    let copy = std::fs::read_to_string(&fetched).unwrap();
+    let line = copy
+        .lines()
+        .find(|l| l.contains("\"approach_deg\""))
+        .unwrap();
+    let at = line.find(|c: char| c.is_ascii_digit()).unwrap();
+    let mut forged = line.to_owned();
+    let digit = forged.as_bytes()[at];
+    forged.replace_range(at..=at, if digit == b'3' { "4" } else { "3" });
+    std::fs::write(&fetched, copy.replacen(line, &forged, 1)).unwrap();
+    let (code, text) = passangle(&["verify", fetched_s, "--public-key", &hex], &root);
+    assert_eq!(code, 3, "a changed digit in the fetched copy: {text}");
+    assert!(text.contains("changed: /approach_deg"), "{text}");
     std::fs::remove_dir_all(&root).unwrap();
 }
 

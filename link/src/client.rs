@@ -10,12 +10,15 @@ use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 use protocol::auth::Key;
 use protocol::common::LogLine;
 use protocol::ids;
-use protocol::radio::{MeasurementResult, Phase, Progress, Refused, RobotStatus, StartMeasurement};
+use protocol::radio::{
+    MeasurementResult, Phase, Progress, RecordFile, Refused, RobotStatus, StartMeasurement,
+};
 
 use crate::Port;
 use crate::handheld::{HandheldConfig, HandheldEvent, HandheldRadio};
 use crate::preview;
 use crate::record::ResultRecord;
+use crate::record_files::ReceivedRecord;
 use crate::session::{Entropy, SessionError};
 
 /// Why a client command failed (each names what the operator should look at).
@@ -79,7 +82,8 @@ pub trait Observer {
     fn progress(&mut self, p: &Progress);
     /// A log line from the robot.
     fn log(&mut self, l: &LogLine);
-    /// The result arrived; the preview follows (`received`/`total` chunks).
+    /// The result arrived; the preview and the record files follow (`received`/`total` chunks
+    /// of them together).
     fn preview(&mut self, received: usize, total: usize);
 }
 
@@ -100,6 +104,9 @@ pub struct Measured {
     pub result: MeasurementResult,
     /// The decimated preview, millimetres.
     pub preview_mm: Vec<[i16; 3]>,
+    /// The run's record files as the robot wrote them (`result.json`, and `result.json.sig` when
+    /// the robot signs), byte-exact, or why one did not come.
+    pub records: Vec<ReceivedRecord>,
     /// From the first `Processing` progress (the robot is at rest) to the result's arrival.
     pub stop_to_result: Option<Duration>,
     /// From the result to the complete preview.
@@ -339,14 +346,17 @@ impl<C: ClientClock> Client<C> {
                 observer.preview(0, usize::from(r.preview_chunks));
                 None
             }
-            HandheldEvent::Complete { result, preview_mm } if result.run_id == run_id => {
-                Some(Ok(Measured {
-                    result: result.clone(),
-                    preview_mm: preview_mm.clone(),
-                    stop_to_result: None,
-                    preview_time: result_at.map(|t| micros(now.saturating_sub(t))),
-                }))
-            }
+            HandheldEvent::Complete {
+                result,
+                preview_mm,
+                records,
+            } if result.run_id == run_id => Some(Ok(Measured {
+                result: result.clone(),
+                preview_mm: preview_mm.clone(),
+                records: records.clone(),
+                stop_to_result: None,
+                preview_time: result_at.map(|t| micros(now.saturating_sub(t))),
+            })),
             _ => {
                 if let Some((got, total)) = radio.preview_progress(run_id) {
                     observer.preview(got, total);
@@ -417,10 +427,15 @@ impl<C: ClientClock> Client<C> {
                     }
                     observer.preview(0, usize::from(r.preview_chunks));
                 }
-                HandheldEvent::Complete { result, preview_mm } if Some(result.run_id) == run_id => {
+                HandheldEvent::Complete {
+                    result,
+                    preview_mm,
+                    records,
+                } if Some(result.run_id) == run_id => {
                     return Some(Ok(Measured {
                         result: result.clone(),
                         preview_mm: preview_mm.clone(),
+                        records: records.clone(),
                         stop_to_result,
                         preview_time: result_at.map(|t| micros(now.saturating_sub(t))),
                     }));
@@ -463,23 +478,94 @@ fn refused(what: &'static str, r: &Refused) -> ClientError {
 /// Files the handheld saves for a measurement, under `dir`.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct SavedFiles {
-    /// `run-NNNNNN.json`.
+    /// `run-NNNNNN.json`: the result rebuilt from the radio's values (no standards' profiles,
+    /// not the signed file).
     pub json: PathBuf,
     /// `run-NNNNNN-preview.ply`.
     pub ply: PathBuf,
     /// `run-NNNNNN-side.svg`.
     pub svg: PathBuf,
+    /// The robot's record files, byte-exact, in `run-NNNNNN/` (`result.json`, `result.json.sig`).
+    pub records: Vec<PathBuf>,
+    /// Why a record file is not among them: not sent (too long for the radio), or the robot
+    /// does not sign (no `result.json.sig`).
+    pub missing: Vec<String>,
 }
 
-/// Saves the result JSON, the preview as PLY and a side-view SVG of the preview.
+impl SavedFiles {
+    /// The robot's `result.json` as saved, if it came.
+    pub fn result_json(&self) -> Option<&Path> {
+        self.records
+            .iter()
+            .find(|p| p.file_name().is_some_and(|n| n == "result.json"))
+            .map(PathBuf::as_path)
+    }
+}
+
+/// Writes `bytes` to `path` through a temporary file beside it, so a reader never sees half.
+fn write_whole(path: &Path, bytes: &[u8]) -> io::Result<()> {
+    let mut tmp = path.as_os_str().to_owned();
+    tmp.push(".part");
+    let tmp = PathBuf::from(tmp);
+    std::fs::write(&tmp, bytes)?;
+    std::fs::rename(&tmp, path)
+}
+
+/// Saves the robot's record files byte-exact in `dir/run-NNNNNN/`. A signature left there by an
+/// earlier fetch is removed when the robot sent none, so it never sits beside a file it does not
+/// belong to.
+fn save_records(dir: &Path, m: &Measured, files: &mut SavedFiles) -> io::Result<()> {
+    if m.records.is_empty() {
+        files.missing.push(
+            "the robot sent no result.json (it could not record this run; see its log)".to_owned(),
+        );
+        return Ok(());
+    }
+    let run_dir = dir.join(crate::record::run_dir_name(m.result.run_id));
+    std::fs::create_dir_all(&run_dir)?;
+    for r in &m.records {
+        let path = run_dir.join(r.file.file_name());
+        match &r.bytes {
+            Ok(bytes) => {
+                write_whole(&path, bytes)?;
+                files.records.push(path);
+            }
+            Err(e) => {
+                remove_if_present(&path)?;
+                files.missing.push(e.to_string());
+            }
+        }
+    }
+    if !m.records.iter().any(|r| r.file == RecordFile::ResultSig) {
+        remove_if_present(&run_dir.join(RecordFile::ResultSig.file_name()))?;
+        files.missing.push(
+            "the robot sent no result.json.sig: it does not sign its records (no signing.key-file)"
+                .to_owned(),
+        );
+    }
+    Ok(())
+}
+
+fn remove_if_present(path: &Path) -> io::Result<()> {
+    match std::fs::remove_file(path) {
+        Err(e) if e.kind() != io::ErrorKind::NotFound => Err(e),
+        _ => Ok(()),
+    }
+}
+
+/// Saves the result JSON, the preview as PLY, a side-view SVG of the preview and the robot's
+/// record files as they came.
 pub fn save(dir: &Path, m: &Measured) -> io::Result<SavedFiles> {
     std::fs::create_dir_all(dir)?;
     let stem = crate::record::run_dir_name(m.result.run_id);
-    let files = SavedFiles {
+    let mut files = SavedFiles {
         json: dir.join(format!("{stem}.json")),
         ply: dir.join(format!("{stem}-preview.ply")),
         svg: dir.join(format!("{stem}-side.svg")),
+        records: Vec::new(),
+        missing: Vec::new(),
     };
+    save_records(dir, m, &mut files)?;
     let json =
         serde_json::to_vec_pretty(&ResultRecord::from_wire(&m.result)).map_err(io::Error::other)?;
     std::fs::write(&files.json, json)?;

@@ -7,8 +7,11 @@
 //!
 //! Commands are reliable. Results are reassembled with their preview: once the result has arrived, chunks
 //! still missing after a quiet spell ([`HandheldConfig::resend_quiet_us`]) are asked for again with
-//! [`ResendChunks`] (32 at a time); when the preview is complete the handheld sends [`ResultAck`]
-//! and reports [`HandheldEvent::Complete`]. A result that arrives again after that is acked again.
+//! [`ResendChunks`] (32 at a time). The record files the result names (`result.json`,
+//! `result.json.sig`) are reassembled byte-exact the same way, missing chunks asked for with
+//! [`ResendRecordChunks`]. When the preview and every file are complete the handheld sends
+//! [`ResultAck`] and reports [`HandheldEvent::Complete`]. A result that arrives again after that
+//! is acked again.
 
 use std::collections::BTreeMap;
 
@@ -19,11 +22,12 @@ use protocol::frame::{Deframer, Frame, Header, MAX_FRAME_LEN};
 use protocol::ids;
 use protocol::message::{self, DecodeError};
 use protocol::radio::{
-    Abort, FetchRun, HandshakeReply, MeasurementResult, Progress, Refused, ResendChunks, ResultAck,
-    RobotStatus, StartMeasurement, StatusRequest, ToHandheld,
+    Abort, FetchRun, HandshakeReply, MeasurementResult, Progress, Refused, ResendChunks,
+    ResendRecordChunks, ResultAck, RobotStatus, StartMeasurement, StatusRequest, ToHandheld,
 };
 
 use super::preview::Assembler;
+use super::record_files::{self, ReceivedRecord, RecordError};
 use super::reliable::{
     Delivery, LinkConfig, LinkEvent, Priority, Received, ReliableLink, SendError,
 };
@@ -67,12 +71,14 @@ pub enum HandheldEvent {
     Progress(Progress),
     /// A result arrived (the preview follows).
     Result(MeasurementResult),
-    /// A result and its whole preview, acknowledged to the onboard.
+    /// A result, its whole preview and its record files, acknowledged to the onboard.
     Complete {
         /// The result.
         result: MeasurementResult,
         /// The preview, millimetres, vehicle frame.
         preview_mm: Vec<[i16; 3]>,
+        /// The record files the result named, in its order: byte-exact, or why not.
+        records: Vec<ReceivedRecord>,
     },
     /// Robot status.
     Status(RobotStatus),
@@ -102,8 +108,47 @@ pub enum HandheldEvent {
 struct Incoming {
     result: MeasurementResult,
     preview: Assembler,
+    records: Vec<Result<record_files::Assembler, RecordError>>,
     last_chunk_us: u64,
     complete: bool,
+}
+
+impl Incoming {
+    fn new(result: &MeasurementResult, now_us: u64) -> Self {
+        Self {
+            result: result.clone(),
+            preview: Assembler::new(result.run_id, result.preview_chunks),
+            records: result
+                .records
+                .as_slice()
+                .iter()
+                .map(|info| record_files::Assembler::new(result.run_id, *info))
+                .collect(),
+            last_chunk_us: now_us,
+            complete: false,
+        }
+    }
+
+    /// Whether the preview and every file that can come are complete.
+    fn is_complete(&self) -> bool {
+        self.preview.is_complete()
+            && self.records.iter().all(|r| {
+                r.as_ref()
+                    .map_or(true, record_files::Assembler::is_complete)
+            })
+    }
+
+    /// Chunks received and expected, preview and files together.
+    fn progress(&self) -> (usize, usize) {
+        let total = usize::from(self.result.preview_chunks);
+        let mut got = total - self.preview.missing().len().min(total);
+        let mut all = total;
+        for a in self.records.iter().flatten() {
+            got += a.received();
+            all += usize::from(a.count());
+        }
+        (got, all)
+    }
 }
 
 /// Counters of frames the handheld dropped.
@@ -213,13 +258,10 @@ impl HandheldRadio {
         self.link.is_in_flight(seq)
     }
 
-    /// Preview chunks received and expected for `run_id`, if its result has arrived.
+    /// Chunks (preview and record files together) received and expected for `run_id`, if its
+    /// result has arrived.
     pub fn preview_progress(&self, run_id: u32) -> Option<(usize, usize)> {
-        self.incoming.get(&run_id).map(|i| {
-            let missing = i.preview.missing().len();
-            let total = usize::from(i.result.preview_chunks);
-            (total - missing.min(total), total)
-        })
+        self.incoming.get(&run_id).map(Incoming::progress)
     }
 
     /// Feeds bytes from the radio; returns what happened, in order.
@@ -313,21 +355,13 @@ impl HandheldRadio {
                     self.ack_result(run_id);
                     return;
                 }
-                let count = result.preview_chunks;
-                let entry = self.incoming.entry(run_id).or_insert_with(|| Incoming {
-                    result: result.clone(),
-                    preview: Assembler::new(run_id, count),
-                    last_chunk_us: now_us,
-                    complete: false,
-                });
+                let entry = self
+                    .incoming
+                    .entry(run_id)
+                    .or_insert_with(|| Incoming::new(&result, now_us));
                 if entry.result != result {
-                    // A fetch re-offered the run with another preview size: start over.
-                    *entry = Incoming {
-                        result: result.clone(),
-                        preview: Assembler::new(run_id, count),
-                        last_chunk_us: now_us,
-                        complete: false,
-                    };
+                    // A fetch re-offered the run with another preview or other files: start over.
+                    *entry = Incoming::new(&result, now_us);
                 }
                 out.push(HandheldEvent::Result(result));
                 self.check_complete(run_id, out);
@@ -335,6 +369,17 @@ impl HandheldRadio {
             ToHandheld::CloudChunk(chunk) => {
                 if let Some(i) = self.incoming.get_mut(&chunk.run_id)
                     && i.preview.add(&chunk)
+                {
+                    i.last_chunk_us = now_us;
+                    self.check_complete(chunk.run_id, out);
+                }
+            }
+            ToHandheld::RecordChunk(chunk) => {
+                if let Some(i) = self.incoming.get_mut(&chunk.run_id)
+                    && i.records
+                        .iter_mut()
+                        .flatten()
+                        .any(|a| a.file() == chunk.file && a.add(&chunk))
                 {
                     i.last_chunk_us = now_us;
                     self.check_complete(chunk.run_id, out);
@@ -350,13 +395,29 @@ impl HandheldRadio {
         let Some(i) = self.incoming.get_mut(&run_id) else {
             return;
         };
-        if i.complete || !i.preview.is_complete() {
+        if i.complete || !i.is_complete() {
             return;
         }
         i.complete = true;
+        let records = i
+            .result
+            .records
+            .as_slice()
+            .iter()
+            .zip(&i.records)
+            .map(|(info, a)| ReceivedRecord {
+                file: info.file,
+                bytes: match a {
+                    // Complete: the bytes are there and of the announced length.
+                    Ok(a) => Ok(a.bytes().unwrap_or_default()),
+                    Err(e) => Err(e.clone()),
+                },
+            })
+            .collect();
         out.push(HandheldEvent::Complete {
             result: i.result.clone(),
             preview_mm: i.preview.points_mm(),
+            records,
         });
         self.ack_result(run_id);
     }
@@ -395,21 +456,46 @@ impl HandheldRadio {
         self.link.poll(now_us);
         let quiet = self.config.resend_quiet_us;
         let mut wanted = Vec::new();
+        let mut wanted_records = Vec::new();
         for (run_id, i) in &mut self.incoming {
             if i.complete || now_us.saturating_sub(i.last_chunk_us) < quiet {
                 continue;
             }
+            let mut asked = false;
             let missing: Vec<u16> = i.preview.missing().into_iter().take(32).collect();
             if !missing.is_empty() {
+                asked = true;
+                wanted.push((*run_id, missing));
+            }
+            for a in i.records.iter().flatten() {
+                let missing: Vec<u16> = a.missing().into_iter().take(32).collect();
+                if !missing.is_empty() {
+                    asked = true;
+                    wanted_records.push((*run_id, a.file(), missing));
+                }
+            }
+            if asked {
                 // Wait another quiet spell before asking again.
                 i.last_chunk_us = now_us;
-                wanted.push((*run_id, missing));
             }
         }
         for (run_id, missing) in wanted {
             if let Some(indices) = List::from_slice(&missing) {
                 let _ = self.link.send(
                     &ResendChunks { run_id, indices },
+                    Delivery::Reliable,
+                    Priority::Control,
+                );
+            }
+        }
+        for (run_id, file, missing) in wanted_records {
+            if let Some(indices) = List::from_slice(&missing) {
+                let _ = self.link.send(
+                    &ResendRecordChunks {
+                        run_id,
+                        file,
+                        indices,
+                    },
                     Delivery::Reliable,
                     Priority::Control,
                 );

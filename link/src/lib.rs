@@ -12,6 +12,8 @@
 //!   result acks).
 //! - [`mcu`]: the onboard's MCU session (hello, config, drive/stop, 20 ms heartbeat).
 //! - [`preview`]: cloud decimation, quantisation and chunking.
+//! - [`record_files`]: a run's record files (`result.json` and its signature), byte-exact in
+//!   chunks.
 //! - [`sim`]: a seeded lossy byte pipe for tests and the simulator.
 //! - [`record`]: the result record (`result.json`) the link delivers, the robot records and the
 //!   handheld saves.
@@ -26,6 +28,7 @@ pub mod mcu;
 pub mod preview;
 pub mod radio;
 pub mod record;
+pub mod record_files;
 pub mod reliable;
 pub mod session;
 pub mod sim;

@@ -12,23 +12,26 @@
 //!   stays in [`OnboardRadio::pending_results`] until the handheld's [`ResultAck`](protocol::radio::ResultAck), which comes
 //!   after the handheld has the whole preview.
 //! - Preview chunks are best effort and paced through the bulk queue; [`ResendChunks`](protocol::radio::ResendChunks) puts the
-//!   wanted ones back in front.
+//!   wanted ones back in front. The run's record files follow the preview the same way as
+//!   [`RecordChunk`]s, resent on [`ResendRecordChunks`](protocol::radio::ResendRecordChunks).
 //! - Per-session rate limit: commands beyond [`COMMANDS_PER_S`] (burst [`COMMAND_BURST`]) are
 //!   dropped unacked (the sender retries); aborts and acks are never limited.
 
 use std::collections::VecDeque;
 
 use protocol::auth::Key;
+use protocol::bounded::List;
 use protocol::common::{Hello, LogLevel, LogLine, Role};
 use protocol::frame::{Deframer, Header, MAX_FRAME_LEN};
 use protocol::message::{self, DecodeError};
 use protocol::radio::{
-    CloudChunk, HandshakeInit, MeasurementResult, Progress, RefuseReason, Refused, RobotStatus,
-    StartMeasurement, ToOnboard,
+    CloudChunk, HandshakeInit, MeasurementResult, Progress, RecordChunk, RecordFile, RefuseReason,
+    Refused, RobotStatus, StartMeasurement, ToOnboard,
 };
 use protocol::{Message, bounded::Text, ids};
 
 use super::preview;
+use super::record_files::{self, OutgoingRecord};
 use super::reliable::{Delivery, LinkConfig, Priority, Received, ReliableLink, SendError};
 use super::session::{Entropy, InitOutcome, SessionError, SessionTable};
 
@@ -134,6 +137,23 @@ struct Pending {
     result_seq: u16,
     chunks: Vec<CloudChunk>,
     to_send: VecDeque<u16>,
+    records: Vec<PendingRecord>,
+}
+
+#[derive(Debug)]
+struct PendingRecord {
+    file: RecordFile,
+    chunks: Vec<RecordChunk>,
+    to_send: VecDeque<u16>,
+}
+
+/// Puts the wanted chunk indices (those that exist and are not queued) back in front.
+fn requeue(to_send: &mut VecDeque<u16>, wanted: &[u16], len: usize) {
+    for &i in wanted.iter().rev() {
+        if usize::from(i) < len && !to_send.contains(&i) {
+            to_send.push_front(i);
+        }
+    }
 }
 
 /// The onboard end of the radio link. See the module docs.
@@ -331,11 +351,18 @@ impl OnboardRadio {
                     .iter_mut()
                     .find(|p| p.result.run_id == r.run_id)
                 {
-                    for &i in r.indices.as_slice().iter().rev() {
-                        if usize::from(i) < p.chunks.len() && !p.to_send.contains(&i) {
-                            p.to_send.push_front(i);
-                        }
-                    }
+                    requeue(&mut p.to_send, r.indices.as_slice(), p.chunks.len());
+                }
+            }
+            ToOnboard::ResendRecordChunks(r) => {
+                if let Some(f) = self
+                    .pending
+                    .iter_mut()
+                    .filter(|p| p.result.run_id == r.run_id)
+                    .flat_map(|p| p.records.iter_mut())
+                    .find(|f| f.file == r.file)
+                {
+                    requeue(&mut f.to_send, r.indices.as_slice(), f.chunks.len());
                 }
             }
             ToOnboard::StatusRequest(_) => out.push(RadioRequest::Status),
@@ -413,16 +440,47 @@ impl OnboardRadio {
             .send(&line, Delivery::BestEffort, Priority::Control);
     }
 
-    /// Offers a result and its preview; held until the handheld's [`RadioRequest::ResultAck`].
-    /// `result.preview_chunks` is set from the preview here. Offering a run again (a fetch)
-    /// replaces the earlier offer.
+    /// Offers a result and its preview without record files (see [`Self::deliver_with_records`]).
     pub fn deliver(
+        &mut self,
+        result: MeasurementResult,
+        preview_mm: &[[i16; 3]],
+    ) -> Result<(), SendError> {
+        self.deliver_with_records(result, preview_mm, &[])
+    }
+
+    /// Offers a result, its preview and the run's record files (sent byte-exact after the
+    /// preview); held until the handheld's [`RadioRequest::ResultAck`], which comes once it has
+    /// all of them. `result.preview_chunks` and `result.records` are set here; a file longer than
+    /// [`protocol::radio::MAX_RECORD_LEN`] is announced with its length and not sent. Offering a
+    /// run again (a fetch) replaces the earlier offer.
+    pub fn deliver_with_records(
         &mut self,
         mut result: MeasurementResult,
         preview_mm: &[[i16; 3]],
+        records: &[OutgoingRecord],
     ) -> Result<(), SendError> {
         let chunks = preview::chunks(result.run_id, preview_mm);
         result.preview_chunks = chunks.len() as u16;
+        let infos: Vec<_> = records
+            .iter()
+            .take(protocol::radio::MAX_RECORD_FILES)
+            .map(OutgoingRecord::info)
+            .collect();
+        // At most MAX_RECORD_FILES: always fits.
+        result.records = List::from_slice(&infos).unwrap_or_default();
+        let records: Vec<PendingRecord> = records
+            .iter()
+            .take(protocol::radio::MAX_RECORD_FILES)
+            .map(|r| {
+                let chunks = record_files::chunks(result.run_id, r);
+                PendingRecord {
+                    file: r.file,
+                    to_send: (0..chunks.len() as u16).collect(),
+                    chunks,
+                }
+            })
+            .collect();
         if let Some(i) = self
             .pending
             .iter()
@@ -439,6 +497,7 @@ impl OnboardRadio {
             result_seq,
             to_send: (0..chunks.len() as u16).collect(),
             chunks,
+            records,
         });
         Ok(())
     }
@@ -460,6 +519,17 @@ impl OnboardRadio {
                     let _ = self.link.send(chunk, Delivery::BestEffort, Priority::Bulk);
                 }
             }
+            // The record files after the preview, one file after the other.
+            for f in &mut p.records {
+                while self.link.bulk_queued() < BULK_DEPTH {
+                    let Some(i) = f.to_send.pop_front() else {
+                        break;
+                    };
+                    if let Some(chunk) = f.chunks.get(usize::from(i)) {
+                        let _ = self.link.send(chunk, Delivery::BestEffort, Priority::Bulk);
+                    }
+                }
+            }
         }
     }
 
@@ -479,7 +549,11 @@ impl OnboardRadio {
 
     /// Whether bytes wait for the rate limiter or preview chunks wait to be queued.
     pub fn has_pending_output(&self) -> bool {
-        self.link.has_pending_output() || self.pending.iter().any(|p| !p.to_send.is_empty())
+        self.link.has_pending_output()
+            || self
+                .pending
+                .iter()
+                .any(|p| !p.to_send.is_empty() || p.records.iter().any(|f| !f.to_send.is_empty()))
     }
 }
 

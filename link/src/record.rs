@@ -243,6 +243,7 @@ impl ResultRecord {
             warnings,
             cloud_points: self.cloud_points,
             preview_chunks: 0,
+            records: protocol::bounded::List::default(),
         }
     }
 }

@@ -56,6 +56,7 @@ fn result(run_id: u32) -> MeasurementResult {
         warnings: ResultWarnings::EMPTY,
         cloud_points: 123_456,
         preview_chunks: 0,
+        records: protocol::bounded::List::default(),
     }
 }
 
@@ -485,7 +486,9 @@ fn result_and_preview_arrive_exactly_over_20_percent_loss_and_corruption() {
         let complete: Vec<_> = hev
             .iter()
             .filter_map(|e| match e {
-                HandheldEvent::Complete { result, preview_mm } => Some((result, preview_mm)),
+                HandheldEvent::Complete {
+                    result, preview_mm, ..
+                } => Some((result, preview_mm)),
                 _ => None,
             })
             .collect();
@@ -501,6 +504,94 @@ fn result_and_preview_arrive_exactly_over_20_percent_loss_and_corruption() {
         assert_eq!(p.ob.pending_results(), 0);
         assert!(p.up.stats().lost > 0 && p.down.stats().corrupted > 0);
     }
+}
+
+/// The record files follow the result byte-exact over a lossy radio: lost chunks are asked for
+/// again, the ack waits for every file, a missing signature is simply not announced, and a file
+/// beyond the bound is announced with its length, not sent, and reported by name.
+#[test]
+fn record_files_arrive_byte_exact_over_20_percent_loss_and_corruption() {
+    use super::record_files::{OutgoingRecord, RecordError};
+    use protocol::radio::{MAX_RECORD_LEN, RecordFile};
+    let json: Vec<u8> = (0..14_000u32)
+        .map(|i| b"{}\n 0123456789"[(i % 14) as usize])
+        .collect();
+    let sig: Vec<u8> = (0..9_000u32).map(|i| (i * 31 % 251) as u8).collect();
+    for seed in 0..3 {
+        let mut p = Pair::new(
+            PipeConfig::radio_lossy(0.2, 0.2),
+            200 + seed,
+            key(1),
+            key(1),
+        );
+        p.hh.connect(0).unwrap();
+        let records = [
+            OutgoingRecord::new(RecordFile::ResultJson, json.clone()),
+            OutgoingRecord::new(RecordFile::ResultSig, sig.clone()),
+        ];
+        p.ob.deliver_with_records(result(8), &[[1, 2, 3]; 50], &records)
+            .unwrap();
+        let (hev, req) = p.run(120_000_000);
+        let complete: Vec<_> = hev
+            .iter()
+            .filter_map(|e| match e {
+                HandheldEvent::Complete {
+                    result, records, ..
+                } => Some((result, records)),
+                _ => None,
+            })
+            .collect();
+        assert_eq!(complete.len(), 1, "seed {seed}");
+        let (r, got) = complete[0];
+        assert_eq!(r.records.as_slice().len(), 2);
+        assert_eq!(got.len(), 2);
+        assert_eq!(got[0].file, RecordFile::ResultJson);
+        assert!(got[0].bytes.as_ref().unwrap() == &json, "seed {seed}: json");
+        assert_eq!(got[1].file, RecordFile::ResultSig);
+        assert!(got[1].bytes.as_ref().unwrap() == &sig, "seed {seed}: sig");
+        assert!(
+            req.iter()
+                .any(|r| matches!(r, RadioRequest::ResultAck { run_id: 8 }))
+        );
+        assert_eq!(p.ob.pending_results(), 0);
+    }
+
+    // Unsigned (no sig announced) and oversize (named, not sent).
+    let mut p = Pair::new(PipeConfig::radio_lossy(0.0, 0.0), 5, key(1), key(1));
+    p.hh.connect(0).unwrap();
+    let big = MAX_RECORD_LEN as usize + 10;
+    p.ob.deliver_with_records(
+        result(9),
+        &[[1, 2, 3]],
+        &[OutgoingRecord::too_large(
+            RecordFile::ResultJson,
+            big as u64,
+        )],
+    )
+    .unwrap();
+    let (hev, _) = p.run(20_000_000);
+    let records = hev
+        .iter()
+        .find_map(|e| match e {
+            HandheldEvent::Complete { records, .. } => Some(records.clone()),
+            _ => None,
+        })
+        .expect("complete without the oversize file");
+    assert_eq!(
+        records[0].bytes,
+        Err(RecordError::TooLarge {
+            file: RecordFile::ResultJson,
+            len: big as u32
+        })
+    );
+    assert!(
+        records[0]
+            .bytes
+            .as_ref()
+            .unwrap_err()
+            .to_string()
+            .starts_with(&format!("result.json is {big} bytes"))
+    );
 }
 
 #[test]
@@ -558,7 +649,7 @@ fn matrix_cell(pipe: PipeConfig, seed: u64) -> Result<(u64, u64, u64), String> {
             started = true;
             p.ob.deliver(result(3), &preview).unwrap();
         }
-        if hev.iter().any(|e| matches!(e, HandheldEvent::Complete { result, preview_mm } if result.run_id == 3 && *preview_mm == preview)) {
+        if hev.iter().any(|e| matches!(e, HandheldEvent::Complete { result, preview_mm, .. } if result.run_id == 3 && *preview_mm == preview)) {
             complete = true;
             abort_seq = Some(p.hh.abort(3).unwrap());
         }

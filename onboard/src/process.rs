@@ -800,6 +800,7 @@ pub fn wire_result(a: &AnglesResult, cloud_points: usize) -> MeasurementResult {
         warnings,
         cloud_points: u32::try_from(cloud_points).unwrap_or(u32::MAX),
         preview_chunks: 0,
+        records: protocol::bounded::List::default(),
     }
 }
 

@@ -675,6 +675,7 @@ mod tests {
             warnings,
             cloud_points: 99,
             preview_chunks: 0,
+            records: protocol::bounded::List::default(),
         }
     }
 
@@ -844,6 +845,7 @@ mod tests {
             warnings: ResultWarnings::LOW_SUPPORT,
             cloud_points: 1_322_335,
             preview_chunks: 0,
+            records: protocol::bounded::List::default(),
         };
         r.save_result(&ResultRecord::from_wire(&wire));
         assert!(r.finish(RecordedOutcome::Completed).is_empty());

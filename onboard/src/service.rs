@@ -25,7 +25,10 @@ use std::thread;
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 use protocol::common::LogLevel;
-use protocol::radio::{MeasurementResult, Phase, RefuseReason, RobotStatus, StartMeasurement};
+use protocol::radio::{
+    MAX_RECORD_LEN, MeasurementResult, Phase, RecordFile, RefuseReason, RobotStatus,
+    StartMeasurement,
+};
 
 // The depth frame and the processor interface are built without the `service` feature (the
 // handheld's replay uses the processing); the service's users name them from here as well.
@@ -40,6 +43,7 @@ use link::Port;
 use link::mcu::{McuEvent, McuSession, McuSessionConfig, MotionIntent};
 use link::preview;
 use link::radio::{OnboardRadio, RadioRequest, START_ID};
+use link::record_files::OutgoingRecord;
 use link::reliable::LinkConfig;
 use link::session::Entropy;
 use vlp16::Vlp16Packet;
@@ -273,7 +277,7 @@ struct Worker {
 /// What a processing thread reports, in this order.
 enum WorkerMsg {
     /// The result and its preview (or why there is none): goes to the handheld at once.
-    Done(Result<Ready, String>),
+    Done(Result<Box<Ready>, String>),
     /// `cloud.ply` and `side_view.svg` are written (errors, e.g. a full disk, named).
     Saved(Vec<String>),
 }
@@ -287,6 +291,45 @@ struct Ready {
     not_measured: Vec<(&'static str, String)>,
     /// The standards' profiles, for `result.json` only.
     profiles: Vec<link::record::ProfileRecord>,
+    /// The run's record files as written (a recorded run's; a live run's are read when its
+    /// recording closes).
+    records: Vec<OutgoingRecord>,
+}
+
+/// The record files of the run in `dir` that go to the handheld byte-exact: `result.json` and,
+/// when the robot signs, `result.json.sig`. A file missing is not sent (no signature without a
+/// device key: the handheld says so, nothing is invented); a file longer than the radio carries
+/// is announced by its length, logged, and not read.
+fn read_records(dir: &std::path::Path) -> Vec<OutgoingRecord> {
+    let mut out = Vec::new();
+    for file in [RecordFile::ResultJson, RecordFile::ResultSig] {
+        let path = dir.join(file.file_name());
+        let len = match std::fs::metadata(&path) {
+            Ok(m) => m.len(),
+            Err(e) if e.kind() == io::ErrorKind::NotFound => continue,
+            Err(e) => {
+                tracing::warn!("{}: {e}: not sent to the handheld", path.display());
+                continue;
+            }
+        };
+        if len > u64::from(MAX_RECORD_LEN) {
+            tracing::error!(
+                "{} is {len} bytes, more than the {MAX_RECORD_LEN} the radio carries: not sent",
+                path.display()
+            );
+            out.push(OutgoingRecord::too_large(file, len));
+            continue;
+        }
+        match std::fs::read(&path) {
+            Ok(bytes) => out.push(OutgoingRecord::new(file, bytes)),
+            Err(e) => tracing::warn!("{}: {e}: not sent to the handheld", path.display()),
+        }
+    }
+    if !out.iter().any(|r| r.file == RecordFile::ResultJson) {
+        // A signature without its file verifies nothing.
+        out.clear();
+    }
+    out
 }
 
 /// The end of every processing thread (live or from the recording): the heavy work after the
@@ -321,12 +364,13 @@ fn complete(
                 .collect()
         })
         .unwrap_or_default();
-    let _ = tx.send(WorkerMsg::Done(Ok(Ready {
+    let _ = tx.send(WorkerMsg::Done(Ok(Box::new(Ready {
         result: processed.result,
         preview_mm,
         not_measured,
         profiles: processed.profiles,
-    })));
+        records: Vec::new(),
+    }))));
     let mut errors = Vec::new();
     let mut ply = Vec::new();
     match cloud_io::write_ply(
@@ -379,7 +423,7 @@ enum IoDone {
     Fetched {
         run_id: u32,
         seq: u16,
-        ready: Option<Ready>,
+        ready: Option<Box<Ready>>,
     },
     Marked {
         run_id: u32,
@@ -388,6 +432,8 @@ enum IoDone {
     Finished {
         run_id: u32,
         errors: Vec<String>,
+        /// The closed run's record files, when it has a result.
+        records: Vec<OutgoingRecord>,
     },
 }
 
@@ -399,7 +445,8 @@ fn run_io_job(root: &std::path::Path, preview: config::PreviewConfig, job: IoJob
             seq,
             ready: Recording::open_run(root, run_id)
                 .ok()
-                .and_then(|rec| recorded_ready(&rec, preview)),
+                .and_then(|rec| recorded_ready(&rec, preview))
+                .map(Box::new),
         },
         IoJob::MarkDelivered { run_id } => IoDone::Marked {
             run_id,
@@ -413,12 +460,19 @@ fn run_io_job(root: &std::path::Path, preview: config::PreviewConfig, job: IoJob
             result,
             outcome,
         } => {
+            let dir = recorder.dir().to_path_buf();
             if let Some(r) = &result {
                 recorder.save_result(r);
             }
+            let errors = recorder.finish(outcome);
             IoDone::Finished {
                 run_id,
-                errors: recorder.finish(outcome),
+                errors,
+                records: if result.is_some() {
+                    read_records(&dir)
+                } else {
+                    Vec::new()
+                },
             }
         }
     }
@@ -541,6 +595,7 @@ fn recorded_ready(rec: &Recording, preview: config::PreviewConfig) -> Option<Rea
         preview_mm: preview::decimate(&points, preview.voxel_m, preview.max_points),
         not_measured: Vec::new(),
         profiles: result.profiles.clone(),
+        records: read_records(&rec.dir),
     })
 }
 
@@ -584,6 +639,9 @@ pub struct Service {
     io_waiting: std::collections::VecDeque<IoJob>,
     /// The current run's result, saved with its recording when the run ends.
     result_record: Option<ResultRecord>,
+    /// A live run's result and preview, sent once its recording is closed and its record files
+    /// can be read.
+    awaiting_records: Option<(MeasurementResult, Vec<[i16; 3]>)>,
     /// Radio counters at the last drop log line.
     logged_radio: link::radio::RadioStats,
     next_drop_log_us: u64,
@@ -739,6 +797,7 @@ impl Service {
             execution: startup.execution,
             io_waiting: std::collections::VecDeque::new(),
             result_record: None,
+            awaiting_records: None,
             logged_radio: link::radio::RadioStats::default(),
             next_drop_log_us: DROP_LOG_PERIOD_US,
             mcu,
@@ -834,7 +893,10 @@ impl Service {
         let Some(ready) = recorded_ready(rec, self.config.preview) else {
             return false;
         };
-        match self.radio.deliver(ready.result, &ready.preview_mm) {
+        match self
+            .radio
+            .deliver_with_records(ready.result, &ready.preview_mm, &ready.records)
+        {
             Ok(()) => true,
             Err(e) => {
                 tracing::error!("cannot offer run {}: {e}", rec.dir.display());
@@ -865,7 +927,10 @@ impl Service {
                     seq: _,
                     ready: Some(r),
                 } => {
-                    if let Err(e) = self.radio.deliver(r.result, &r.preview_mm) {
+                    if let Err(e) =
+                        self.radio
+                            .deliver_with_records(r.result, &r.preview_mm, &r.records)
+                    {
                         tracing::error!("cannot offer run {run_id}: {e}");
                     }
                 }
@@ -887,9 +952,21 @@ impl Service {
                     run_id,
                     error: Some(e),
                 } => tracing::warn!("run {run_id}: result acknowledged, but {e}"),
-                IoDone::Finished { run_id, errors } => {
+                IoDone::Finished {
+                    run_id,
+                    errors,
+                    records,
+                } => {
                     for e in errors {
                         tracing::error!(run_id, "{e}");
+                    }
+                    if let Some((result, preview_mm)) =
+                        self.awaiting_records.take_if(|(r, _)| r.run_id == run_id)
+                        && let Err(e) =
+                            self.radio
+                                .deliver_with_records(result, &preview_mm, &records)
+                    {
+                        tracing::error!("cannot send the result: {e}");
                     }
                 }
             }
@@ -1295,13 +1372,17 @@ impl Service {
         }
     }
 
-    /// The result goes out first; `result.json` is written when the run's recording closes (on
-    /// the IO worker); the cloud and the SVG are written by the processing thread.
+    /// `result.json` (and its signature) is written when the run's recording closes, on the IO
+    /// worker; the result goes to the handheld then, with those files byte-exact, so the
+    /// handheld's copy is the signed record. A run that could not be recorded sends its result
+    /// at once, without files. The cloud and the SVG are written by the processing thread.
     fn deliver(&mut self, r: &Ready) {
-        if let Err(e) = self.radio.deliver(r.result.clone(), &r.preview_mm) {
-            tracing::error!("cannot send the result: {e}");
-        }
-        if self.recorder.is_some() {
+        if self.recorder.is_none() {
+            if let Err(e) = self.radio.deliver(r.result.clone(), &r.preview_mm) {
+                tracing::error!("cannot send the result: {e}");
+            }
+        } else {
+            self.awaiting_records = Some((r.result.clone(), r.preview_mm.clone()));
             let mut record = ResultRecord::from_wire(&r.result);
             for (quantity, reason) in &r.not_measured {
                 if let Some(n) = record.not_measured.get_mut(*quantity) {

@@ -51,9 +51,16 @@ impl<const N: usize> Text<N> {
 }
 
 /// A list of at most `N` items.
-#[derive(Debug, Clone, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(transparent)]
 pub struct List<T, const N: usize>(pub heapless::Vec<T, N>);
+
+/// The empty list, for any item type.
+impl<T, const N: usize> Default for List<T, N> {
+    fn default() -> Self {
+        Self(heapless::Vec::new())
+    }
+}
 
 impl<T: MaxSize, const N: usize> MaxSize for List<T, N> {
     const POSTCARD_MAX_SIZE: usize = varint_len(N) + N * T::POSTCARD_MAX_SIZE;

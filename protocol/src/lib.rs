@@ -72,7 +72,7 @@ pub use frame::{Deframer, Flags, Frame, Header};
 pub use message::{DecodeError, Message};
 
 /// Version of this protocol. Bump on any change to the bytes of any message.
-pub const PROTOCOL_VERSION: u8 = 4;
+pub const PROTOCOL_VERSION: u8 = 5;
 
 /// Message ids. Explicit, never derived from declaration order; never reused.
 pub mod ids {
@@ -114,6 +114,8 @@ pub mod ids {
     pub const FETCH_RUN: u16 = 0x0206;
     /// [`crate::radio::HandshakeInit`].
     pub const HANDSHAKE_INIT: u16 = 0x0207;
+    /// [`crate::radio::ResendRecordChunks`].
+    pub const RESEND_RECORD_CHUNKS: u16 = 0x0208;
     /// [`crate::radio::Progress`].
     pub const PROGRESS: u16 = 0x0281;
     /// [`crate::radio::MeasurementResult`].
@@ -126,4 +128,6 @@ pub mod ids {
     pub const REFUSED: u16 = 0x0285;
     /// [`crate::radio::HandshakeReply`].
     pub const HANDSHAKE_REPLY: u16 = 0x0286;
+    /// [`crate::radio::RecordChunk`].
+    pub const RECORD_CHUNK: u16 = 0x0287;
 }

@@ -7,7 +7,10 @@
 //! Every command is sent with [`Flags::ACK_REQUESTED`](crate::frame::Flags) and retransmitted until
 //! acked; a refused command is answered with [`Refused`]. Results are resent until the handheld
 //! sends [`ResultAck`]; the cloud preview goes as [`CloudChunk`]s and the handheld asks for the
-//! missing ones with [`ResendChunks`].
+//! missing ones with [`ResendChunks`]. The run's record files as the robot wrote them
+//! (`result.json` and its signature `result.json.sig`, named in
+//! [`MeasurementResult::records`]) go byte-exact as [`RecordChunk`]s, the missing ones asked for
+//! with [`ResendRecordChunks`], so the handheld's copy verifies against the robot's public key.
 
 use postcard::experimental::max_size::MaxSize;
 use serde::{Deserialize, Serialize};
@@ -80,6 +83,17 @@ pub struct ResultAck {
 pub struct ResendChunks {
     /// The run.
     pub run_id: u32,
+    /// Chunk indices wanted (at most 32 per request).
+    pub indices: List<u16, 32>,
+}
+
+/// Ask for record chunks of one file again.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize, MaxSize)]
+pub struct ResendRecordChunks {
+    /// The run.
+    pub run_id: u32,
+    /// The file.
+    pub file: RecordFile,
     /// Chunk indices wanted (at most 32 per request).
     pub indices: List<u16, 32>,
 }
@@ -220,6 +234,75 @@ pub struct MeasurementResult {
     pub cloud_points: u32,
     /// Number of [`CloudChunk`]s of the preview.
     pub preview_chunks: u16,
+    /// The run's record files that follow as [`RecordChunk`]s, with their lengths. A file the
+    /// robot does not have (no `result.json.sig` without a device key) is not listed; a file
+    /// longer than [`MAX_RECORD_LEN`] is listed with its length and not sent.
+    pub records: List<RecordInfo, MAX_RECORD_FILES>,
+}
+
+wire_enum! {
+    /// A file of a run's record on the robot, sent byte-exact.
+    pub enum RecordFile {
+        /// `result.json`.
+        ResultJson = 1,
+        /// `result.json.sig`, the device key's detached signature of `result.json`.
+        ResultSig = 2,
+    }
+}
+
+impl RecordFile {
+    /// The file's name in the run directory.
+    pub const fn file_name(self) -> &'static str {
+        match self {
+            Self::ResultJson => "result.json",
+            Self::ResultSig => "result.json.sig",
+        }
+    }
+}
+
+/// Record files one result can name.
+pub const MAX_RECORD_FILES: usize = 4;
+
+/// Largest record file sent over the radio, bytes (about a minute at the radio's rate). A longer
+/// file is named with its length in [`MeasurementResult::records`] and stays on the robot.
+pub const MAX_RECORD_LEN: u32 = 256 * 1024;
+
+/// Bytes of a record file per [`RecordChunk`] (the most that fits a sealed frame's inner payload
+/// limit beside the chunk's other fields).
+pub const RECORD_CHUNK_LEN: usize = 190;
+
+/// Chunks of a record file of `len` bytes: at least one, so an empty file is sent too.
+#[allow(clippy::cast_possible_truncation)] // RECORD_CHUNK_LEN is 190: fits a u32
+pub const fn record_chunk_count(len: u32) -> u32 {
+    let n = len.div_ceil(RECORD_CHUNK_LEN as u32);
+    if n == 0 { 1 } else { n }
+}
+
+/// A record file that follows a result.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, MaxSize)]
+pub struct RecordInfo {
+    /// Which file.
+    pub file: RecordFile,
+    /// Its length on the robot, bytes.
+    pub len: u32,
+}
+
+/// One chunk of a record file, byte-exact. Chunk `index` holds the file's bytes from
+/// `index * RECORD_CHUNK_LEN`; every chunk but the last is full.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize, MaxSize)]
+pub struct RecordChunk {
+    /// The run.
+    pub run_id: u32,
+    /// The file.
+    pub file: RecordFile,
+    /// Chunk index, 0-based.
+    pub index: u16,
+    /// Number of chunks ([`record_chunk_count`] of `total_len`).
+    pub count: u16,
+    /// The file's length, bytes (at most [`MAX_RECORD_LEN`]).
+    pub total_len: u32,
+    /// The bytes.
+    pub bytes: List<u8, RECORD_CHUNK_LEN>,
 }
 
 /// Points of the cloud preview per chunk (i16 varints take up to 3 bytes each, so 21 points fit
@@ -311,6 +394,8 @@ crate::message::impl_message! {
     CloudChunk => crate::ids::CLOUD_CHUNK,
     RobotStatus => crate::ids::ROBOT_STATUS,
     Refused => crate::ids::REFUSED,
+    RecordChunk => crate::ids::RECORD_CHUNK,
+    ResendRecordChunks => crate::ids::RESEND_RECORD_CHUNKS,
 }
 
 message_set! {
@@ -332,6 +417,8 @@ message_set! {
         StatusRequest(StatusRequest),
         /// An earlier run wanted.
         FetchRun(FetchRun),
+        /// Record chunks wanted again.
+        ResendRecordChunks(ResendRecordChunks),
     }
 }
 
@@ -354,6 +441,8 @@ message_set! {
         Refused(Refused),
         /// Log line.
         LogLine(LogLine),
+        /// Record file chunk.
+        RecordChunk(RecordChunk),
     }
 }
 
@@ -361,4 +450,5 @@ message_set! {
 // checks).
 const _: () = assert!(ToOnboard::MAX_PAYLOAD_LEN <= crate::auth::MAX_INNER_PAYLOAD_LEN);
 const _: () = assert!(ToHandheld::MAX_PAYLOAD_LEN <= crate::auth::MAX_INNER_PAYLOAD_LEN);
+const _: () = assert!(record_chunk_count(MAX_RECORD_LEN) <= u16::MAX as u32);
 const _: () = assert!(HandshakeReply::POSTCARD_MAX_SIZE <= crate::frame::MAX_PAYLOAD_LEN);

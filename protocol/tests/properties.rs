@@ -177,6 +177,19 @@ fn to_onboard() -> impl Strategy<Value = ToOnboard> {
             }),
         Just(radio::StatusRequest {}.into()),
         any::<u32>().prop_map(|run_id| radio::FetchRun { run_id }.into()),
+        (
+            any::<u32>(),
+            proptest::sample::select(radio::RecordFile::ALL),
+            proptest::collection::vec(any::<u16>(), 0..=32)
+        )
+            .prop_map(|(run_id, file, idx)| {
+                radio::ResendRecordChunks {
+                    run_id,
+                    file,
+                    indices: List::from_slice(&idx).unwrap(),
+                }
+                .into()
+            }),
     ]
 }
 
@@ -188,31 +201,45 @@ fn measurement_result() -> impl Strategy<Value = radio::MeasurementResult> {
         any::<[u16; 4]>(),
         any::<u32>(),
         proptest::array::uniform4(absence()),
+        proptest::collection::vec(
+            (
+                proptest::sample::select(radio::RecordFile::ALL),
+                any::<u32>(),
+            ),
+            0..=radio::MAX_RECORD_FILES,
+        ),
     )
-        .prop_map(|(run_id, vehicle_id, a, s, cloud_points, absent)| {
-            radio::MeasurementResult {
-                run_id,
-                vehicle_id,
-                approach_rad: a[0],
-                departure_rad: a[1],
-                breakover_rad: a[2],
-                ground_clearance_m: a[3],
-                approach_u_rad: a[4],
-                departure_u_rad: a[5],
-                breakover_u_rad: a[1],
-                ground_clearance_u_m: a[2],
-                absent,
-                wheelbase_m: a[4],
-                track_m: a[5],
-                approach_support: s[0],
-                departure_support: s[1],
-                breakover_support: s[2],
-                tyre_fit_rms_m: a[0],
-                warnings: ResultWarnings(s[3]),
-                cloud_points,
-                preview_chunks: s[3],
-            }
-        })
+        .prop_map(
+            |(run_id, vehicle_id, a, s, cloud_points, absent, records)| {
+                let records: Vec<radio::RecordInfo> = records
+                    .into_iter()
+                    .map(|(file, len)| radio::RecordInfo { file, len })
+                    .collect();
+                radio::MeasurementResult {
+                    run_id,
+                    vehicle_id,
+                    approach_rad: a[0],
+                    departure_rad: a[1],
+                    breakover_rad: a[2],
+                    ground_clearance_m: a[3],
+                    approach_u_rad: a[4],
+                    departure_u_rad: a[5],
+                    breakover_u_rad: a[1],
+                    ground_clearance_u_m: a[2],
+                    absent,
+                    wheelbase_m: a[4],
+                    track_m: a[5],
+                    approach_support: s[0],
+                    departure_support: s[1],
+                    breakover_support: s[2],
+                    tyre_fit_rms_m: a[0],
+                    warnings: ResultWarnings(s[3]),
+                    cloud_points,
+                    preview_chunks: s[3],
+                    records: List::from_slice(&records).unwrap(),
+                }
+            },
+        )
 }
 
 fn to_handheld() -> impl Strategy<Value = ToHandheld> {
@@ -235,6 +262,24 @@ fn to_handheld() -> impl Strategy<Value = ToHandheld> {
                 .into()
             }),
         measurement_result().prop_map(Into::into),
+        (
+            any::<u32>(),
+            proptest::sample::select(radio::RecordFile::ALL),
+            any::<[u16; 2]>(),
+            any::<u32>(),
+            proptest::collection::vec(any::<u8>(), 0..=radio::RECORD_CHUNK_LEN)
+        )
+            .prop_map(|(run_id, file, ic, total_len, bytes)| {
+                radio::RecordChunk {
+                    run_id,
+                    file,
+                    index: ic[0],
+                    count: ic[1],
+                    total_len,
+                    bytes: List::from_slice(&bytes).unwrap(),
+                }
+                .into()
+            }),
         (
             any::<u32>(),
             any::<u16>(),

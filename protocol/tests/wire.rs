@@ -96,6 +96,17 @@ fn result() -> radio::MeasurementResult {
         warnings: ResultWarnings::LOW_SUPPORT,
         cloud_points: 250_000,
         preview_chunks: 100,
+        records: List::from_slice(&[
+            radio::RecordInfo {
+                file: radio::RecordFile::ResultJson,
+                len: 13_837,
+            },
+            radio::RecordInfo {
+                file: radio::RecordFile::ResultSig,
+                len: 24_925,
+            },
+        ])
+        .unwrap(),
     }
 }
 
@@ -191,6 +202,14 @@ fn exemplars() -> Vec<(&'static str, u16, usize, Vec<u8>)> {
         row(&radio::StatusRequest {}, ack),
         row(&radio::FetchRun { run_id: 6 }, ack),
         row(
+            &radio::ResendRecordChunks {
+                run_id: 7,
+                file: radio::RecordFile::ResultSig,
+                indices: List::from_slice(&[0, 12]).unwrap(),
+            },
+            ack,
+        ),
+        row(
             &radio::Progress {
                 run_id: 7,
                 phase: radio::Phase::Driving,
@@ -230,6 +249,17 @@ fn exemplars() -> Vec<(&'static str, u16, usize, Vec<u8>)> {
                 seq: 9,
                 reason: radio::RefuseReason::Replay,
                 detail: Text::new("counter 5 is not above 9").unwrap(),
+            },
+            none,
+        ),
+        row(
+            &radio::RecordChunk {
+                run_id: 7,
+                file: radio::RecordFile::ResultJson,
+                index: 1,
+                count: 73,
+                total_len: 13_837,
+                bytes: List::from_slice(b"{\n  \"run_id\": 7,\n").unwrap(),
             },
             none,
         ),
@@ -334,31 +364,56 @@ fn ids_are_unique() {
 }
 
 /// Worst-case instances: longest texts, full lists, largest varints.
+/// A worst-case message: its payload within its bound, the bound within the payload limit, its
+/// frame within the link buffer; returns the frame's length.
+fn check<M: Message>(msg: &M) -> usize {
+    let mut payload = [0u8; 1024];
+    let len = postcard::to_slice(msg, &mut payload).unwrap().len();
+    assert!(
+        len <= M::POSTCARD_MAX_SIZE,
+        "{}: {len} > bound {}",
+        M::NAME,
+        M::POSTCARD_MAX_SIZE
+    );
+    assert!(
+        M::POSTCARD_MAX_SIZE <= MAX_PAYLOAD_LEN,
+        "{} bound exceeds the payload limit",
+        M::NAME
+    );
+    let frame = frame_of(msg, Flags::ACK_REQUESTED);
+    assert!(frame.len() <= max_frame_len::<M>());
+    assert!(
+        max_frame_len::<M>() <= MAX_FRAME_LEN,
+        "{} does not fit the link buffer",
+        M::NAME
+    );
+    frame.len()
+}
+
+#[test]
+fn worst_case_record_messages_fit_their_bounds() {
+    check(&radio::RecordChunk {
+        run_id: u32::MAX,
+        file: radio::RecordFile::ResultSig,
+        index: u16::MAX,
+        count: u16::MAX,
+        total_len: u32::MAX,
+        bytes: List::from_slice(&[0xff; radio::RECORD_CHUNK_LEN]).unwrap(),
+    });
+    check(&radio::ResendRecordChunks {
+        run_id: u32::MAX,
+        file: radio::RecordFile::ResultSig,
+        indices: List::from_slice(&[u16::MAX; 32]).unwrap(),
+    });
+    // The largest record file fits the chunk count's u16.
+    assert!(u16::try_from(radio::record_chunk_count(radio::MAX_RECORD_LEN)).is_ok());
+    assert_eq!(radio::record_chunk_count(0), 1);
+    assert_eq!(radio::record_chunk_count(190), 1);
+    assert_eq!(radio::record_chunk_count(191), 2);
+}
+
 #[test]
 fn worst_cases_fit_their_bounds_and_the_link_buffer() {
-    fn check<M: Message>(msg: &M) -> usize {
-        let mut payload = [0u8; 1024];
-        let len = postcard::to_slice(msg, &mut payload).unwrap().len();
-        assert!(
-            len <= M::POSTCARD_MAX_SIZE,
-            "{}: {len} > bound {}",
-            M::NAME,
-            M::POSTCARD_MAX_SIZE
-        );
-        assert!(
-            M::POSTCARD_MAX_SIZE <= MAX_PAYLOAD_LEN,
-            "{} bound exceeds the payload limit",
-            M::NAME
-        );
-        let frame = frame_of(msg, Flags::ACK_REQUESTED);
-        assert!(frame.len() <= max_frame_len::<M>());
-        assert!(
-            max_frame_len::<M>() <= MAX_FRAME_LEN,
-            "{} does not fit the link buffer",
-            M::NAME
-        );
-        frame.len()
-    }
     let long = |n: usize| "\u{e9}".repeat(n / 2);
     check(&LogLine {
         level: LogLevel::Debug,
@@ -397,6 +452,13 @@ fn worst_cases_fit_their_bounds_and_the_link_buffer() {
     r.vehicle_id = Text::new(&"W".repeat(32)).unwrap();
     r.cloud_points = u32::MAX;
     r.approach_support = u16::MAX;
+    r.records = List::from_slice(
+        &[radio::RecordInfo {
+            file: radio::RecordFile::ResultSig,
+            len: u32::MAX,
+        }; radio::MAX_RECORD_FILES],
+    )
+    .unwrap();
     check(&r);
     let pts = vec![[i16::MIN, i16::MIN, i16::MIN]; radio::CHUNK_POINTS];
     check(&radio::CloudChunk {

@@ -258,6 +258,13 @@ fn check_signed(files: &[(String, Vec<u8>)]) {
             "{name}"
         );
     }
+    // The service writes the standards' profiles the pipeline computed into result.json.
+    let json: serde_json::Value = serde_json::from_slice(file("result.json")).unwrap();
+    let profiles = json["profiles"].as_array().expect("a profiles section");
+    assert!(
+        profiles.iter().any(|p| p["standard"] == "cfr"),
+        "the CFR profile among {profiles:?}"
+    );
     let result = String::from_utf8(file("result.json").clone()).unwrap();
     let line = result
         .lines()

@@ -33,6 +33,7 @@ use hil_sim::fil::{Fil, FilConfig, Pacing};
 use hil_sim::pty::MemPipe;
 use hil_sim::robot::PoseSample;
 use link::client::{Client, ClientError, Observer, Quiet};
+use link::record::{ProfileQuantityRecord, ProfileRecord};
 use link::session::Entropy;
 use link::sim::{LossyPortPair, PipeConfig};
 use onboard::config::{CameraSource, OnboardConfig};
@@ -119,6 +120,7 @@ impl Processor for CountingProcessor {
             warnings: ResultWarnings::EMPTY,
             cloud_points: 400,
             preview_chunks: 0,
+            records: protocol::bounded::List::default(),
         };
         self.produced.lock().unwrap().push(result.clone());
         let cloud = Cloud {
@@ -137,8 +139,27 @@ impl Processor for CountingProcessor {
             cloud,
             svg: "<svg/>".into(),
             angles: None,
-            profiles: Vec::new(),
+            profiles: vec![profile()],
         })
+    }
+}
+
+/// The one standard's profile the processing double reports: the service must write it into
+/// `result.json`.
+fn profile() -> ProfileRecord {
+    ProfileRecord {
+        standard: "cfr".into(),
+        title: "49 CFR 523.2".into(),
+        citation: "49 CFR 523.2".into(),
+        notes: vec!["ahead of the tyre".into()],
+        quantities: vec![ProfileQuantityRecord {
+            id: "approach".into(),
+            name: "approach angle".into(),
+            unit: "deg".into(),
+            value: Some(23.5),
+            u: Some(0.4),
+            not_measured: None,
+        }],
     }
 }
 
@@ -238,17 +259,33 @@ impl Rig {
         malformed_every: Option<u64>,
         radio_seed: u64,
     ) -> Self {
+        Self::start_with(name, radio, malformed_every, radio_seed, None)
+    }
+
+    /// A rig whose robot signs its records with the device key drawn from `device_seed`.
+    fn start_with(
+        name: &str,
+        radio: PipeConfig,
+        malformed_every: Option<u64>,
+        radio_seed: u64,
+        device_seed: Option<[u8; onboard::signing::SEED_LEN]>,
+    ) -> Self {
         let turn = ONE_RIG_AT_A_TIME
             .lock()
             .unwrap_or_else(std::sync::PoisonError::into_inner);
         let dir = temp_dir(name);
         let key = Key([0x5a; KEY_LEN]);
         onboard::config::write_key(&dir.join("pairing.key"), &key).unwrap();
-        let text = format!(
+        let mut text = format!(
             "[recording]\nroot = {:?}\n[radio]\nport = \"mem\"\nkey-file = {:?}\n[mcu]\nport = \"mem\"\n[camera]\nsource = \"none\"\n",
             dir.join("runs"),
             dir.join("pairing.key"),
         );
+        if let Some(seed) = device_seed {
+            let path = dir.join("device.key");
+            onboard::config::write_device_key(&path, &seed).unwrap();
+            text = format!("{text}[signing]\nkey-file = {path:?}\n");
+        }
         let mut config = OnboardConfig::parse(&text, Path::new("e2e.toml")).unwrap();
         let fw = control::Config::default();
         config.mcu.firmware = fw.to_mcu();
@@ -431,6 +468,7 @@ fn full_run_over_a_radio_with_20_percent_loss_and_corruption_delivers_the_exact_
     assert_eq!(produced.len(), 1);
     let mut expect = produced[0].clone();
     expect.preview_chunks = m.result.preview_chunks;
+    expect.records.clone_from(&m.result.records);
     assert_eq!(m.result, expect, "exactly the result the robot produced");
     assert!(m.result.preview_chunks > 0 && !m.preview_mm.is_empty());
     let truth_x = rig.latest().x_m;
@@ -479,6 +517,131 @@ fn full_run_over_a_radio_with_20_percent_loss_and_corruption_delivers_the_exact_
     rig.finish();
 }
 
+/// `passangle measure` and `passangle fetch` bring back the robot's own `result.json` and
+/// `result.json.sig`, byte for byte, over a lossy radio: the copy the handheld saves verifies
+/// with the robot's public key, and one changed digit in it is named. The service's
+/// `result.json` carries the standards' profiles the processing reported.
+#[test]
+fn measure_and_fetch_bring_back_the_robots_signed_result_json() {
+    use onboard::signing::{Change, DeviceKey, Sidecar, Verdict};
+    use protocol::radio::RecordFile;
+    let seed = [0x42; onboard::signing::SEED_LEN];
+    let public = DeviceKey::from_seed(&seed).public();
+    let mut rig = Rig::start_with(
+        "signed",
+        PipeConfig::radio_lossy(0.1, 0.05),
+        None,
+        78,
+        Some(seed),
+    );
+    rig.wait_firmware_ready();
+    let key = rig.key.clone();
+    let mut client = rig.client(key);
+    client.connect(Duration::from_secs(10)).unwrap();
+    let mut trace = Trace::new();
+    let m = client
+        .measure(&params(0.4), Duration::from_secs(90), &mut trace)
+        .unwrap_or_else(|e| panic!("{e}; the handheld saw:\n{}", trace.lines.join("\n")));
+    let run_dir = rig
+        .dir
+        .join("runs")
+        .join(link::record::run_dir_name(m.result.run_id));
+    let on_robot = std::fs::read(run_dir.join("result.json")).unwrap();
+    let sig_on_robot = std::fs::read(run_dir.join("result.json.sig")).unwrap();
+
+    // The service wrote the processing's profiles into its result.json.
+    let json: serde_json::Value = serde_json::from_slice(&on_robot).unwrap();
+    assert_eq!(
+        json["profiles"][0]["standard"], "cfr",
+        "profiles in the robot's result.json: {json}"
+    );
+    assert_eq!(json["profiles"][0]["quantities"][0]["value"], 23.5);
+
+    // `measure`: both files, byte-exact.
+    let files: Vec<RecordFile> = m.records.iter().map(|r| r.file).collect();
+    assert_eq!(files, [RecordFile::ResultJson, RecordFile::ResultSig]);
+    assert!(m.records[0].bytes.as_ref().unwrap() == &on_robot);
+    assert!(m.records[1].bytes.as_ref().unwrap() == &sig_on_robot);
+
+    // `fetch`: the same files read back from the robot's disk; saved and verified offline.
+    let again = client
+        .fetch(m.result.run_id, Duration::from_secs(60), &mut Quiet)
+        .unwrap();
+    assert_eq!(again.records, m.records);
+    let saved = link::client::save(&rig.dir.join("handheld"), &again).unwrap();
+    assert!(saved.missing.is_empty(), "{:?}", saved.missing);
+    let copy = std::fs::read(saved.result_json().unwrap()).unwrap();
+    let sidecar = Sidecar::parse(
+        &std::fs::read(
+            saved
+                .result_json()
+                .unwrap()
+                .with_file_name("result.json.sig"),
+        )
+        .unwrap(),
+    )
+    .unwrap();
+    assert_eq!(
+        sidecar.verify(&copy, &[public]),
+        Ok(Verdict::Verified { key: public })
+    );
+    let text = String::from_utf8(copy).unwrap();
+    let line = text
+        .lines()
+        .find(|l| l.contains("\"approach_deg\""))
+        .unwrap();
+    let at = line.rfind(|c: char| c.is_ascii_digit()).unwrap();
+    let mut changed = line.to_owned();
+    changed.replace_range(at..=at, if &line[at..=at] == "1" { "2" } else { "1" });
+    let forged = text.replacen(line, &changed, 1);
+    assert_eq!(
+        sidecar.verify(forged.as_bytes(), &[public]),
+        Ok(Verdict::Changed {
+            key: public,
+            changes: vec![Change::Value("/approach_deg".into())]
+        })
+    );
+    rig.finish();
+}
+
+/// A robot without a device key sends its `result.json` and no signature; the handheld saves
+/// the file and says it is not signed, inventing nothing.
+#[test]
+fn an_unsigned_robot_sends_its_result_json_and_no_signature() {
+    use protocol::radio::RecordFile;
+    let mut rig = Rig::start("unsigned", PipeConfig::radio_lossy(0.0, 0.0), None);
+    rig.wait_firmware_ready();
+    let key = rig.key.clone();
+    let mut client = rig.client(key);
+    client.connect(Duration::from_secs(10)).unwrap();
+    let m = client
+        .measure(&params(0.4), Duration::from_secs(60), &mut Quiet)
+        .unwrap();
+    let run_dir = rig
+        .dir
+        .join("runs")
+        .join(link::record::run_dir_name(m.result.run_id));
+    assert!(!run_dir.join("result.json.sig").exists());
+    assert_eq!(m.records.len(), 1);
+    assert_eq!(m.records[0].file, RecordFile::ResultJson);
+    assert!(
+        m.records[0].bytes.as_ref().unwrap()
+            == &std::fs::read(run_dir.join("result.json")).unwrap()
+    );
+    let saved = link::client::save(&rig.dir.join("handheld"), &m).unwrap();
+    assert!(saved.result_json().is_some());
+    assert_eq!(saved.records.len(), 1);
+    assert!(
+        saved
+            .missing
+            .iter()
+            .any(|w| w.contains("no result.json.sig")),
+        "{:?}",
+        saved.missing
+    );
+    rig.finish();
+}
+
 /// The demo's radio at its worst tested setting, on the real service, client and firmware loop:
 /// 30 % loss and 10 % corruption both ways, radio seeds 1 to 10; every run delivers its exact
 /// result and preview.
@@ -509,6 +672,7 @@ fn runs_deliver_on_every_seed_at_30_percent_loss_and_10_percent_corruption() {
         assert_eq!(produced.len(), 1, "seed {seed}");
         let mut expect = produced[0].clone();
         expect.preview_chunks = m.result.preview_chunks;
+        expect.records.clone_from(&m.result.records);
         assert_eq!(m.result, expect, "seed {seed}: the exact result");
         let stats = *rig.stats.lock().unwrap();
         lines.push(format!(
