@@ -5,16 +5,13 @@
 
 mod common;
 
-use common::temp_root;
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use common::{passangle, temp_root};
+use std::path::PathBuf;
 
 use link::client::Measured;
-use onboard::recorder::{RecordedOutcome, ResultRecord, RunRecorder};
-use onboard::signed::{Signer, write_signed};
 use onboard::signing::{DeviceKey, PublicKey, SEED_LEN};
 use protocol::bounded::Text;
-use protocol::radio::{MeasurementResult, ResultWarnings, StartMeasurement, Zone};
+use protocol::radio::{MeasurementResult, ResultWarnings};
 
 fn wire() -> MeasurementResult {
     MeasurementResult {
@@ -41,59 +38,19 @@ fn wire() -> MeasurementResult {
     }
 }
 
-/// A finished run signed as the service signs it: the recorder's files and the processing
-/// thread's `cloud.ply` and `side_view.svg`.
-fn signed_run(root: &Path, key: DeviceKey) -> PathBuf {
-    let params = StartMeasurement {
-        vehicle_id: Text::truncated("AB-123"),
-        speed_mps: 0.2,
-        distance_m: 7.0,
-        zone: Zone::Tyre,
-    };
-    let signer = Signer::new(key);
-    let config = include_str!("../../onboard/onboard.example.toml");
-    let mut rec = RunRecorder::begin_signed(
-        root,
-        1,
-        &params,
-        1_790_000_000_000_000,
-        config,
-        signer.clone(),
-    )
-    .unwrap();
-    rec.save_result(&ResultRecord::from_wire(&wire()));
-    let dir = rec.dir().to_path_buf();
-    write_signed(&dir.join("cloud.ply"), &vec![7u8; 200_000], &signer).unwrap();
-    write_signed(
-        &dir.join("side_view.svg"),
-        b"<svg>\n<text>approach 25.0</text>\n</svg>\n",
-        &signer,
-    )
-    .unwrap();
-    assert!(rec.finish(RecordedOutcome::Completed).is_empty());
-    dir
-}
-
-fn passangle(args: &[&str], home: &Path) -> (i32, String) {
-    let out: Output = Command::new(env!("CARGO_BIN_EXE_passangle"))
-        .args(args)
-        .env("HOME", home)
-        .output()
-        .unwrap();
-    let text = format!(
-        "{}{}",
-        String::from_utf8_lossy(&out.stdout),
-        String::from_utf8_lossy(&out.stderr)
-    );
-    (out.status.code().unwrap(), text)
-}
-
-/// A signed run under a fresh root: (root, run directory, the robot's public key).
+/// A signed run under a fresh root, as the service signs it (a stand-in cloud and side view):
+/// (root, run directory, the robot's public key).
 fn setup(name: &str) -> (PathBuf, PathBuf, PublicKey) {
     let root = temp_root(name);
     let key = DeviceKey::from_seed(&[0x11; SEED_LEN]);
     let public = key.public();
-    let dir = signed_run(&root, key);
+    let dir = common::signed_run(
+        &root,
+        key,
+        &wire(),
+        &vec![7u8; 200_000],
+        b"<svg>\n<text>approach 25.0</text>\n</svg>\n",
+    );
     (root, dir, public)
 }
 
@@ -107,7 +64,7 @@ fn verify_accepts_the_robots_records_with_a_key_from_the_user() {
     // The whole run directory, then the one file.
     let (code, text) = passangle(
         &["verify", dir.to_str().unwrap(), "--public-key", &hex],
-        &root,
+        Some(&root),
     );
     assert_eq!(code, 0, "{text}");
     for name in [
@@ -122,7 +79,7 @@ fn verify_accepts_the_robots_records_with_a_key_from_the_user() {
             "{text}"
         );
     }
-    let (code, text) = passangle(&["verify", result_s, "--public-key", &hex], &root);
+    let (code, text) = passangle(&["verify", result_s, "--public-key", &hex], Some(&root));
     assert_eq!(code, 0, "{text}");
     assert!(
         text.contains(&format!("signed by {}", public.id())),
@@ -134,15 +91,15 @@ fn verify_accepts_the_robots_records_with_a_key_from_the_user() {
     std::fs::write(&keys, format!("# the lab's robots\n{hex} robot 7\n")).unwrap();
     let (code, text) = passangle(
         &["verify", result_s, "--keys", keys.to_str().unwrap()],
-        &root,
+        Some(&root),
     );
     assert_eq!(code, 0, "{text}");
-    let (code, text) = passangle(&["verify", result_s], &root);
+    let (code, text) = passangle(&["verify", result_s], Some(&root));
     assert_eq!(code, 1, "no key given, none in ~/.config: {text}");
     assert!(text.contains("no trusted robot key"), "{text}");
     std::fs::create_dir_all(root.join(".config/passangle")).unwrap();
     std::fs::copy(&keys, root.join(".config/passangle/robot-keys")).unwrap();
-    let (code, text) = passangle(&["verify", result_s], &root);
+    let (code, text) = passangle(&["verify", result_s], Some(&root));
     assert_eq!(code, 0, "{text}");
 
     // The handheld's copy (`passangle measure`/`fetch` saves it from the radio's result) has the
@@ -167,7 +124,7 @@ fn verify_accepts_the_robots_records_with_a_key_from_the_user() {
             "--public-key",
             &hex,
         ],
-        &root,
+        Some(&root),
     );
     assert_eq!(code, 0, "{text}");
     std::fs::remove_dir_all(&root).unwrap();
@@ -191,7 +148,7 @@ fn verify_catches_a_changed_digit_and_names_it() {
     let digit = forged_line.as_bytes()[at];
     forged_line.replace_range(at..=at, if digit == b'3' { "4" } else { "3" });
     std::fs::write(&result, original.replacen(line, &forged_line, 1)).unwrap();
-    let (code, text) = passangle(&["verify", result_s, "--public-key", &hex], &root);
+    let (code, text) = passangle(&["verify", result_s, "--public-key", &hex], Some(&root));
     assert_eq!(code, 3, "{text}");
     assert!(text.contains("changed: /approach_deg"), "{text}");
     assert_eq!(
@@ -201,7 +158,7 @@ fn verify_catches_a_changed_digit_and_names_it() {
     );
     let (code, text) = passangle(
         &["verify", dir.to_str().unwrap(), "--public-key", &hex],
-        &root,
+        Some(&root),
     );
     assert_eq!(code, 3, "{text}");
     assert!(
@@ -212,7 +169,7 @@ fn verify_catches_a_changed_digit_and_names_it() {
 
     // Another robot's key.
     let other = DeviceKey::from_seed(&[0x22; SEED_LEN]).public().to_hex();
-    let (code, text) = passangle(&["verify", result_s, "--public-key", &other], &root);
+    let (code, text) = passangle(&["verify", result_s, "--public-key", &other], Some(&root));
     assert_eq!(code, 4, "{text}");
     assert!(text.contains("signature does not match this key"), "{text}");
 
@@ -223,22 +180,22 @@ fn verify_catches_a_changed_digit_and_names_it() {
         sig_text.replacen("\"name\": \"result.json\"", "\"name\": \"result2.json\"", 1);
     assert_ne!(forged_sig, sig_text);
     std::fs::write(&sig, &forged_sig).unwrap();
-    let (code, text) = passangle(&["verify", result_s, "--public-key", &hex], &root);
+    let (code, text) = passangle(&["verify", result_s, "--public-key", &hex], Some(&root));
     assert_eq!(code, 4, "{text}");
 
     // Garbage, cut short, missing.
     for bytes in [&b"\x00\xffnot json"[..], &sig_text.as_bytes()[..100]] {
         std::fs::write(&sig, bytes).unwrap();
-        let (code, text) = passangle(&["verify", result_s, "--public-key", &hex], &root);
+        let (code, text) = passangle(&["verify", result_s, "--public-key", &hex], Some(&root));
         assert_eq!(code, 5, "{text}");
         assert!(text.contains("no usable signature"), "{text}");
     }
     std::fs::remove_file(&sig).unwrap();
-    let (code, text) = passangle(&["verify", result_s, "--public-key", &hex], &root);
+    let (code, text) = passangle(&["verify", result_s, "--public-key", &hex], Some(&root));
     assert_eq!(code, 5, "{text}");
     let (code, text) = passangle(
         &["verify", dir.to_str().unwrap(), "--public-key", &hex],
-        &root,
+        Some(&root),
     );
     assert_eq!(code, 5, "{text}");
     assert!(text.contains("result.json: not signed"), "{text}");
