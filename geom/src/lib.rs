@@ -28,12 +28,13 @@ pub type M3 = nalgebra::Matrix3<f64>;
 /// unknowns of the 6x6 normal equations that [`solve_spd`] solves, kept as a plain array like them.
 pub type Twist6 = [f64; 6];
 
-// The free functions below name nalgebra's own operations. nalgebra evaluates each of them with
-// the operations in the same order as the component expressions in their docs (a 3-vector's dot
-// product is `(x x' + y y') + z z'`, a matrix product sums over k = 0, 1, 2 in turn), so results
-// are bit for bit those of the written-out formulas. Their value is the pinned form at call sites
-// where a neighbouring expression would round differently: `scale(a, 1.0 / n)` multiplies by a
-// reciprocal where `a / n` divides.
+// Code here and in the pipeline uses nalgebra's operators and methods (`a + b`, `a * s`,
+// `a.dot(&b)`, `m * v`). nalgebra evaluates them in the order of the written-out formulas (a
+// 3-vector's dot product is `(x x' + y y') + z z'`, a matrix product sums over k = 0, 1, 2 in
+// turn), so results are bit for bit those formulas'. A division by a count is written
+// `a * (1.0 / n)` where the formulas multiply by the reciprocal: `a / n` rounds differently.
+// The free functions below name the same operations for the calculator (`angles`), which
+// still calls them.
 
 /// `a + b`.
 #[inline]
@@ -60,43 +61,16 @@ pub fn dot(a: V3, b: V3) -> f64 {
 pub fn cross(a: V3, b: V3) -> V3 {
     a.cross(&b)
 }
-/// Euclidean norm, `sqrt(dot(a, a))`.
-#[inline]
-pub fn norm(a: V3) -> f64 {
-    a.norm()
-}
-/// Squared distance.
-#[inline]
-pub fn dist2(a: V3, b: V3) -> f64 {
-    let d = a - b;
-    d.dot(&d)
-}
 
 /// The identity matrix.
 pub const IDENTITY: M3 = M3::new(1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0);
-
-/// `m v`.
-#[inline]
-pub fn mat_vec(m: &M3, v: V3) -> V3 {
-    m * v
-}
-/// `a b`.
-#[inline]
-pub fn mat_mul(a: &M3, b: &M3) -> M3 {
-    a * b
-}
-/// `m^T`.
-#[inline]
-pub fn transpose(m: &M3) -> M3 {
-    m.transpose()
-}
 
 /// Rotation matrix of a rotation vector: Rodrigues' `I + a K + b K^2` with `K` the cross-product
 /// matrix of `r`, summed entry by entry as `I + (a K + b K^2)`. (nalgebra's
 /// `Rotation3::from_scaled_axis` builds the same rotation from a different formula, which rounds
 /// differently.)
 pub fn exp_so3(r: V3) -> M3 {
-    let theta = norm(r);
+    let theta = r.norm();
     let k = M3::new(0.0, -r[2], r[1], r[2], 0.0, -r[0], -r[1], r[0], 0.0);
     let (a, b) = if theta < 1e-9 {
         (1.0, 0.5)
@@ -121,7 +95,7 @@ pub fn log_so3(m: &M3) -> V3 {
     } else {
         theta / (2.0 * theta.sin())
     };
-    scale(w, s)
+    w * s
 }
 
 /// Rotation from roll, pitch, yaw (radians): `Rz(yaw) Ry(pitch) Rx(roll)`, each factor by
@@ -252,7 +226,7 @@ impl Pose {
         let rt = self.rotation.transpose();
         Self {
             rotation: rt,
-            translation: scale(rt * self.translation, -1.0),
+            translation: -(rt * self.translation),
         }
     }
 
@@ -266,13 +240,10 @@ impl Pose {
     #[must_use]
     pub fn interpolate(&self, other: &Self, s: f64) -> Self {
         let delta = self.rotation.transpose() * other.rotation;
-        let r = scale(log_so3(&delta), s);
+        let r = log_so3(&delta) * s;
         Self {
             rotation: self.rotation * exp_so3(r),
-            translation: add(
-                self.translation,
-                scale(sub(other.translation, self.translation), s),
-            ),
+            translation: self.translation + (other.translation - self.translation) * s,
         }
     }
 }
@@ -361,7 +332,7 @@ pub fn symmetric_eigen3(m: &M3) -> Option<(V3, M3)> {
     } else {
         diagonal3(&a)
     };
-    Some((scale(values, max), M3::from_columns(&columns)))
+    Some((values * max, M3::from_columns(&columns)))
 }
 
 /// Ascending eigenvalues of a scaled symmetric 3x3 matrix with a non-zero off-diagonal part.
@@ -400,10 +371,10 @@ fn refine3(a: &M3, values: V3) -> (V3, [V3; 3]) {
         values[0]
     };
     let w = eigenvector_isolated(a, isolated);
-    let w_value = dot(w, mat_vec(a, w));
+    let w_value = w.dot(&(a * w));
     let (u, v) = orthogonal_complement(w);
-    let (au, av) = (mat_vec(a, u), mat_vec(a, v));
-    let (m00, m01, m11) = (dot(u, au), dot(u, av), dot(v, av));
+    let (au, av) = (a * u, a * v);
+    let (m00, m01, m11) = (u.dot(&au), u.dot(&av), v.dot(&av));
     let mean = 0.5 * (m00 + m11);
     let half_diff = 0.5 * (m00 - m11);
     let radius = (half_diff * half_diff + m01 * m01).sqrt();
@@ -417,8 +388,8 @@ fn refine3(a: &M3, values: V3) -> (V3, [V3; 3]) {
     };
     let len = (x * x + y * y).sqrt();
     let (x, y) = (x / len, y / len);
-    let high = add(scale(u, x), scale(v, y));
-    let low = add(scale(u, -y), scale(v, x));
+    let high = u * x + v * y;
+    let low = u * -y + v * x;
     let mut pairs = [(w_value, w), (mean - radius, low), (mean + radius, high)];
     pairs.sort_by(|p, q| p.0.total_cmp(&q.0));
     (V3::from(pairs.map(|p| p.0)), pairs.map(|p| p.1))
@@ -430,13 +401,13 @@ fn eigenvector_isolated(a: &M3, value: f64) -> V3 {
     let r0 = V3::new(a[(0, 0)] - value, a[(0, 1)], a[(0, 2)]);
     let r1 = V3::new(a[(0, 1)], a[(1, 1)] - value, a[(1, 2)]);
     let r2 = V3::new(a[(0, 2)], a[(1, 2)], a[(2, 2)] - value);
-    let candidates = [cross(r0, r1), cross(r0, r2), cross(r1, r2)];
+    let candidates = [r0.cross(&r1), r0.cross(&r2), r1.cross(&r2)];
     let (best, len2) = candidates
         .iter()
-        .map(|&c| (c, dot(c, c)))
+        .map(|&c| (c, c.dot(&c)))
         .fold((V3::x(), 0.0), |acc, c| if c.1 > acc.1 { c } else { acc });
     if len2 > 0.0 {
-        scale(best, 1.0 / len2.sqrt())
+        best * (1.0 / len2.sqrt())
     } else {
         best
     }
@@ -445,17 +416,11 @@ fn eigenvector_isolated(a: &M3, value: f64) -> V3 {
 /// Two unit vectors completing the unit vector `w` to an orthonormal basis.
 fn orthogonal_complement(w: V3) -> (V3, V3) {
     let u = if w[0].abs() > w[1].abs() {
-        scale(
-            V3::new(-w[2], 0.0, w[0]),
-            1.0 / (w[0] * w[0] + w[2] * w[2]).sqrt(),
-        )
+        V3::new(-w[2], 0.0, w[0]) * (1.0 / (w[0] * w[0] + w[2] * w[2]).sqrt())
     } else {
-        scale(
-            V3::new(0.0, w[2], -w[1]),
-            1.0 / (w[1] * w[1] + w[2] * w[2]).sqrt(),
-        )
+        V3::new(0.0, w[2], -w[1]) * (1.0 / (w[1] * w[1] + w[2] * w[2]).sqrt())
     };
-    (u, cross(w, u))
+    (u, w.cross(&u))
 }
 
 /// Eigen-decomposition of a diagonal matrix: its entries, ascending, with the axes.
@@ -535,17 +500,17 @@ pub fn centroid_covariance(points: impl Iterator<Item = V3> + Clone) -> Option<(
     let mut n = 0.0;
     let mut c = V3::zeros();
     for p in points.clone() {
-        c = add(c, p);
+        c += p;
         n += 1.0;
     }
     if n == 0.0 {
         return None;
     }
-    c = scale(c, 1.0 / n);
+    c *= 1.0 / n;
     // The six distinct products, summed, then one division each (the matrix is symmetric).
     let mut s = [0.0; 6];
     for p in points {
-        let d = sub(p, c);
+        let d = p - c;
         s[0] += d[0] * d[0];
         s[1] += d[0] * d[1];
         s[2] += d[0] * d[2];
@@ -700,7 +665,7 @@ impl VoxelIndex {
     pub fn insert_capped(&mut self, p: V3, tag: u32, cap: usize, spacing_m: f64) -> bool {
         let cell = self.cells.entry(voxel_of(p, self.voxel_m)).or_default();
         let s2 = spacing_m * spacing_m;
-        if cell.len() >= cap || cell.iter().any(|e| dist2(e.p, p) < s2) {
+        if cell.len() >= cap || cell.iter().any(|e| (e.p - p).norm_squared() < s2) {
             return false;
         }
         cell.push(Entry {
@@ -828,7 +793,7 @@ impl VoxelIndex {
         let r2 = radius_m * radius_m;
         let mut visit = |cell: &[Entry]| {
             for e in cell {
-                if dist2(e.p, q) <= r2 {
+                if (e.p - q).norm_squared() <= r2 {
                     f(e.index, e.p);
                 }
             }
@@ -865,8 +830,8 @@ impl VoxelIndex {
     /// outnumber the occupied voxels (then a scan of every cell is cheaper and always terminates).
     fn voxel_range(&self, q: V3, radius_m: f64) -> Option<([i32; 3], [i32; 3])> {
         let reach = radius_m + BOUND_SLACK_M;
-        let lo = voxel_of(sub(q, V3::repeat(reach)), self.voxel_m);
-        let hi = voxel_of(add(q, V3::repeat(reach)), self.voxel_m);
+        let lo = voxel_of(q - V3::repeat(reach), self.voxel_m);
+        let hi = voxel_of(q + V3::repeat(reach), self.voxel_m);
         let count: f64 = (0..3)
             .map(|k| f64::from(hi[k]) - f64::from(lo[k]) + 1.0)
             .product();
@@ -907,7 +872,7 @@ impl<const K: usize> Best<'_, K> {
     fn scan(&mut self, cell: &[Entry], q: V3) {
         let mut bound = self.bound();
         for e in cell {
-            let d2 = dist2(e.p, q);
+            let d2 = (e.p - q).norm_squared();
             // One comparison per point on the common path; it also drops NaN.
             if !(d2 <= bound) {
                 continue;
@@ -976,10 +941,10 @@ mod tests {
         assert!(close(rpy[0], 0.05, 1e-12) && close(rpy[1], -0.1, 1e-12));
         assert!(close(rpy[2], 2.0, 1e-12));
         let id = pose.compose(&pose.inverse());
-        assert!(norm(id.translation) < 1e-12);
+        assert!(id.translation.norm() < 1e-12);
         let p = V3::new(0.3, 0.4, -0.2);
         let q = pose.inverse().apply(pose.apply(p));
-        assert!(dist2(p, q) < 1e-24);
+        assert!((p - q).norm_squared() < 1e-24);
     }
 
     #[test]
@@ -1023,7 +988,7 @@ mod tests {
         let mut brute: Vec<(f64, u32)> = points
             .iter()
             .enumerate()
-            .map(|(i, &p)| (dist2(p, q), i as u32))
+            .map(|(i, &p)| ((p - q).norm_squared(), i as u32))
             .filter(|(d, _)| *d <= 0.09)
             .collect();
         brute.sort_by(|a, b| a.0.total_cmp(&b.0));
@@ -1040,7 +1005,7 @@ mod tests {
             rng.random_range(-3.0..3.0),
         ));
         let d = M3::from_diagonal(&values);
-        let m = mat_mul(&r, &mat_mul(&d, &transpose(&r)));
+        let m = r * (d * r.transpose());
         // Exactly symmetric, as a covariance is.
         M3::from_fn(|i, j| 0.5 * (m[(i, j)] + m[(j, i)]))
     }
@@ -1070,16 +1035,16 @@ mod tests {
             // Jacobi stops on an absolute off-diagonal size: give it entries of order one.
             let rows = std::array::from_fn(|i| std::array::from_fn(|j| m[(i, j)] / scale_m));
             let (slow, slow_vectors) = symmetric_eigen_jacobi(&rows);
-            let slow = scale(V3::from(slow), scale_m);
+            let slow = V3::from(slow) * scale_m;
             for i in 0..3 {
                 assert!(
                     close(fast[i], slow[i], 1e-13 * scale_m),
                     "{m:?}: {fast:?} {slow:?}"
                 );
                 let v: V3 = fast_vectors.column(i).into_owned();
-                assert!(close(norm(v), 1.0, 1e-12), "{m:?}: |v{i}| = {}", norm(v));
-                let residual = sub(mat_vec(&m, v), scale(v, fast[i]));
-                assert!(norm(residual) <= 1e-12 * scale_m, "{m:?}: {residual:?}");
+                assert!(close(v.norm(), 1.0, 1e-12), "{m:?}: |v{i}| = {}", v.norm());
+                let residual = m * v - v * fast[i];
+                assert!(residual.norm() <= 1e-12 * scale_m, "{m:?}: {residual:?}");
                 // Where the eigenvalue is simple, the vector is Jacobi's up to sign.
                 let gap = (0..3)
                     .filter(|&j| j != i)
@@ -1087,14 +1052,14 @@ mod tests {
                     .fold(f64::INFINITY, f64::min);
                 if gap > 1e-3 * scale_m {
                     let w = V3::new(slow_vectors[0][i], slow_vectors[1][i], slow_vectors[2][i]);
-                    assert!(close(dot(v, w).abs(), 1.0, 1e-9), "{m:?}: {v:?} vs {w:?}");
+                    assert!(close(v.dot(&w).abs(), 1.0, 1e-9), "{m:?}: {v:?} vs {w:?}");
                 }
             }
             let (v0, v1) = (
                 fast_vectors.column(0).into_owned(),
                 fast_vectors.column(1).into_owned(),
             );
-            assert!(dot(v0, v1).abs() < 1e-12, "{m:?}");
+            assert!(v0.dot(&v1).abs() < 1e-12, "{m:?}");
         }
     }
 
@@ -1132,7 +1097,7 @@ mod tests {
         let mut all: Vec<(f64, u32)> = points
             .iter()
             .enumerate()
-            .map(|(i, &p)| (dist2(p, q), i as u32))
+            .map(|(i, &p)| ((p - q).norm_squared(), i as u32))
             .filter(|(d, _)| *d <= r * r)
             .collect();
         all.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));

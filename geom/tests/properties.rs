@@ -1,9 +1,7 @@
 //! Property tests of the geometry's invariants over random inputs (proptest, seeded by its own
 //! persistence; failures print the minimal case).
 
-use passangle_geom::{
-    M3, Pose, V3, VoxelIndex, dist2, mat_mul, mat_vec, norm, symmetric_eigen3, transpose, voxel_of,
-};
+use passangle_geom::{M3, Pose, V3, VoxelIndex, symmetric_eigen3, voxel_of};
 use proptest::prelude::*;
 
 fn v3(range: f64) -> impl Strategy<Value = V3> {
@@ -15,7 +13,7 @@ fn pose() -> impl Strategy<Value = Pose> {
 }
 
 fn close(a: V3, b: V3, tol: f64) -> bool {
-    dist2(a, b).sqrt() <= tol
+    (a - b).norm() <= tol
 }
 
 proptest! {
@@ -37,19 +35,19 @@ proptest! {
     #[test]
     fn rotations_stay_orthonormal_and_keep_lengths(a in pose(), b in pose(), v in v3(10.0)) {
         let r = a.compose(&b).rotation;
-        let rtr = mat_mul(&transpose(&r), &r);
+        let rtr = r.transpose() * r;
         for i in 0..3 {
             for j in 0..3 {
                 let want = if i == j { 1.0 } else { 0.0 };
                 prop_assert!((rtr[(i, j)] - want).abs() < 1e-12, "R^T R = {rtr:?}");
             }
         }
-        prop_assert!((norm(mat_vec(&r, v)) - norm(v)).abs() < 1e-9);
+        prop_assert!(((r * v).norm() - v.norm()).abs() < 1e-9);
     }
 
     #[test]
     fn an_increment_survives_the_round_trip_through_a_pose(
-        r in v3(3.0).prop_filter("rotation below pi", |r| norm(*r) < 3.1),
+        r in v3(3.0).prop_filter("rotation below pi", |r| r.norm() < 3.1),
         t in v3(5.0),
     ) {
         let d = [r[0], r[1], r[2], t[0], t[1], t[2]];
@@ -74,8 +72,8 @@ proptest! {
         let scale = m.iter().fold(1.0_f64, |a, &v| a.max(v.abs()));
         for k in 0..3 {
             let v: V3 = vectors.column(k).into_owned();
-            prop_assert!((norm(v) - 1.0).abs() < 1e-9, "|v{k}| = {}", norm(v));
-            let mv = mat_vec(&m, v);
+            prop_assert!((v.norm() - 1.0).abs() < 1e-9, "|v{k}| = {}", v.norm());
+            let mv = m * v;
             let lv = v.map(|c| c * values[k]);
             prop_assert!(close(mv, lv, 1e-7 * scale), "m v != lambda v for {m:?}: {values:?}");
         }
@@ -106,7 +104,7 @@ proptest! {
         let mut want: Vec<(f64, u32)> = points
             .iter()
             .enumerate()
-            .map(|(i, &p)| (dist2(p, q), i as u32))
+            .map(|(i, &p)| ((p - q).norm_squared(), i as u32))
             .filter(|&(d2, _)| d2 <= radius_m * radius_m)
             .collect();
         want.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));

@@ -3,12 +3,16 @@
 //! 0.001 degrees, through the library and through the command line.
 #![allow(clippy::unwrap_used, missing_docs)]
 
+mod common;
+
 #[path = "../../onboard/tests/synth/mod.rs"]
 mod synth;
 
+use common::temp_root;
+
 use std::fs::File;
 use std::io::{BufWriter, Cursor};
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::Command;
 
 use angles::{AnglesConfig, AnglesResult, V3, compute_angles};
@@ -26,13 +30,6 @@ const TOLERANCE_DEG: f64 = 0.001;
 /// A cloud file's points as the calculator's vectors.
 fn vectors(points: &[[f64; 3]]) -> Vec<V3> {
     points.iter().map(|&p| p.into()).collect()
-}
-
-fn temp_dir() -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("passangle-formats-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
 }
 
 /// A sedan scanned at 1 cm with 3 mm range noise, tilted, yawed and shifted as a real cloud is.
@@ -111,7 +108,7 @@ fn angles_deg(r: &AnglesResult) -> [f64; 3] {
 
 #[test]
 fn ply_e57_las_and_laz_copies_give_the_same_angles() {
-    let dir = temp_dir();
+    let dir = temp_root("formats");
     let cloud = demo_like_cloud();
     let ply = dir.join("cloud.ply");
     write_ply(

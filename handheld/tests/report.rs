@@ -9,17 +9,15 @@ mod common;
 #[path = "../../onboard/tests/synth/mod.rs"]
 mod synth;
 
-use common::temp_root;
+use common::{passangle, temp_root};
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use angles::{AnglesConfig, V3, compute_angles};
 use cloud_io::{Cloud, PlyEncoding, write_ply};
-use onboard::recorder::{RecordedOutcome, ResultRecord, RunRecorder};
-use onboard::signed::{Signer, write_signed};
 use onboard::signing::{DeviceKey, SEED_LEN};
 use protocol::bounded::Text;
-use protocol::radio::{Absence, MeasurementResult, ResultWarnings, StartMeasurement, Zone};
+use protocol::radio::{Absence, MeasurementResult, ResultWarnings};
 
 /// A sedan scanned at 1 cm with 3 mm noise, turned so its front faces the cloud's -x (the robot
 /// entered under the front bumper: `processing.enter-at-front = true`, as in the example config).
@@ -84,48 +82,9 @@ fn signed_run(root: &Path, key: DeviceKey) -> PathBuf {
         preview_chunks: 0,
         records: protocol::bounded::List::default(),
     };
-    let params = StartMeasurement {
-        vehicle_id: Text::truncated("AB-123"),
-        speed_mps: 0.2,
-        distance_m: 7.0,
-        zone: Zone::Tyre,
-    };
-    let signer = Signer::new(key);
-    let mut rec = RunRecorder::begin_signed(
-        root,
-        1,
-        &params,
-        1_790_000_000_000_000,
-        include_str!("../../onboard/onboard.example.toml"),
-        signer.clone(),
-    )
-    .unwrap();
-    rec.save_result(&ResultRecord::from_wire(&wire));
-    let dir = rec.dir().to_path_buf();
     let mut ply = Vec::new();
     write_ply(&mut ply, &cloud, PlyEncoding::BinaryLittleEndian).unwrap();
-    write_signed(&dir.join("cloud.ply"), &ply, &signer).unwrap();
-    write_signed(
-        &dir.join("side_view.svg"),
-        angles::side_view_svg(&a).as_bytes(),
-        &signer,
-    )
-    .unwrap();
-    assert!(rec.finish(RecordedOutcome::Completed).is_empty());
-    dir
-}
-
-fn passangle(args: &[&str]) -> (i32, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_passangle"))
-        .args(args)
-        .output()
-        .unwrap();
-    let text = format!(
-        "{}{}",
-        String::from_utf8_lossy(&out.stdout),
-        String::from_utf8_lossy(&out.stderr)
-    );
-    (out.status.code().unwrap(), text)
+    common::signed_run(root, key, &wire, &ply, angles::side_view_svg(&a).as_bytes())
 }
 
 /// Every element closed in order (HTML void elements and `/>` aside).
@@ -173,16 +132,19 @@ fn report_fills_every_section_and_renders_in_chromium() {
     )
     .unwrap();
     let html_path = root.join("report.html");
-    let (code, text) = passangle(&[
-        "report",
-        dir.to_str().unwrap(),
-        "--lab",
-        lab.to_str().unwrap(),
-        "--out",
-        html_path.to_str().unwrap(),
-        "--public-key",
-        &public.to_hex(),
-    ]);
+    let (code, text) = passangle(
+        &[
+            "report",
+            dir.to_str().unwrap(),
+            "--lab",
+            lab.to_str().unwrap(),
+            "--out",
+            html_path.to_str().unwrap(),
+            "--public-key",
+            &public.to_hex(),
+        ],
+        None,
+    );
     assert_eq!(code, 0, "{text}");
     let html = std::fs::read_to_string(&html_path).unwrap();
     assert_balanced(&html);
@@ -273,7 +235,7 @@ fn named_by_meta(dir: &Path, key_id: &str) {
         serde_json::from_slice(&std::fs::read(dir.join("meta.json")).unwrap()).unwrap();
     assert_eq!(meta["robot_id"], key_id, "{meta}");
     std::fs::remove_file(dir.join("result.json.sig")).unwrap();
-    let (code, text) = passangle(&["report", dir.to_str().unwrap()]);
+    let (code, text) = passangle(&["report", dir.to_str().unwrap()], None);
     assert_eq!(code, 0, "{text}");
     let html = std::fs::read_to_string(dir.join("report.html")).unwrap();
     assert!(
@@ -292,14 +254,17 @@ fn decisions_when_asked(dir: &Path, lab: &Path, root: &Path) {
     )
     .unwrap();
     let out = root.join("report-decide.html");
-    let (code, text) = passangle(&[
-        "report",
-        dir.to_str().unwrap(),
-        "--lab",
-        asking.to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-    ]);
+    let (code, text) = passangle(
+        &[
+            "report",
+            dir.to_str().unwrap(),
+            "--lab",
+            asking.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ],
+        None,
+    );
     assert_eq!(code, 0, "{text}");
     let html = std::fs::read_to_string(&out).unwrap();
     assert_balanced(&html);
@@ -318,7 +283,7 @@ fn decisions_when_asked(dir: &Path, lab: &Path, root: &Path) {
 /// No key, no lab file, the default output: said so, not failed; the same id. An unknown key in
 /// the lab file is an error naming it.
 fn without_key_or_lab(dir: &Path, lab: &Path, id: &str) {
-    let (code, text) = passangle(&["report", dir.to_str().unwrap()]);
+    let (code, text) = passangle(&["report", dir.to_str().unwrap()], None);
     assert_eq!(code, 0, "{text}");
     let bare = std::fs::read_to_string(dir.join("report.html")).unwrap();
     assert_balanced(&bare);
@@ -332,12 +297,15 @@ fn without_key_or_lab(dir: &Path, lab: &Path, id: &str) {
 
     // An unknown key in the lab file is an error naming it.
     std::fs::write(lab, "[vehicle]\ncolour = \"red\"\n").unwrap();
-    let (code, text) = passangle(&[
-        "report",
-        dir.to_str().unwrap(),
-        "--lab",
-        lab.to_str().unwrap(),
-    ]);
+    let (code, text) = passangle(
+        &[
+            "report",
+            dir.to_str().unwrap(),
+            "--lab",
+            lab.to_str().unwrap(),
+        ],
+        None,
+    );
     assert_ne!(code, 0);
     assert!(text.contains("colour"), "{text}");
 }
@@ -349,7 +317,10 @@ fn tampered(dir: &Path, key: &str) {
     let forged = text.replacen("\"run_id\": 1", "\"run_id\": 2", 1);
     assert_ne!(forged, text);
     std::fs::write(&result, forged).unwrap();
-    let (code, text) = passangle(&["report", dir.to_str().unwrap(), "--public-key", key]);
+    let (code, text) = passangle(
+        &["report", dir.to_str().unwrap(), "--public-key", key],
+        None,
+    );
     assert_eq!(code, 0, "{text}");
     let html = std::fs::read_to_string(dir.join("report.html")).unwrap();
     assert!(

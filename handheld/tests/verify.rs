@@ -5,17 +5,14 @@
 
 mod common;
 
-use common::temp_root;
+use common::{passangle, temp_root};
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
 
 use link::client::Measured;
 use link::record_files::ReceivedRecord;
-use onboard::recorder::{RecordedOutcome, ResultRecord, RunRecorder};
-use onboard::signed::{Signer, write_signed};
 use onboard::signing::{DeviceKey, PublicKey, SEED_LEN};
 use protocol::bounded::Text;
-use protocol::radio::{MeasurementResult, RecordFile, ResultWarnings, StartMeasurement, Zone};
+use protocol::radio::{MeasurementResult, RecordFile, ResultWarnings};
 
 fn wire() -> MeasurementResult {
     MeasurementResult {
@@ -43,59 +40,19 @@ fn wire() -> MeasurementResult {
     }
 }
 
-/// A finished run signed as the service signs it: the recorder's files and the processing
-/// thread's `cloud.ply` and `side_view.svg`.
-fn signed_run(root: &Path, key: DeviceKey) -> PathBuf {
-    let params = StartMeasurement {
-        vehicle_id: Text::truncated("AB-123"),
-        speed_mps: 0.2,
-        distance_m: 7.0,
-        zone: Zone::Tyre,
-    };
-    let signer = Signer::new(key);
-    let config = include_str!("../../onboard/onboard.example.toml");
-    let mut rec = RunRecorder::begin_signed(
-        root,
-        1,
-        &params,
-        1_790_000_000_000_000,
-        config,
-        signer.clone(),
-    )
-    .unwrap();
-    rec.save_result(&ResultRecord::from_wire(&wire()));
-    let dir = rec.dir().to_path_buf();
-    write_signed(&dir.join("cloud.ply"), &vec![7u8; 200_000], &signer).unwrap();
-    write_signed(
-        &dir.join("side_view.svg"),
-        b"<svg>\n<text>approach 25.0</text>\n</svg>\n",
-        &signer,
-    )
-    .unwrap();
-    assert!(rec.finish(RecordedOutcome::Completed).is_empty());
-    dir
-}
-
-fn passangle(args: &[&str], home: &Path) -> (i32, String) {
-    let out: Output = Command::new(env!("CARGO_BIN_EXE_passangle"))
-        .args(args)
-        .env("HOME", home)
-        .output()
-        .unwrap();
-    let text = format!(
-        "{}{}",
-        String::from_utf8_lossy(&out.stdout),
-        String::from_utf8_lossy(&out.stderr)
-    );
-    (out.status.code().unwrap(), text)
-}
-
-/// A signed run under a fresh root: (root, run directory, the robot's public key).
+/// A signed run under a fresh root, as the service signs it (a stand-in cloud and side view):
+/// (root, run directory, the robot's public key).
 fn setup(name: &str) -> (PathBuf, PathBuf, PublicKey) {
     let root = temp_root(name);
     let key = DeviceKey::from_seed(&[0x11; SEED_LEN]);
     let public = key.public();
-    let dir = signed_run(&root, key);
+    let dir = common::signed_run(
+        &root,
+        key,
+        &wire(),
+        &vec![7u8; 200_000],
+        b"<svg>\n<text>approach 25.0</text>\n</svg>\n",
+    );
     (root, dir, public)
 }
 
@@ -109,7 +66,7 @@ fn verify_accepts_the_robots_records_with_a_key_from_the_user() {
     // The whole run directory, then the one file.
     let (code, text) = passangle(
         &["verify", dir.to_str().unwrap(), "--public-key", &hex],
-        &root,
+        Some(&root),
     );
     assert_eq!(code, 0, "{text}");
     for name in [
@@ -124,7 +81,7 @@ fn verify_accepts_the_robots_records_with_a_key_from_the_user() {
             "{text}"
         );
     }
-    let (code, text) = passangle(&["verify", result_s, "--public-key", &hex], &root);
+    let (code, text) = passangle(&["verify", result_s, "--public-key", &hex], Some(&root));
     assert_eq!(code, 0, "{text}");
     assert!(
         text.contains(&format!("signed by {}", public.id())),
@@ -136,15 +93,15 @@ fn verify_accepts_the_robots_records_with_a_key_from_the_user() {
     std::fs::write(&keys, format!("# the lab's robots\n{hex} robot 7\n")).unwrap();
     let (code, text) = passangle(
         &["verify", result_s, "--keys", keys.to_str().unwrap()],
-        &root,
+        Some(&root),
     );
     assert_eq!(code, 0, "{text}");
-    let (code, text) = passangle(&["verify", result_s], &root);
+    let (code, text) = passangle(&["verify", result_s], Some(&root));
     assert_eq!(code, 1, "no key given, none in ~/.config: {text}");
     assert!(text.contains("no trusted robot key"), "{text}");
     std::fs::create_dir_all(root.join(".config/passangle")).unwrap();
     std::fs::copy(&keys, root.join(".config/passangle/robot-keys")).unwrap();
-    let (code, text) = passangle(&["verify", result_s], &root);
+    let (code, text) = passangle(&["verify", result_s], Some(&root));
     assert_eq!(code, 0, "{text}");
 
     // The summary rebuilt from the radio's values has the robot's bytes here (this record has
@@ -159,7 +116,7 @@ fn verify_accepts_the_robots_records_with_a_key_from_the_user() {
             "--public-key",
             &hex,
         ],
-        &root,
+        Some(&root),
     );
     assert_eq!(code, 0, "{text}");
     std::fs::remove_dir_all(&root).unwrap();
@@ -199,7 +156,7 @@ fn verify_accepts_the_handhelds_copy_and_names_a_changed_digit() {
     );
     assert!(saved.missing.is_empty(), "{:?}", saved.missing);
     let fetched_s = fetched.to_str().unwrap();
-    let (code, text) = passangle(&["verify", fetched_s, "--public-key", &hex], &root);
+    let (code, text) = passangle(&["verify", fetched_s, "--public-key", &hex], Some(&root));
     assert_eq!(code, 0, "{text}");
     let (code, text) = passangle(
         &[
@@ -208,7 +165,7 @@ fn verify_accepts_the_handhelds_copy_and_names_a_changed_digit() {
             "--public-key",
             &hex,
         ],
-        &root,
+        Some(&root),
     );
     assert_eq!(code, 0, "the fetched run directory: {text}");
     let copy = std::fs::read_to_string(&fetched).unwrap();
@@ -221,7 +178,7 @@ fn verify_accepts_the_handhelds_copy_and_names_a_changed_digit() {
     let digit = forged.as_bytes()[at];
     forged.replace_range(at..=at, if digit == b'3' { "4" } else { "3" });
     std::fs::write(&fetched, copy.replacen(line, &forged, 1)).unwrap();
-    let (code, text) = passangle(&["verify", fetched_s, "--public-key", &hex], &root);
+    let (code, text) = passangle(&["verify", fetched_s, "--public-key", &hex], Some(&root));
     assert_eq!(code, 3, "a changed digit in the fetched copy: {text}");
     assert!(text.contains("changed: /approach_deg"), "{text}");
     std::fs::remove_dir_all(&root).unwrap();
@@ -245,7 +202,7 @@ fn verify_catches_a_changed_digit_and_names_it() {
     let digit = forged_line.as_bytes()[at];
     forged_line.replace_range(at..=at, if digit == b'3' { "4" } else { "3" });
     std::fs::write(&result, original.replacen(line, &forged_line, 1)).unwrap();
-    let (code, text) = passangle(&["verify", result_s, "--public-key", &hex], &root);
+    let (code, text) = passangle(&["verify", result_s, "--public-key", &hex], Some(&root));
     assert_eq!(code, 3, "{text}");
     assert!(text.contains("changed: /approach_deg"), "{text}");
     assert_eq!(
@@ -255,7 +212,7 @@ fn verify_catches_a_changed_digit_and_names_it() {
     );
     let (code, text) = passangle(
         &["verify", dir.to_str().unwrap(), "--public-key", &hex],
-        &root,
+        Some(&root),
     );
     assert_eq!(code, 3, "{text}");
     assert!(
@@ -266,7 +223,7 @@ fn verify_catches_a_changed_digit_and_names_it() {
 
     // Another robot's key.
     let other = DeviceKey::from_seed(&[0x22; SEED_LEN]).public().to_hex();
-    let (code, text) = passangle(&["verify", result_s, "--public-key", &other], &root);
+    let (code, text) = passangle(&["verify", result_s, "--public-key", &other], Some(&root));
     assert_eq!(code, 4, "{text}");
     assert!(text.contains("signature does not match this key"), "{text}");
 
@@ -277,22 +234,22 @@ fn verify_catches_a_changed_digit_and_names_it() {
         sig_text.replacen("\"name\": \"result.json\"", "\"name\": \"result2.json\"", 1);
     assert_ne!(forged_sig, sig_text);
     std::fs::write(&sig, &forged_sig).unwrap();
-    let (code, text) = passangle(&["verify", result_s, "--public-key", &hex], &root);
+    let (code, text) = passangle(&["verify", result_s, "--public-key", &hex], Some(&root));
     assert_eq!(code, 4, "{text}");
 
     // Garbage, cut short, missing.
     for bytes in [&b"\x00\xffnot json"[..], &sig_text.as_bytes()[..100]] {
         std::fs::write(&sig, bytes).unwrap();
-        let (code, text) = passangle(&["verify", result_s, "--public-key", &hex], &root);
+        let (code, text) = passangle(&["verify", result_s, "--public-key", &hex], Some(&root));
         assert_eq!(code, 5, "{text}");
         assert!(text.contains("no usable signature"), "{text}");
     }
     std::fs::remove_file(&sig).unwrap();
-    let (code, text) = passangle(&["verify", result_s, "--public-key", &hex], &root);
+    let (code, text) = passangle(&["verify", result_s, "--public-key", &hex], Some(&root));
     assert_eq!(code, 5, "{text}");
     let (code, text) = passangle(
         &["verify", dir.to_str().unwrap(), "--public-key", &hex],
-        &root,
+        Some(&root),
     );
     assert_eq!(code, 5, "{text}");
     assert!(text.contains("result.json: not signed"), "{text}");

@@ -51,7 +51,7 @@ use hil_sim::world::Scene;
 use pipeline::config::PipelineConfig;
 use pipeline::deskew::{self, Velocity};
 use pipeline::features::{self, RingPoint};
-use pipeline::geom::{Pose, V3, norm};
+use pipeline::geom::{Pose, V3};
 use pipeline::ground;
 use pipeline::laser_odometry::{
     FeatureTarget, GROUND_TAG_BIT, Scan, register_two_step, residuals_at,
@@ -91,7 +91,7 @@ fn prepare(
         let l = V3::from(p.xyz_in_lidar_m.map(f64::from));
         points.push(robot_from_lidar.apply(l));
         times.push(f64::from(p.time_offset_s));
-        ranges.push(norm(l));
+        ranges.push(l.norm());
     }
     deskew::deskew(&mut points, &times, velocity, &config.deskew);
     let split = ground::segment_ground(

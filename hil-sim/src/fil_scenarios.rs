@@ -312,17 +312,17 @@ pub fn cruise_drive() -> Drive {
     }
 }
 
-/// Heartbeats on, `Hello`, then the drive command.
-fn start() -> Vec<Event> {
+/// How a run starts: heartbeats on, `Hello`, then [`cruise_drive`] at `drive_at_us`.
+pub fn start_events(drive_at_us: u64) -> Vec<Event> {
     vec![
         at(0, Action::Heartbeats(true)),
         send(0, Hello::new(Role::Simulator)),
-        send(DRIVE_AT_US, cruise_drive()),
+        send(drive_at_us, cruise_drive()),
     ]
 }
 
 fn cruise_events() -> Vec<Event> {
-    let mut e = start();
+    let mut e = start_events(DRIVE_AT_US);
     e.push(send(6_000_000, Stop { immediate: false }));
     e
 }
@@ -333,13 +333,13 @@ const HEARTBEAT_OFF_US: u64 = 3_001_000;
 const FAULT_AT_US: u64 = 3_000_000;
 
 fn heartbeat_loss_events() -> Vec<Event> {
-    let mut e = start();
+    let mut e = start_events(DRIVE_AT_US);
     e.push(at(HEARTBEAT_OFF_US, Action::Heartbeats(false)));
     e
 }
 
 fn esc_silent_events() -> Vec<Event> {
-    let mut e = start();
+    let mut e = start_events(DRIVE_AT_US);
     e.push(at(
         FAULT_AT_US,
         Action::Fault {
@@ -351,7 +351,7 @@ fn esc_silent_events() -> Vec<Event> {
 }
 
 fn over_temperature_events() -> Vec<Event> {
-    let mut e = start();
+    let mut e = start_events(DRIVE_AT_US);
     e.push(at(
         FAULT_AT_US,
         Action::Fault {
@@ -368,7 +368,7 @@ fn over_temperature_events() -> Vec<Event> {
 const STUCK_A: f32 = 18.0;
 
 fn stuck_current_events() -> Vec<Event> {
-    let mut e = start();
+    let mut e = start_events(DRIVE_AT_US);
     e.push(at(
         FAULT_AT_US,
         Action::Fault {
@@ -387,7 +387,7 @@ const FLAT_AT_US: u64 = FAULT_AT_US;
 const RETRY_AT_US: u64 = 7_500_000;
 
 fn battery_low_events() -> Vec<Event> {
-    let mut e = start();
+    let mut e = start_events(DRIVE_AT_US);
     e.push(at(SAG_AT_US, Action::BatteryOpenCircuit(16.0)));
     e.push(at(SAG_AT_US + 150_000, Action::BatteryOpenCircuit(24.0)));
     e.push(at(FLAT_AT_US, Action::BatteryOpenCircuit(19.2)));
@@ -400,7 +400,7 @@ const CLEAR_AT_US: u64 = 4_500_000;
 const REDRIVE_AT_US: u64 = 4_600_000;
 
 fn bus_off_events() -> Vec<Event> {
-    let mut e = start();
+    let mut e = start_events(DRIVE_AT_US);
     e.push(at(
         FAULT_AT_US,
         Action::BusOff {
@@ -417,11 +417,7 @@ const FLOOD_DRIVE_US: u64 = 1_000_000;
 
 fn flood_events(seed: u64) -> Vec<Event> {
     let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0xF100D);
-    let mut e = vec![
-        at(0, Action::Heartbeats(true)),
-        send(0, Hello::new(Role::Simulator)),
-        send(FLOOD_DRIVE_US, cruise_drive()),
-    ];
+    let mut e = start_events(FLOOD_DRIVE_US);
     let good_drive = encode_frame(&ToFirmware::Drive(cruise_drive()), 7);
     for (k, t) in (100_000..3_400_000).step_by(5_000).enumerate() {
         let bytes = match k % 4 {

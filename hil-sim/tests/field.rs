@@ -2,13 +2,15 @@
 //! template scenario. Sensor-effect tests live beside their models (`vlp16.rs`, `d435.rs`,
 //! `wheel_odometry.rs`).
 
-use std::path::{Path, PathBuf};
+mod common;
 
+use std::path::Path;
+
+use common::{crate_dir, shipped_vehicle, temp_dir};
 use hil_sim::geometry::Vec3;
 use hil_sim::scenario::Scenario;
 use hil_sim::trajectory::Trajectory;
 use hil_sim::truth::{TruthOptions, true_angles};
-use hil_sim::vehicle::Vehicle;
 use hil_sim::world::{Scene, SurfaceKind};
 
 const FLEET: [&str; 8] = [
@@ -22,14 +24,6 @@ const FLEET: [&str; 8] = [
     "estate_towbar",
 ];
 
-fn root() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-}
-
-fn fleet(name: &str) -> Vehicle {
-    Vehicle::load(&root().join("vehicles").join(format!("{name}.toml"))).expect("valid vehicle")
-}
-
 /// The closed form of the tangent angle to a point at distance d ahead of the tyre, height z.
 fn closed_form(d: f64, z: f64, r: f64) -> f64 {
     (r / d.hypot(r - z)).asin() - (r - z).atan2(d)
@@ -40,7 +34,7 @@ fn the_sports_cars_approach_is_the_hand_computed_angle_to_its_splitter() {
     // By hand: the splitter's front lower edge is at x = 1.10 m, z = 0.172 m; the static loaded
     // radius is 0.322 m. hypot(1.10, 0.150) = 1.110180, asin(0.322 / 1.110180) = 16.8597 deg,
     // atan2(0.150, 1.10) = 7.7652 deg: approach = 9.0946 deg.
-    let v = fleet("sports_car");
+    let v = shipped_vehicle("sports_car");
     let t = true_angles(&v, &TruthOptions::default());
     let w = t.approach.witness.as_ref().expect("a witness");
     assert_eq!(w.source, "front splitter");
@@ -59,7 +53,7 @@ fn the_sports_cars_approach_is_the_hand_computed_angle_to_its_splitter() {
 #[test]
 fn every_fleet_vehicle_loads_has_its_truth_and_small_meshes() {
     for name in FLEET {
-        let v = fleet(name);
+        let v = shipped_vehicle(name);
         assert!(v.tyre.is_loaded(), "{name}: loaded tyres");
         assert!(v.tyre.tread_radius() > v.tyre.radius_m, "{name}");
         let t = true_angles(&v, &TruthOptions::default());
@@ -85,7 +79,7 @@ fn every_fleet_vehicle_loads_has_its_truth_and_small_meshes() {
                 );
             }
         }
-        let dir = root().join("vehicles/meshes/fleet").join(name);
+        let dir = crate_dir().join("vehicles/meshes/fleet").join(name);
         for f in std::fs::read_dir(&dir).expect("mesh directory") {
             let len = f.expect("entry").metadata().expect("metadata").len();
             assert!(len < 300_000, "{name}: a mesh of {len} bytes");
@@ -95,7 +89,7 @@ fn every_fleet_vehicle_loads_has_its_truth_and_small_meshes() {
 
 #[test]
 fn a_loaded_tyre_is_flat_on_the_ground_and_wider_than_its_loaded_radius() {
-    let v = fleet("offroader_skid");
+    let v = shipped_vehicle("offroader_skid");
     let s = Scene::from_vehicle(&v);
     let (r, big_r) = (v.tyre.radius_m, v.tyre.tread_radius());
     let [_, y, _] = v.tyre_centres()[0];
@@ -156,12 +150,16 @@ fn a_loaded_tyre_is_flat_on_the_ground_and_wider_than_its_loaded_radius() {
 }
 
 fn field_scenario(vehicle: &str, world: Option<&str>, seed: u64) -> Scenario {
-    let template_path = root().join("scenarios/field/city-car-hall-a.toml");
+    let template_path = crate_dir().join("scenarios/field/city-car-hall-a.toml");
     let template = Scenario::load(&template_path).expect("template");
-    let v = fleet(vehicle);
+    let v = shipped_vehicle(vehicle);
     let mut file = template.file.clone();
-    file.vehicle = root().join("vehicles").join(format!("{vehicle}.toml"));
-    file.world = world.map(|w| root().join("scenarios/worlds").join(format!("{w}.toml")));
+    file.vehicle = crate_dir().join("vehicles").join(format!("{vehicle}.toml"));
+    file.world = world.map(|w| {
+        crate_dir()
+            .join("scenarios/worlds")
+            .join(format!("{w}.toml"))
+    });
     file.seed = seed;
     file.robot.start_x_m = v.front_x_m() + 1.0;
     file.robot.distance_m = v.front_x_m() - v.rear_x_m() + 2.0;
@@ -311,19 +309,18 @@ fn the_field_scenarios_packets_repeat_bit_for_bit() {
 
 #[test]
 fn world_files_are_validated_with_the_field_named() {
-    let dir = std::env::temp_dir().join(format!("hil-sim-world-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).expect("temp dir");
+    let dir = temp_dir("world");
     let world = dir.join("bad.toml");
     std::fs::write(&world, "walls_m = [1.0, 8.0, 6.0, 9.0]\n").expect("write");
-    let template_path = root().join("scenarios/field/city-car-hall-a.toml");
+    let template_path = crate_dir().join("scenarios/field/city-car-hall-a.toml");
     let template = Scenario::load(&template_path).expect("template");
     let mut file = template.file.clone();
-    file.vehicle = root().join("vehicles/city_car.toml");
+    file.vehicle = crate_dir().join("vehicles/city_car.toml");
     file.world = Some(world);
-    let e = Scenario::from_parts(&template_path, file, fleet("city_car"))
+    let e = Scenario::from_parts(&template_path, file, shipped_vehicle("city_car"))
         .expect_err("a wall 1 m away")
         .to_string();
     assert!(e.contains("hall.walls_m"), "{e}");
     let _ = std::fs::remove_dir_all(&dir);
-    assert!(Path::new(&root().join("evaluation.toml")).exists());
+    assert!(Path::new(&crate_dir().join("evaluation.toml")).exists());
 }

@@ -6,8 +6,7 @@
 use hil_sim::esc_model::EscFault;
 use hil_sim::fil::{Action, Event, FilConfig};
 use hil_sim::fil_scenarios::{self, BusChoice, LinkChoice};
-use protocol::mcu::{DriveMode, EscFaults, Interlocks, ToFirmware};
-use protocol::{Hello, Role};
+use protocol::mcu::{DriveMode, EscFaults, Interlocks};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
@@ -32,24 +31,12 @@ fn any_single_fault_is_named_and_zeroes_the_bus() {
             LinkChoice::Memory,
         )
         .unwrap();
-        fil.schedule([
-            Event {
-                at_us: 0,
-                action: Action::Heartbeats(true),
-            },
-            Event {
-                at_us: 0,
-                action: Action::Send(ToFirmware::Hello(Hello::new(Role::Simulator))),
-            },
-            Event {
-                at_us: 20_000,
-                action: Action::Send(fil_scenarios::cruise_drive().into()),
-            },
-            Event {
-                at_us,
-                action: action.clone(),
-            },
-        ]);
+        let mut events = fil_scenarios::start_events(fil_scenarios::DRIVE_AT_US);
+        events.push(Event {
+            at_us,
+            action: action.clone(),
+        });
+        fil.schedule(events);
         fil.run_until(at_us + 600_000).unwrap();
         let trace = fil.take_trace();
         let reported = trace.statuses().find(|(t, s)| {

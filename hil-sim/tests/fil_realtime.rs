@@ -4,10 +4,8 @@
 
 use std::time::Instant;
 
-use hil_sim::fil::{Action, Event, FilConfig, Pacing};
+use hil_sim::fil::{FilConfig, Pacing};
 use hil_sim::fil_scenarios::{self, BusChoice, LinkChoice};
-use protocol::mcu::ToFirmware;
-use protocol::{Hello, Role};
 
 #[test]
 fn drives_over_a_pty_in_real_time() {
@@ -21,20 +19,7 @@ fn drives_over_a_pty_in_real_time() {
         LinkChoice::Pty,
     )
     .expect("a pty pair opens on Linux");
-    fil.schedule([
-        Event {
-            at_us: 0,
-            action: Action::Heartbeats(true),
-        },
-        Event {
-            at_us: 0,
-            action: Action::Send(ToFirmware::Hello(Hello::new(Role::Simulator))),
-        },
-        Event {
-            at_us: 50_000,
-            action: Action::Send(fil_scenarios::cruise_drive().into()),
-        },
-    ]);
+    fil.schedule(fil_scenarios::start_events(50_000));
     let started = Instant::now();
     fil.run_until(1_200_000).unwrap();
     let wall_s = started.elapsed().as_secs_f64();

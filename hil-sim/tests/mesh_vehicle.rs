@@ -2,9 +2,12 @@
 //! box casts exactly like the analytic box, simulated hits on meshes lie on them, and bad mesh
 //! parts are rejected with errors that name the vehicle file, the field and the mesh file.
 
-use std::fmt::Write as _;
-use std::path::{Path, PathBuf};
+mod common;
 
+use std::fmt::Write as _;
+use std::path::Path;
+
+use common::{temp_dir, vehicles_dir};
 use hil_sim::geometry::{Normalized, Vec3};
 use hil_sim::truth::{TrueAngles, TruthOptions, closed_form_rad, true_angles};
 use hil_sim::vehicle::{Part, Vehicle};
@@ -12,10 +15,6 @@ use hil_sim::world::{Candidates, Scene, SurfaceKind};
 use rand::{Rng, SeedableRng};
 
 const TOL: f64 = 1e-7;
-
-fn vehicles_dir() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("vehicles")
-}
 
 fn hatchback() -> Vehicle {
     Vehicle::load(&vehicles_dir().join("hatchback_mesh.toml")).expect("shipped vehicle is valid")
@@ -41,14 +40,6 @@ fn without(v: &Vehicle, name: &str) -> Vehicle {
 
 fn witness(a: &hil_sim::truth::TrueAngle) -> &str {
     a.witness.as_ref().map_or("", |w| w.source.as_str())
-}
-
-/// A fresh, empty directory for this test's files.
-fn temp_dir(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("hil-sim-mesh-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).expect("temp dir");
-    dir
 }
 
 #[test]

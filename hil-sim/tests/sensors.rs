@@ -3,9 +3,12 @@
 //! cast on (to quantisation plus noise), shipped vehicles' true angles match the closed form and
 //! their published figures, and a seeded run is reproducible bit for bit (through the binary).
 
-use std::path::{Path, PathBuf};
+mod common;
+
+use std::path::Path;
 use std::process::Command;
 
+use common::{crate_dir, shipped_vehicle, temp_dir};
 use hil_sim::geometry::Vec3;
 use hil_sim::scenario::Scenario;
 use hil_sim::trajectory::{StraightRun, Vibration};
@@ -15,15 +18,6 @@ use hil_sim::vlp16::{FiringTruth, Vlp16Config, Vlp16Sim};
 use hil_sim::world::Scene;
 use vlp16::pcap::{PcapReader, PcapWriter, udp_in_frame};
 use vlp16::{DecoderConfig, FrameAssembler, Point};
-
-fn crate_dir() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-}
-
-fn vehicle(name: &str) -> Vehicle {
-    Vehicle::load(&crate_dir().join("vehicles").join(format!("{name}.toml")))
-        .expect("shipped vehicle is valid")
-}
 
 fn run_under(v: &Vehicle) -> StraightRun {
     StraightRun {
@@ -85,7 +79,7 @@ fn world_point(p: &Point, t: &FiringTruth) -> Vec3 {
 
 #[test]
 fn decoder_reads_back_noiseless_points_on_the_surfaces_they_were_cast_on() {
-    let v = vehicle("suv");
+    let v = shipped_vehicle("suv");
     let scene = Scene::from_vehicle(&v);
     let run = run_under(&v);
     let config = Vlp16Config {
@@ -129,7 +123,7 @@ fn decoder_reads_back_noiseless_points_on_the_surfaces_they_were_cast_on() {
 
 #[test]
 fn noisy_points_stay_within_the_noise_limit_with_the_configured_spread() {
-    let v = vehicle("offroader");
+    let v = shipped_vehicle("offroader");
     let scene = Scene::from_vehicle(&v);
     let run = run_under(&v);
     let config = Vlp16Config {
@@ -163,7 +157,7 @@ fn noisy_points_stay_within_the_noise_limit_with_the_configured_spread() {
 
 #[test]
 fn pcap_written_with_onboard_writer_decodes_to_every_return() {
-    let v = vehicle("van");
+    let v = shipped_vehicle("van");
     let scene = Scene::from_vehicle(&v);
     let run = run_under(&v);
     let sim = Vlp16Sim::new(&scene, &run, Vlp16Config::default(), 4);
@@ -211,7 +205,7 @@ fn pcap_written_with_onboard_writer_decodes_to_every_return() {
 #[test]
 fn shipped_vehicles_match_the_closed_form_and_their_published_angles() {
     for name in ["sedan", "suv", "offroader", "pickup", "van"] {
-        let v = vehicle(name);
+        let v = shipped_vehicle(name);
         let t = true_angles(
             &v,
             &TruthOptions {
@@ -274,13 +268,6 @@ fn shipped_scenarios_load() {
 
 fn sim_bin() -> Command {
     Command::new(env!("CARGO_BIN_EXE_passangle-sim"))
-}
-
-fn temp_dir(name: &str) -> PathBuf {
-    let dir =
-        std::env::temp_dir().join(format!("passangle-sim-test-{}-{name}", std::process::id()));
-    std::fs::create_dir_all(&dir).expect("temp dir");
-    dir
 }
 
 fn run_ok(cmd: &mut Command) {

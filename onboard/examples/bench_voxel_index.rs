@@ -27,7 +27,7 @@ use std::hash::{BuildHasherDefault, Hasher};
 use std::hint::black_box;
 use std::time::Instant;
 
-use pipeline::geom::{V3, VoxelIndex, dist2, voxel_of};
+use pipeline::geom::{V3, VoxelIndex, voxel_of};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
@@ -86,7 +86,7 @@ impl Old27 {
         let mut n = 0;
         for cell in self.cells_around(q) {
             for &i in cell {
-                let d2 = dist2(self.points[i as usize], q);
+                let d2 = (self.points[i as usize] - q).norm_squared();
                 if d2 > r2 || (n == K && d2 >= out[K - 1].0) {
                     continue;
                 }
@@ -110,9 +110,9 @@ impl Old27 {
         out.clear();
         for cell in self.cells_around(q) {
             out.extend(
-                cell.iter()
-                    .copied()
-                    .filter(|&i| dist2(self.points[i as usize], q) <= radius_m * radius_m),
+                cell.iter().copied().filter(|&i| {
+                    (self.points[i as usize] - q).norm_squared() <= radius_m * radius_m
+                }),
             );
         }
     }
@@ -151,7 +151,7 @@ fn brute_nearest<const K: usize>(points: &[V3], q: V3, radius_m: f64) -> Vec<(f6
     let mut all: Vec<(f64, u32)> = points
         .iter()
         .enumerate()
-        .map(|(i, &p)| (dist2(p, q), i as u32))
+        .map(|(i, &p)| ((p - q).norm_squared(), i as u32))
         .filter(|&(d2, _)| d2 <= radius_m * radius_m)
         .collect();
     all.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));

@@ -2,12 +2,16 @@
 //! its device key is open to others, missing or malformed: the same owner and mode rules as
 //! `check-config` (docs/security.md). `device-key` makes and reads the device key.
 
+use std::fmt::Write as _;
 use std::os::unix::fs::PermissionsExt as _;
+use std::path::PathBuf;
 use std::process::Command;
 
-#[test]
-fn a_key_file_readable_by_others_stops_the_service_before_it_starts() {
-    let dir = std::env::temp_dir().join(format!("passangle-start-{}", std::process::id()));
+/// A fresh directory with a pairing key and an `onboard.toml` that uses it, with ports that do not
+/// exist and, if `device_key` names a file in the directory, that file as `signing.key-file`:
+/// (directory, pairing-key file, config file).
+fn service_dir(name: &str, device_key: Option<&str>) -> (PathBuf, PathBuf, PathBuf) {
+    let dir = std::env::temp_dir().join(format!("passangle-{name}-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).expect("temp dir");
     let key_file = dir.join("pairing.key");
@@ -16,25 +20,29 @@ fn a_key_file_readable_by_others_stops_the_service_before_it_starts() {
         &protocol::auth::Key([7; protocol::auth::KEY_LEN]),
     )
     .expect("key written");
-    std::fs::set_permissions(&key_file, std::fs::Permissions::from_mode(0o644)).expect("chmod");
+    let mut text = format!(
+        "[recording]\nroot = \"{}\"\n[radio]\nport = \"/dev/null-radio\"\nkey-file = \"{}\"\n[mcu]\nport = \"/dev/null-mcu\"\n[camera]\nsource = \"none\"\n",
+        dir.join("runs").display(),
+        key_file.display()
+    );
+    if let Some(device_key) = device_key {
+        let _ = write!(
+            text,
+            "[signing]\nkey-file = \"{}\"\n",
+            dir.join(device_key).display()
+        );
+    }
     let config = dir.join("onboard.toml");
-    std::fs::write(
-        &config,
-        format!(
-            "[recording]\nroot = \"{}\"\n[radio]\nport = \"/dev/null-radio\"\nkey-file = \"{}\"\n[mcu]\nport = \"/dev/null-mcu\"\n[camera]\nsource = \"none\"\n",
-            dir.join("runs").display(),
-            key_file.display()
-        ),
-    )
-    .expect("config written");
-    let out = Command::new(env!("CARGO_BIN_EXE_passangle-onboard"))
-        .arg("run")
-        .arg("--config")
-        .arg(&config)
-        .output()
-        .expect("the binary runs");
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert_eq!(out.status.code(), Some(65), "{stderr}");
+    std::fs::write(&config, text).expect("config written");
+    (dir, key_file, config)
+}
+
+#[test]
+fn a_key_file_readable_by_others_stops_the_service_before_it_starts() {
+    let (dir, key_file, config) = service_dir("start", None);
+    std::fs::set_permissions(&key_file, std::fs::Permissions::from_mode(0o644)).expect("chmod");
+    let (code, _, stderr) = onboard(&["run".as_ref(), "--config".as_ref(), config.as_os_str()]);
+    assert_eq!(code, Some(65), "{stderr}");
     assert!(
         stderr.contains("radio.key-file") && stderr.contains("0644"),
         "names the key and its mode: {stderr}"
@@ -58,27 +66,8 @@ fn onboard(args: &[&std::ffi::OsStr]) -> (Option<i32>, String, String) {
 
 #[test]
 fn a_configured_device_key_must_be_valid_before_the_service_starts() {
-    let dir = std::env::temp_dir().join(format!("passangle-devkey-start-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).expect("temp dir");
-    let key_file = dir.join("pairing.key");
-    onboard::config::write_key(
-        &key_file,
-        &protocol::auth::Key([7; protocol::auth::KEY_LEN]),
-    )
-    .expect("key written");
+    let (dir, _, config) = service_dir("devkey-start", Some("device.key"));
     let device = dir.join("device.key");
-    let config = dir.join("onboard.toml");
-    std::fs::write(
-        &config,
-        format!(
-            "[recording]\nroot = \"{}\"\n[radio]\nport = \"/dev/null-radio\"\nkey-file = \"{}\"\n[mcu]\nport = \"/dev/null-mcu\"\n[camera]\nsource = \"none\"\n[signing]\nkey-file = \"{}\"\n",
-            dir.join("runs").display(),
-            key_file.display(),
-            device.display()
-        ),
-    )
-    .expect("config written");
     let run = ["run".as_ref(), "--config".as_ref(), config.as_os_str()];
     // Missing.
     let (code, _, stderr) = onboard(&run);

@@ -11,7 +11,7 @@
 //!   `p_start = exp(w t) p_t + v t` (first order in `t` for the translation, exact rotation).
 
 use super::config::DeskewConfig;
-use super::geom::{V3, add, exp_so3, mat_vec, norm, scale};
+use super::geom::{V3, exp_so3};
 
 /// The robot's velocity over a sweep, robot frame.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -44,16 +44,16 @@ pub fn deskew(
     if !config.enabled {
         return DeskewModel::None;
     }
-    let v = scale(velocity.linear_mps, config.alpha);
-    if norm(velocity.angular_radps) <= config.straight_max_yaw_rate_radps {
+    let v = velocity.linear_mps * config.alpha;
+    if velocity.angular_radps.norm() <= config.straight_max_yaw_rate_radps {
         for (p, &t) in points_in_robot.iter_mut().zip(times_s) {
-            *p = add(*p, scale(v, t));
+            *p += v * t;
         }
         DeskewModel::Straight
     } else {
         for (p, &t) in points_in_robot.iter_mut().zip(times_s) {
-            let r = exp_so3(scale(velocity.angular_radps, t));
-            *p = add(mat_vec(&r, *p), scale(v, t));
+            let r = exp_so3(velocity.angular_radps * t);
+            *p = r * *p + v * t;
         }
         DeskewModel::Twist
     }
@@ -61,7 +61,7 @@ pub fn deskew(
 
 #[cfg(test)]
 mod tests {
-    use super::super::geom::{Pose, dist2};
+    use super::super::geom::Pose;
     use super::*;
 
     /// A fixed world point seen from a robot moving with a constant twist comes back to the same
@@ -85,15 +85,18 @@ mod tests {
                 .map(|&t| {
                     // start_from_t = (exp(w t), v t) to first order, exact for w = 0.
                     let start_from_t = Pose {
-                        rotation: exp_so3(scale(velocity.angular_radps, t)),
-                        translation: scale(velocity.linear_mps, t),
+                        rotation: exp_so3(velocity.angular_radps * t),
+                        translation: velocity.linear_mps * t,
                     };
                     start_from_t.inverse().apply(world_point)
                 })
                 .collect();
             let model = deskew(&mut points, &times, velocity, &DeskewConfig::default());
             for p in &points {
-                assert!(dist2(*p, world_point) < 1e-20, "{model:?}: {p:?}");
+                assert!(
+                    (*p - world_point).norm_squared() < 1e-20,
+                    "{model:?}: {p:?}"
+                );
             }
         }
     }

@@ -20,7 +20,7 @@
 //! Ground points (step 2) take part in windows but are never selected as features.
 
 use super::config::FeatureConfig;
-use super::geom::{V3, norm, sub};
+use super::geom::V3;
 
 /// One point as feature extraction sees it.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -136,7 +136,7 @@ fn score_ring(
     ahead.resize(pos.len() * n_half, 0.0);
     for (i, (row, &p)) in ahead.chunks_exact_mut(n_half).zip(pos.iter()).enumerate() {
         for (slot, &q) in row.iter_mut().zip(&pos[i + 1..]) {
-            *slot = norm(sub(q, p));
+            *slot = (q - p).norm();
         }
     }
     let mut out = Vec::new();
@@ -149,7 +149,7 @@ fn score_ring(
         let centre = pos[k];
         let mut sum = V3::zeros();
         for &q in &pos[k - n_half..=k + n_half] {
-            let d = sub(q, centre);
+            let d = q - centre;
             sum = V3::new(sum[0] + d[0], sum[1] + d[1], sum[2] + d[2]);
         }
         // |p_j - p_k| for j = k - n_half .. k - 1 (stored ahead of p_j, `n_half - 1` apart),
@@ -167,7 +167,7 @@ fn score_ring(
         let range_m = points[ring[k]].range_m;
         out.push(Scored {
             index: ring[k],
-            smoothness: norm(sum) / (w * range_m),
+            smoothness: sum.norm() / (w * range_m),
             spread: total_distance / w / range_m,
         });
     }
@@ -329,14 +329,14 @@ mod tests {
             let mut sum = V3::zeros();
             let mut total_distance = 0.0;
             for &j in &ring[k - n_half..=k + n_half] {
-                let d = sub(points[j].p, centre.p);
+                let d = points[j].p - centre.p;
                 sum = V3::new(sum[0] + d[0], sum[1] + d[1], sum[2] + d[2]);
-                total_distance += norm(d);
+                total_distance += d.norm();
             }
             let w = (2 * n_half) as f64;
             out.push(Scored {
                 index: ring[k],
-                smoothness: norm(sum) / (w * centre.range_m),
+                smoothness: sum.norm() / (w * centre.range_m),
                 spread: total_distance / w / centre.range_m,
             });
         }

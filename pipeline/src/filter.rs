@@ -10,9 +10,7 @@
 //! The filter reads only the input cloud (a Jacobi step), so the result does not depend on order.
 
 use super::config::FilterConfig;
-use super::geom::{
-    V3, add, centroid_covariance, dist2, dot, scale, sub, symmetric_eigen_m3, voxel_of,
-};
+use super::geom::{V3, centroid_covariance, symmetric_eigen_m3, voxel_of};
 
 /// Filter `points`; returns the filtered cloud (same order and length).
 ///
@@ -53,7 +51,12 @@ pub fn bilateral(points: &[V3], config: &FilterConfig) -> Vec<V3> {
         for k in cell.start..cell.end {
             let p = grid.points[k];
             neighbours.clear();
-            neighbours.extend(candidates.iter().copied().filter(|&q| dist2(p, q) <= r * r));
+            neighbours.extend(
+                candidates
+                    .iter()
+                    .copied()
+                    .filter(|&q| (p - q).norm_squared() <= r * r),
+            );
             out[grid.input_index[k]] = filter_one(p, &neighbours, config);
         }
     }
@@ -132,17 +135,13 @@ fn filter_one(p: V3, neighbours: &[V3], config: &FilterConfig) -> V3 {
     let mut num = 0.0;
     let mut den = 0.0;
     for &q in neighbours {
-        let d = sub(q, p);
-        let h = dot(n, d);
-        let w = (-dot(d, d) / two_ss - h * h / two_sn).exp();
+        let d = q - p;
+        let h = n.dot(&d);
+        let w = (-d.dot(&d) / two_ss - h * h / two_sn).exp();
         num += w * h;
         den += w;
     }
-    if den > 0.0 {
-        add(p, scale(n, num / den))
-    } else {
-        p
-    }
+    if den > 0.0 { p + n * (num / den) } else { p }
 }
 
 #[cfg(test)]
@@ -187,7 +186,7 @@ mod tests {
                 let mut near: Vec<([i32; 3], usize)> = points
                     .iter()
                     .enumerate()
-                    .filter(|&(_, &q)| dist2(p, q) <= r * r)
+                    .filter(|&(_, &q)| (p - q).norm_squared() <= r * r)
                     .map(|(i, &q)| (voxel_of(q, r), i))
                     .collect();
                 near.sort_unstable();

@@ -22,7 +22,7 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
 use super::config::GroundConfig;
-use super::geom::{V3, cross, dot, norm, scale, sub};
+use super::geom::V3;
 
 /// A plane `normal . p + offset = 0` with a unit normal pointing up.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -36,7 +36,7 @@ pub struct Plane {
 impl Plane {
     /// Signed distance of `p` (positive above).
     pub fn distance(&self, p: V3) -> f64 {
-        dot(self.normal, p) + self.offset_m
+        self.normal.dot(&p) + self.offset_m
     }
 }
 
@@ -144,11 +144,11 @@ fn refit(points: &[V3], plane: Plane, threshold_m: f64) -> Option<Plane> {
     let (_, vectors) = super::geom::symmetric_eigen_m3(&cov);
     let mut normal = vectors.column(0).into_owned();
     if normal[2] < 0.0 {
-        normal = scale(normal, -1.0);
+        normal = -normal;
     }
     Some(Plane {
         normal,
-        offset_m: -dot(normal, c),
+        offset_m: -normal.dot(&c),
     })
 }
 
@@ -161,18 +161,18 @@ fn count_inliers(points: &[V3], plane: Plane, threshold_m: f64) -> usize {
 
 /// The plane through three points with an upward normal; `None` if they are (nearly) collinear.
 pub fn plane_through(a: V3, b: V3, c: V3) -> Option<Plane> {
-    let n = cross(sub(b, a), sub(c, a));
-    let len = norm(n);
+    let n = (b - a).cross(&(c - a));
+    let len = n.norm();
     if !(len > 1e-9) {
         return None;
     }
-    let mut normal = scale(n, 1.0 / len);
+    let mut normal = n * (1.0 / len);
     if normal[2] < 0.0 {
-        normal = scale(normal, -1.0);
+        normal = -normal;
     }
     Some(Plane {
         normal,
-        offset_m: -dot(normal, a),
+        offset_m: -normal.dot(&a),
     })
 }
 

@@ -27,8 +27,7 @@ use super::config::LaserOdometryConfig;
 pub use super::registration::{Registration, Scan, register_joint, register_two_step};
 
 use super::geom::{
-    Neighbour, Pose, Twist6, V3, VoxelIndex, add, centroid_covariance, cross, dist2, dot, mat_vec,
-    norm, scale, solve_spd, sub, symmetric_eigen_m3,
+    Neighbour, Pose, Twist6, V3, VoxelIndex, centroid_covariance, solve_spd, symmetric_eigen_m3,
 };
 use super::registration::{DegeneracyThresholds, determined_projection};
 
@@ -157,12 +156,12 @@ fn match_plane(target: &FeatureTarget, p: V3, q: V3, radius_m: f64) -> Option<Co
 /// residual runs along the perpendicular from the line to `q` (none if `q` is on the line).
 fn match_corner(target: &FeatureTarget, p: V3, q: V3, radius_m: f64) -> Option<Correspondence> {
     let (u, c) = line_at(&target.corners, q, radius_m)?;
-    let d = sub(q, c);
-    let perp = sub(d, scale(u, dot(d, u)));
-    let len = norm(perp);
+    let d = q - c;
+    let perp = d - u * d.dot(&u);
+    let len = perp.norm();
     (len > 1e-9).then(|| Correspondence {
         source: p,
-        direction: scale(perp, 1.0 / len),
+        direction: perp * (1.0 / len),
         anchor: c,
         cutoff_m: f64::INFINITY,
     })
@@ -235,7 +234,7 @@ impl Search<'_> {
 /// True when `m` was searched within `limit_m` of `q`.
 fn is_fresh(m: &Match, q: V3, limit_m: f64) -> bool {
     m.searched_at
-        .is_some_and(|s| dist2(s, q) <= limit_m * limit_m)
+        .is_some_and(|s| (s - q).norm_squared() <= limit_m * limit_m)
 }
 
 /// One residual of a registration, for diagnostics: the source point (source frame), the unit
@@ -275,7 +274,7 @@ pub fn residuals_at(
         .map(|(i, c)| ResidualInfo {
             source: c.source,
             direction: c.direction,
-            residual_m: dot(c.direction, sub(pose.apply(c.source), c.anchor)),
+            residual_m: c.direction.dot(&(pose.apply(c.source) - c.anchor)),
             corner: i >= n_planes,
             anchor: c.anchor,
         })
@@ -313,7 +312,7 @@ impl Kernel {
 
     /// The cutoff of a residual along `e` at `q` (target frame), solved about `centre`.
     fn cutoff(&self, q: V3, centre: V3, e: V3) -> f64 {
-        self.cutoff_m + self.cutoff_rad * norm(cross(sub(q, centre), e))
+        self.cutoff_m + self.cutoff_rad * (q - centre).cross(&e).norm()
     }
 
     /// IRLS weight of residual `r` with cutoff `cutoff_m`.
@@ -344,7 +343,7 @@ fn cost(corr: &[Correspondence], pose: &Pose, k: Kernel) -> f64 {
     corr.iter()
         .map(|c| {
             k.cost(
-                dot(c.direction, sub(pose.apply(c.source), c.anchor)),
+                c.direction.dot(&(pose.apply(c.source) - c.anchor)),
                 c.cutoff_m,
             )
         })
@@ -364,13 +363,13 @@ fn normal_equations(
     let mut weighted = 0;
     for c in corr {
         let q = pose.apply(c.source);
-        let r = dot(c.direction, sub(q, c.anchor));
+        let r = c.direction.dot(&(q - c.anchor));
         let w = k.weight(r, c.cutoff_m);
         if w == 0.0 {
             continue;
         }
         weighted += 1;
-        let jw = cross(sub(q, centre), c.direction);
+        let jw = (q - centre).cross(&c.direction);
         let j = [
             jw[0],
             jw[1],
@@ -402,7 +401,7 @@ fn apply_increment(pose: &Pose, d: &Twist6, centre: V3) -> Pose {
 /// degenerate late in a run, and its noise went into the trajectory.)
 pub(crate) fn about(centre: V3, d: &Twist6) -> Pose {
     let e = Pose::from_increment(*d);
-    let translation = add(sub(e.translation, mat_vec(&e.rotation, centre)), centre);
+    let translation = e.translation - e.rotation * centre + centre;
     Pose {
         rotation: e.rotation,
         translation,
@@ -411,7 +410,7 @@ pub(crate) fn about(centre: V3, d: &Twist6) -> Pose {
 
 /// Inverse of [`about`]: the increment `d` with `about(centre, d) == m`.
 pub(crate) fn increment_about(centre: V3, m: &Pose) -> Twist6 {
-    let translation = sub(add(m.translation, mat_vec(&m.rotation, centre)), centre);
+    let translation = m.translation + m.rotation * centre - centre;
     Pose {
         rotation: m.rotation,
         translation,
@@ -721,8 +720,8 @@ fn lm_step(
 /// True when increment `d` (`[rx, ry, rz, tx, ty, tz]`) is below [`CONVERGED_STEP`] in both
 /// rotation and translation.
 fn is_converged(d: &Twist6) -> bool {
-    norm(V3::new(d[0], d[1], d[2])) < CONVERGED_STEP
-        && norm(V3::new(d[3], d[4], d[5])) < CONVERGED_STEP
+    V3::new(d[0], d[1], d[2]).norm() < CONVERGED_STEP
+        && V3::new(d[3], d[4], d[5]).norm() < CONVERGED_STEP
 }
 
 #[cfg(test)]

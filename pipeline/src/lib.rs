@@ -61,7 +61,7 @@ pub use visual_odometry::DepthImage;
 use self::deskew::{DeskewModel, Velocity};
 use self::features::RingPoint;
 use self::fusion::{Fusion, Source, SourceRate};
-use self::geom::{Pose, Twist6, V3, VoxelIndex, norm, voxel_of};
+use self::geom::{Pose, Twist6, V3, VoxelIndex, voxel_of};
 use self::laser_odometry::{FeatureTarget, GROUND_TAG_BIT};
 use self::map::{CloudAccumulator, FeatureMap, FloorAccumulator};
 use self::registration::{
@@ -675,7 +675,7 @@ impl Pipeline {
             let l = V3::from(p.xyz_in_lidar_m.map(f64::from));
             robot.points.push(self.robot_from_lidar.apply(l));
             robot.times_s.push(f64::from(p.time_offset_s));
-            robot.ranges_m.push(norm(l));
+            robot.ranges_m.push(l.norm());
         }
         let velocity = self.deskew_velocity(frame.stamp_s);
         if deskew::deskew(
@@ -1087,18 +1087,18 @@ fn level_with_ground(world_from_robot: &Pose, plane: (V3, f64), world: (V3, f64)
     let (n_r, d_r) = plane;
     let (n_w, d_w) = world;
     let n_now = world_from_robot.apply_vector(n_r);
-    let axis = geom::cross(n_now, n_w);
-    let angle = axis_angle(norm(axis), geom::dot(n_now, n_w));
-    let fix = if norm(axis) > 1e-12 {
-        geom::scale(axis, angle / norm(axis))
+    let axis = n_now.cross(&n_w);
+    let angle = axis_angle(axis.norm(), n_now.dot(&n_w));
+    let fix = if axis.norm() > 1e-12 {
+        axis * (angle / axis.norm())
     } else {
         V3::zeros()
     };
-    let rotation = geom::mat_mul(&geom::exp_so3(fix), &world_from_robot.rotation);
+    let rotation = geom::exp_so3(fix) * world_from_robot.rotation;
     let mut translation = world_from_robot.translation;
     // Ground points p satisfy n_r . p = -d_r; in the world n_w . (R p + t) = -d_w.
-    let shift = (d_r - d_w) - geom::dot(n_w, translation);
-    translation = geom::add(translation, geom::scale(n_w, shift));
+    let shift = (d_r - d_w) - n_w.dot(&translation);
+    translation += n_w * shift;
     Pose {
         rotation,
         translation,

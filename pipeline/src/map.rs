@@ -12,7 +12,7 @@
 //! surface average down the lidar's range noise instead of thickening the surface, and the cloud's
 //! size is bounded by the surface area seen.
 
-use super::geom::{Pose, V3, VoxelIndex, VoxelMap, add, scale, voxel_of};
+use super::geom::{Pose, V3, VoxelIndex, VoxelMap, voxel_of};
 use super::laser_odometry::FeatureTarget;
 
 /// Corner and plane points in the world frame.
@@ -162,7 +162,7 @@ impl Block {
             }
         };
         let new = cell.1 == 0;
-        cell.0 = add(cell.0, p);
+        cell.0 += p;
         cell.1 += 1;
         new
     }
@@ -373,7 +373,7 @@ impl CloudAccumulator {
 
 /// The mean of a cell's points.
 fn centroid((sum, n): (V3, u32)) -> V3 {
-    scale(sum, 1.0 / f64::from(n))
+    sum * (1.0 / f64::from(n))
 }
 
 /// Add `points` (in order within each voxel) to `blocks`, block by block; a block not yet in
@@ -527,7 +527,7 @@ mod tests {
             cells.sort_unstable_by_key(|(k, _)| **k);
             cells
                 .into_iter()
-                .map(|(_, (sum, n))| scale(*sum, 1.0 / f64::from(*n)))
+                .map(|(_, (sum, n))| *sum * (1.0 / f64::from(*n)))
                 .collect()
         };
         for i in 0..BATCH + 4000 {
@@ -542,7 +542,7 @@ mod tests {
             let cell = reference
                 .entry(voxel_of(p, voxel_m))
                 .or_insert((V3::zeros(), 0));
-            cell.0 = add(cell.0, p);
+            cell.0 += p;
             cell.1 += 1;
             if i == 1000 || i == BATCH - 1 || i == BATCH {
                 // Before the first batch, at it and just after: pending points count.

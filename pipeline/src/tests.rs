@@ -5,7 +5,7 @@
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-use super::geom::{Pose, V3, norm};
+use super::geom::{Pose, V3};
 use super::*;
 
 const SPEED_MPS: f64 = 0.3;
@@ -133,10 +133,7 @@ fn run(config: PipelineConfig, frames: usize, wheel_overshoot: Option<f64>) -> (
     let built = pipeline.finish();
     let last = built.trajectory.last().unwrap();
     let truth = truth_at(0.0).inverse().compose(&truth_at(last.stamp_s));
-    let err = norm(geom::sub(
-        last.world_from_robot.translation,
-        truth.translation,
-    ));
+    let err = (last.world_from_robot.translation - truth.translation).norm();
     (err, built)
 }
 
@@ -209,7 +206,7 @@ fn position_errors(built: &BuiltCloud) -> Vec<f64> {
         .iter()
         .map(|t| {
             let truth = truth_at(0.0).inverse().compose(&truth_at(t.stamp_s));
-            norm(geom::sub(t.world_from_robot.translation, truth.translation))
+            (t.world_from_robot.translation - truth.translation).norm()
         })
         .collect()
 }
@@ -348,7 +345,7 @@ fn levelling_restores_roll_pitch_and_height_and_keeps_yaw() {
     // (z = 0) from there; the estimate has 1 degree of pitch and 2 cm of height error.
     let truth = Pose::from_xyz_rpy([1.0, 0.5, 0.0], [0.0, 0.0, 0.3]);
     let n_r = truth.inverse().apply_vector(V3::new(0.0, 0.0, 1.0));
-    let d_r = -geom::dot(n_r, truth.inverse().apply(V3::new(0.0, 0.0, 0.0)));
+    let d_r = -n_r.dot(&truth.inverse().apply(V3::new(0.0, 0.0, 0.0)));
     let estimate = Pose::from_xyz_rpy([1.0, 0.5, 0.02], [0.0, 0.0175, 0.3]);
     let fixed = level_with_ground(&estimate, (n_r, d_r), (V3::new(0.0, 0.0, 1.0), 0.0));
     let rpy = fixed.rpy();

@@ -14,7 +14,7 @@
 //! The result is `robot_prev_from_robot_cur`, converted through the camera mount.
 
 use super::config::VisualOdometryConfig;
-use super::geom::{Pose, V3, cross, dot, norm, scale, solve_spd, sub, symmetric_eigen};
+use super::geom::{Pose, V3, solve_spd, symmetric_eigen};
 
 /// One D435 depth frame with its intrinsics.
 #[derive(Debug, Clone, PartialEq)]
@@ -80,21 +80,17 @@ impl DepthImage {
         // Neighbours across a depth discontinuity (more than 5 % of the depth away) would give a
         // normal that belongs to neither surface: no normal there.
         let near = |q: V3| ((q[2] - p[2]).abs() <= 0.05 * p[2]).then_some(q);
-        let dx = sub(
-            near(self.vertex(u + step, v, config)?)?,
-            near(self.vertex(u - step, v, config)?)?,
-        );
-        let dy = sub(
-            near(self.vertex(u, v + step, config)?)?,
-            near(self.vertex(u, v - step, config)?)?,
-        );
-        let n = cross(dx, dy);
-        let len = norm(n);
+        let dx =
+            near(self.vertex(u + step, v, config)?)? - near(self.vertex(u - step, v, config)?)?;
+        let dy =
+            near(self.vertex(u, v + step, config)?)? - near(self.vertex(u, v - step, config)?)?;
+        let n = dx.cross(&dy);
+        let len = n.norm();
         if !(len > 0.0) {
             return None;
         }
-        let n = scale(n, 1.0 / len);
-        Some(if dot(n, p) > 0.0 { scale(n, -1.0) } else { n })
+        let n = n * (1.0 / len);
+        Some(if n.dot(&p) > 0.0 { -n } else { n })
     }
 
     /// Points on the stride grid, optical frame.
@@ -162,13 +158,13 @@ pub fn register_depth(
             ) else {
                 continue;
             };
-            let r = dot(normal, sub(q, target));
+            let r = normal.dot(&(q - target));
             if r.abs() > config.max_residual_m {
                 continue;
             }
             let k = 0.01;
             let w = if r.abs() <= k { 1.0 } else { k / r.abs() };
-            let jw = cross(q, normal);
+            let jw = q.cross(&normal);
             let j = [jw[0], jw[1], jw[2], normal[0], normal[1], normal[2]];
             for a in 0..6 {
                 g[a] += w * j[a] * r;
@@ -276,8 +272,8 @@ fn degenerate_robot_axes(
         }
         // Rotate the camera-frame direction's rotation and translation parts into the robot frame
         // (the lever arm of the mount is ignored: only which axes are weak matters here).
-        let w = super::geom::mat_vec(&r, V3::new(vectors[0][e], vectors[1][e], vectors[2][e]));
-        let t = super::geom::mat_vec(&r, V3::new(vectors[3][e], vectors[4][e], vectors[5][e]));
+        let w = r * V3::new(vectors[0][e], vectors[1][e], vectors[2][e]);
+        let t = r * V3::new(vectors[3][e], vectors[4][e], vectors[5][e]);
         for k in 0..3 {
             weight[k] += w[k] * w[k];
             weight[k + 3] += t[k] * t[k];

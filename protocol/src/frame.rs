@@ -16,8 +16,6 @@
 use crc::{CRC_32_ISO_HDLC, Crc};
 use serde::Serialize;
 
-use crate::cobs;
-
 /// Size of the fixed header.
 pub const HEADER_LEN: usize = 6;
 /// Size of the CRC trailer.
@@ -31,13 +29,17 @@ pub const MAX_RAW_LEN: usize = 250;
 pub const MAX_PAYLOAD_LEN: usize = MAX_RAW_LEN - HEADER_LEN - CRC_LEN;
 
 // COBS of MAX_RAW_LEN bytes plus the delimiter must fit MAX_FRAME_LEN.
-const _: () = assert!(cobs::max_encoded_len(MAX_RAW_LEN) < MAX_FRAME_LEN);
+const _: () = assert!(cobs::max_encoding_length(MAX_RAW_LEN) < MAX_FRAME_LEN);
+// A raw frame is shorter than one 254-byte COBS block. Only there do COBS encoders differ (some
+// end a block of exactly 254 non-zero bytes with an extra 0x01), so below it the `cobs` crate
+// writes the bytes of the reference encoding (see the tests).
+const _: () = assert!(MAX_RAW_LEN < 254);
 
 const CRC32: Crc<u32> = Crc::<u32>::new(&CRC_32_ISO_HDLC);
 
 /// Worst-case encoded frame length (delimiter included) for a payload of up to `payload_len` bytes.
 pub const fn max_frame_len(payload_len: usize) -> usize {
-    cobs::max_encoded_len(HEADER_LEN + payload_len + CRC_LEN) + 1
+    cobs::max_encoding_length(HEADER_LEN + payload_len + CRC_LEN) + 1
 }
 
 /// Header flag bits.
@@ -146,7 +148,9 @@ pub fn encode_raw(header: Header, payload: &[u8], out: &mut [u8]) -> Result<usiz
     raw[HEADER_LEN..HEADER_LEN + payload.len()].copy_from_slice(payload);
     let crc = CRC32.checksum(&raw[..HEADER_LEN + payload.len()]);
     raw[HEADER_LEN + payload.len()..raw_len].copy_from_slice(&crc.to_le_bytes());
-    let n = cobs::encode(&raw[..raw_len], out).ok_or(EncodeError::OutputTooSmall)?;
+    // `try_encode` can return a length past the end of `out` when the block's last code byte
+    // would fall just outside it; the delimiter's bounds check below refuses that case too.
+    let n = cobs::try_encode(&raw[..raw_len], out).map_err(|_| EncodeError::OutputTooSmall)?;
     *out.get_mut(n).ok_or(EncodeError::OutputTooSmall)? = 0;
     Ok(n + 1)
 }
@@ -332,7 +336,8 @@ impl<const N: usize> Deframer<N> {
     }
 }
 
-/// Decodes one COBS block (delimiter stripped) in place and checks length and CRC.
+/// Decodes one COBS block (delimiter stripped, so it is non-empty and has no 0x00) in place and
+/// checks length and CRC.
 fn decode_block(block: &mut [u8]) -> Result<Frame<'_>, DeframeError> {
     let len = cobs::decode_in_place(block).map_err(|_| DeframeError::Cobs)?;
     let raw = &block[..len];
@@ -354,6 +359,7 @@ fn decode_block(block: &mut [u8]) -> Result<Frame<'_>, DeframeError> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use proptest::prelude::*;
 
     fn frame_bytes(header: Header, payload: &[u8]) -> Vec<u8> {
         let mut out = [0u8; MAX_FRAME_LEN];
@@ -387,7 +393,7 @@ mod tests {
         let mut raw = vec![1, 2, 0, 7, 0, 0];
         raw.extend(crc);
         let mut expect = vec![0u8; 16];
-        let n = cobs::encode(&raw, &mut expect).unwrap();
+        let n = cobs::try_encode(&raw, &mut expect).unwrap();
         expect.truncate(n);
         expect.push(0);
         assert_eq!(bytes, expect);
@@ -448,5 +454,90 @@ mod tests {
         got.clear();
         d.feed_all(&[0x03, 0x01, 0x02, 0x00], |r| got.push(r.map(|f| f.header)));
         assert_eq!(got, vec![Err(DeframeError::TooShort { len: 2 })]);
+    }
+
+    fn cobs_of(raw: &[u8]) -> Vec<u8> {
+        let mut out = vec![0; cobs::max_encoding_length(raw.len())];
+        let n = cobs::try_encode(raw, &mut out).unwrap();
+        out.truncate(n);
+        out
+    }
+
+    /// COBS as Cheshire and Baker's paper writes it, byte for byte: the wire encoding.
+    fn reference_cobs(raw: &[u8]) -> Vec<u8> {
+        let mut out = vec![0];
+        let mut code_at = 0;
+        for &byte in raw {
+            if byte != 0 {
+                out.push(byte);
+            }
+            if byte == 0 || out.len() - code_at == 0xFF {
+                out[code_at] = u8::try_from(out.len() - code_at).unwrap();
+                code_at = out.len();
+                out.push(0);
+            }
+        }
+        out[code_at] = u8::try_from(out.len() - code_at).unwrap();
+        out
+    }
+
+    #[test]
+    fn cobs_wire_vectors() {
+        assert_eq!(cobs_of(&[0x00]), [0x01, 0x01]);
+        assert_eq!(cobs_of(&[0x00, 0x00]), [0x01, 0x01, 0x01]);
+        assert_eq!(cobs_of(&[0x00, 0x11, 0x00]), [0x01, 0x02, 0x11, 0x01]);
+        assert_eq!(
+            cobs_of(&[0x11, 0x22, 0x00, 0x33]),
+            [0x03, 0x11, 0x22, 0x02, 0x33]
+        );
+        assert_eq!(
+            cobs_of(&[0x11, 0x00, 0x00, 0x00]),
+            [0x02, 0x11, 0x01, 0x01, 0x01]
+        );
+        let run: Vec<u8> = (1..=253).collect();
+        let mut expected = vec![0xFE];
+        expected.extend(&run);
+        assert_eq!(cobs_of(&run), expected);
+        assert_eq!(reference_cobs(&run), expected);
+    }
+
+    #[test]
+    fn truncated_block_is_a_cobs_error() {
+        // The code byte 0x0C promises eleven bytes; two follow.
+        assert_eq!(
+            decode_block(&mut [0x0C, 0x11, 0x22]),
+            Err(DeframeError::Cobs)
+        );
+    }
+
+    proptest! {
+        #[test]
+        fn cobs_is_the_reference_encoding_up_to_max_raw_len(
+            raw in proptest::collection::vec(prop_oneof![Just(0u8), any::<u8>()], 1..=MAX_RAW_LEN)
+        ) {
+            let encoded = cobs_of(&raw);
+            prop_assert_eq!(&encoded, &reference_cobs(&raw));
+            let mut block = encoded.clone();
+            let n = cobs::decode_in_place(&mut block).unwrap();
+            prop_assert_eq!(&block[..n], &raw[..]);
+        }
+
+        #[test]
+        fn encode_refuses_a_buffer_one_byte_short(
+            payload in proptest::collection::vec(prop_oneof![Just(0u8), any::<u8>()], 0..=MAX_PAYLOAD_LEN)
+        ) {
+            let header = Header::new(1, 1, Flags::NONE);
+            let len = frame_bytes(header, &payload).len();
+            let mut short = vec![0; len - 1];
+            prop_assert_eq!(encode_raw(header, &payload, &mut short), Err(EncodeError::OutputTooSmall));
+        }
+
+        #[test]
+        fn cobs_decode_never_panics(block in proptest::collection::vec(1u8..=255, 1..600)) {
+            let mut buf = block.clone();
+            let _ = cobs::decode_in_place(&mut buf);
+            let mut buf = block;
+            let _ = decode_block(&mut buf);
+        }
     }
 }

@@ -15,7 +15,7 @@
 //!  COBS( version u8 | msg id u16 LE | seq u16 LE | flags u8 | postcard payload | CRC-32 u32 LE ) 0x00
 //! ```
 //!
-//! - COBS ([`cobs`]) removes every 0x00 so that 0x00 delimits frames; a receiver that starts mid-frame
+//! - COBS (the [`cobs`] crate) removes every 0x00 so that 0x00 delimits frames; a receiver that starts mid-frame
 //!   or sees garbage resynchronises at the next 0x00. All ends use the one IO-free
 //!   [`frame::Deframer`].
 //! - CRC-32/ISO-HDLC over header and payload. A frame with a bad CRC is dropped and counted.
@@ -59,7 +59,6 @@
 
 pub mod auth;
 pub mod bounded;
-pub mod cobs;
 pub mod common;
 pub mod esc;
 pub mod frame;

@@ -26,6 +26,7 @@ use std::sync::Mutex;
 
 use hil_sim::demo::{self, DemoOptions, DemoReport};
 use hil_sim::lockstep::Faults;
+use passangle_tests::scratch;
 
 /// Every angle within this of the truth. The paper's Table 1 reads about 1 degree; the
 /// measurement-validity work aims at 0.5 on held-out vehicles (its bench reports that figure).
@@ -43,12 +44,6 @@ fn options(vehicle: &str, root: &Path) -> DemoOptions {
         realtime: false,
         faults: Faults::default(),
     }
-}
-
-fn scratch(name: &str) -> PathBuf {
-    let root = std::env::temp_dir().join(format!("passangle-demo-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&root);
-    root
 }
 
 /// One line of the golden file: what must not move without review.

@@ -13,13 +13,14 @@
 //! debug build.)
 #![allow(clippy::unwrap_used)]
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use hil_sim::scenario::Scenario;
 use hil_sim::trajectory::Trajectory;
 use hil_sim::vlp16::{Datagram, Vlp16Sim};
 use onboard::process::{ProcessConfig, REORDER_WINDOW_S, RunBuilder, build_cloud};
 use onboard::recorder::{RecordedOutcome, RunRecorder};
+use passangle_tests::temp_root;
 use protocol::bounded::Text;
 use protocol::mcu::Odometry;
 use protocol::radio::{StartMeasurement, Zone};
@@ -131,13 +132,6 @@ fn config() -> ProcessConfig {
     c.pipeline.fusion.use_laser = false;
     c.pipeline.map.refine = false;
     c
-}
-
-fn temp_root(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("passangle-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
 }
 
 #[test]

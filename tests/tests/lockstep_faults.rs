@@ -15,13 +15,13 @@ use hil_sim::demo::{self, DemoOptions};
 use hil_sim::esc_model::EscFault;
 use hil_sim::lockstep::{self, Faults, Observed};
 use onboard::recorder::{RecordedOutcome, Recording};
+use passangle_tests::scratch;
 
 /// The fault time: the robot drives by then (about 2 s after the start).
 const FAULT_S: f64 = 6.0;
 
 fn observe(name: &str, faults: Faults) -> (Observed, PathBuf) {
-    let root = std::env::temp_dir().join(format!("passangle-faults-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&root);
+    let root = scratch(&format!("faults-{name}"));
     let o = DemoOptions {
         scenario: demo::scenario_for("sedan"),
         run_root: root.clone(),

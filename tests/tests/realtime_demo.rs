@@ -4,6 +4,7 @@
 
 use hil_sim::demo::{self, DemoOptions};
 use hil_sim::lockstep::Faults;
+use passangle_tests::scratch;
 
 /// The real-time demo (threads, loopback UDP, the wall clock) still delivers. Its angles depend
 /// on the machine's load, so the bar is wide: this catches a broken wall-clock path, not a
@@ -14,8 +15,7 @@ use hil_sim::lockstep::Faults;
     ignore = "real time: needs the optimised build to keep up"
 )]
 fn realtime_demo_delivers() {
-    let root = std::env::temp_dir().join(format!("passangle-demo-rt-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&root);
+    let root = scratch("demo-rt");
     let o = DemoOptions {
         scenario: demo::scenario_for("van"),
         run_root: root.clone(),

@@ -41,6 +41,7 @@ use onboard::recorder::{RecordedOutcome, Recording};
 use onboard::service::{
     self, Io, LidarPacket, NoNotify, ProcessInput, Processed, Processor, ServiceStats, SharedStats,
 };
+use passangle_tests::temp_root;
 use protocol::auth::{KEY_LEN, Key};
 use protocol::bounded::Text;
 use protocol::common::LogLine;
@@ -241,13 +242,6 @@ struct Rig {
     threads: Vec<JoinHandle<()>>,
 }
 
-fn temp_dir(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("passangle-e2e-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
-}
-
 impl Rig {
     fn start(name: &str, radio: PipeConfig, malformed_every: Option<u64>) -> Self {
         Self::start_seeded(name, radio, malformed_every, 77)
@@ -273,7 +267,7 @@ impl Rig {
         let turn = ONE_RIG_AT_A_TIME
             .lock()
             .unwrap_or_else(std::sync::PoisonError::into_inner);
-        let dir = temp_dir(name);
+        let dir = temp_root(name);
         let key = Key([0x5a; KEY_LEN]);
         onboard::config::write_key(&dir.join("pairing.key"), &key).unwrap();
         let mut text = format!(
