@@ -95,8 +95,8 @@ pub(crate) fn surface_noise(points: &[V3]) -> Option<f64> {
         }
         let ssr: f64 = pts
             .map(|p| {
-                let d = super::geom::sub(p, centre);
-                super::geom::dot(d, normal).powi(2)
+                let d = p - centre;
+                d.dot(&normal).powi(2)
             })
             .sum();
         sigmas.push((ssr / (group.len() - 3) as f64).sqrt());

@@ -2,12 +2,11 @@
 //! frame, a least-squares plane, a circle fit with its covariance, and the median.
 
 pub use passangle_geom::V3;
-pub(crate) use passangle_geom::{add, cross, dot, scale, sub};
 
 /// Unit vector along `a`, or `None` for a (near) zero vector.
 pub(crate) fn unit(a: V3) -> Option<V3> {
-    let n = dot(a, a).sqrt();
-    (n > 1e-12 && n.is_finite()).then(|| scale(a, 1.0 / n))
+    let n = a.dot(&a).sqrt();
+    (n > 1e-12 && n.is_finite()).then(|| a * (1.0 / n))
 }
 
 /// A right-handed orthonormal frame given in cloud coordinates: the vehicle frame (x forward,
@@ -28,8 +27,8 @@ impl VehicleFrame {
     /// A frame with z along `up` (unit) and x along `forward` projected onto the plane normal to `up`.
     pub(crate) fn from_up_forward(origin_in_cloud: V3, up: V3, forward: V3) -> Option<Self> {
         let z = unit(up)?;
-        let x = unit(sub(forward, scale(z, dot(forward, z))))?;
-        let y = cross(z, x);
+        let x = unit(forward - (z * forward.dot(&z)))?;
+        let y = z.cross(&x);
         Some(Self {
             origin_in_cloud,
             x_axis_in_cloud: x,
@@ -40,36 +39,27 @@ impl VehicleFrame {
 
     /// Coordinates of a cloud point in this frame.
     pub fn vehicle_from_cloud(&self, p_in_cloud: V3) -> V3 {
-        let d = sub(p_in_cloud, self.origin_in_cloud);
+        let d = p_in_cloud - self.origin_in_cloud;
         V3::new(
-            dot(d, self.x_axis_in_cloud),
-            dot(d, self.y_axis_in_cloud),
-            dot(d, self.z_axis_in_cloud),
+            d.dot(&self.x_axis_in_cloud),
+            d.dot(&self.y_axis_in_cloud),
+            d.dot(&self.z_axis_in_cloud),
         )
     }
 
     /// Cloud coordinates of a point given in this frame.
     pub fn cloud_from_vehicle(&self, p_in_vehicle: V3) -> V3 {
-        add(
-            self.origin_in_cloud,
-            add(
-                add(
-                    scale(self.x_axis_in_cloud, p_in_vehicle[0]),
-                    scale(self.y_axis_in_cloud, p_in_vehicle[1]),
-                ),
-                scale(self.z_axis_in_cloud, p_in_vehicle[2]),
-            ),
-        )
+        self.origin_in_cloud
+            + (((self.x_axis_in_cloud * p_in_vehicle[0])
+                + (self.y_axis_in_cloud * p_in_vehicle[1]))
+                + (self.z_axis_in_cloud * p_in_vehicle[2]))
     }
 
     /// The same axes rotated by `yaw_rad` about z, origin moved to `origin_in_frame` (given in this frame).
     pub(crate) fn yawed(&self, yaw_rad: f64, origin_in_frame: V3) -> Self {
         let (s, c) = yaw_rad.sin_cos();
-        let x = add(
-            scale(self.x_axis_in_cloud, c),
-            scale(self.y_axis_in_cloud, s),
-        );
-        let y = cross(self.z_axis_in_cloud, x);
+        let x = (self.x_axis_in_cloud * c) + (self.y_axis_in_cloud * s);
+        let y = self.z_axis_in_cloud.cross(&x);
         Self {
             origin_in_cloud: self.cloud_from_vehicle(origin_in_frame),
             x_axis_in_cloud: x,
@@ -111,15 +101,15 @@ pub(crate) fn fit_plane(points: impl Iterator<Item = V3> + Clone) -> Option<(V3,
     let (mut n, mut centre) = (0.0, V3::zeros());
     for p in points.clone() {
         n += 1.0;
-        centre = add(centre, p);
+        centre += p;
     }
     if n < 3.0 {
         return None;
     }
-    let centre = scale(centre, 1.0 / n);
+    let centre = centre * (1.0 / n);
     let (mut sxx, mut sxy, mut syy, mut sxz, mut syz) = (0.0, 0.0, 0.0, 0.0, 0.0);
     for p in points {
-        let d = sub(p, centre);
+        let d = p - centre;
         sxx += d[0] * d[0];
         sxy += d[0] * d[1];
         syy += d[1] * d[1];
@@ -324,7 +314,7 @@ mod tests {
             .collect();
         let (n, p) = fit_plane(pts.iter().copied()).unwrap();
         let expect = unit(V3::new(-0.1, 0.05, 1.0)).unwrap();
-        assert!(dot(n, expect) > 1.0 - 1e-12);
+        assert!(n.dot(&expect) > 1.0 - 1e-12);
         assert!((p[2] - (0.1 * p[0] - 0.05 * p[1] + 2.0)).abs() < 1e-12);
     }
 
@@ -339,6 +329,6 @@ mod tests {
         .yawed(0.2, V3::new(0.5, -0.1, 0.0));
         let p = V3::new(3.0, -1.0, 0.7);
         let q = f.cloud_from_vehicle(f.vehicle_from_cloud(p));
-        assert!(sub(p, q).iter().all(|d| d.abs() < 1e-12));
+        assert!((p - q).iter().all(|d| d.abs() < 1e-12));
     }
 }

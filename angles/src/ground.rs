@@ -7,7 +7,7 @@
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-use super::geom::{V3, cross, dot, fit_plane, median, sub, unit};
+use super::geom::{V3, fit_plane, median, unit};
 
 /// Points further than this below a candidate plane count against it.
 const BELOW_M: f64 = 0.10;
@@ -27,13 +27,13 @@ pub(crate) struct Plane {
 
 impl Plane {
     pub fn height(&self, p: V3) -> f64 {
-        dot(self.normal, p) - self.offset
+        self.normal.dot(&p) - self.offset
     }
 
     fn through(normal: V3, point: V3) -> Self {
         Self {
             normal,
-            offset: dot(normal, point),
+            offset: normal.dot(&point),
         }
     }
 }
@@ -66,7 +66,7 @@ pub(crate) fn ransac(
     for i in 0..ITERATIONS {
         let pool = if i % 2 == 0 { &low } else { &sample };
         let [a, b, c] = [0, 1, 2].map(|_| pool[rng.random_range(0..pool.len())]);
-        let Some(mut n) = unit(cross(sub(b, a), sub(c, a))) else {
+        let Some(mut n) = unit((b - a).cross(&(c - a))) else {
             continue;
         };
         if n[2] < 0.0 {

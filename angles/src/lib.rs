@@ -63,7 +63,7 @@ pub use uncertainty::Uncertainty;
 pub use visibility::ScannerView;
 
 use envelope::{EnvelopeParams, lower_envelope};
-use geom::{sub, unit};
+use geom::unit;
 use ground::Plane;
 use tyres::{Seed, TyreFit, TyreParams};
 
@@ -725,7 +725,7 @@ fn settle_frame(
                 sigma,
                 ground_inliers,
                 fits,
-                in_frame: in_frame.into_iter().map(|p| sub(p, shift)).collect(),
+                in_frame: in_frame.into_iter().map(|p| p - shift).collect(),
             });
         }
         let footprints: Vec<TyreFit> = fits.iter().map(|(_, f)| f.clone()).collect();
@@ -903,9 +903,9 @@ fn refine_ends(body: &mut Body, front: Axle, rear: Axle, zone: Zone) {
 /// projection of the points' centroid.
 fn frame_on(plane: Plane, points: &[V3], forward: V3) -> Option<VehicleFrame> {
     let n = points.len() as f64;
-    let c = points.iter().fold(V3::zeros(), |a, p| geom::add(a, *p));
-    let c = geom::scale(c, 1.0 / n);
-    let origin = sub(c, geom::scale(plane.normal, plane.height(c)));
+    let c = points.iter().fold(V3::zeros(), |a, p| a + *p);
+    let c = c * (1.0 / n);
+    let origin = c - (plane.normal * plane.height(c));
     VehicleFrame::from_up_forward(origin, plane.normal, forward)
 }
 
@@ -1027,7 +1027,7 @@ fn axle_heading(frame: &VehicleFrame, fits: &[(TyrePosition, TyreFit)]) -> Optio
             frame.cloud_from_vehicle(V3::new(x, y, 0.0))
         })
     };
-    unit(sub(mid(true)?, mid(false)?))
+    unit(mid(true)? - mid(false)?)
 }
 
 /// Largest left-right difference of one axle's static loaded radii that counts as agreement

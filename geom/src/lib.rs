@@ -33,34 +33,6 @@ pub type Twist6 = [f64; 6];
 // 3-vector's dot product is `(x x' + y y') + z z'`, a matrix product sums over k = 0, 1, 2 in
 // turn), so results are bit for bit those formulas'. A division by a count is written
 // `a * (1.0 / n)` where the formulas multiply by the reciprocal: `a / n` rounds differently.
-// The free functions below name the same operations for the calculator (`angles`), which
-// still calls them.
-
-/// `a + b`.
-#[inline]
-pub fn add(a: V3, b: V3) -> V3 {
-    a + b
-}
-/// `a - b`.
-#[inline]
-pub fn sub(a: V3, b: V3) -> V3 {
-    a - b
-}
-/// `s * a`, component by component.
-#[inline]
-pub fn scale(a: V3, s: f64) -> V3 {
-    a * s
-}
-/// Dot product, `(a0 b0 + a1 b1) + a2 b2`.
-#[inline]
-pub fn dot(a: V3, b: V3) -> f64 {
-    a.dot(&b)
-}
-/// Cross product.
-#[inline]
-pub fn cross(a: V3, b: V3) -> V3 {
-    a.cross(&b)
-}
 
 /// The identity matrix.
 pub const IDENTITY: M3 = M3::new(1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0);
