@@ -586,13 +586,9 @@ pub fn compute_angles(
         trajectory_per_m: config.trajectory_x_sigma_per_m,
     };
     let mut findings = find_angles(&body.samples, front, rear, config.zone, &frame, inputs);
-    not_covered.extend(end_reaches(
-        &mut findings,
-        (&settled.in_frame, &frame),
-        config,
-        (front, rear),
-        (body.noise_sigma_m, body_floor_m(config, noise_m)),
-    ));
+    if let Some(sight) = scan_sight(config, &frame, &settled.in_frame, &body, noise_m) {
+        not_covered.extend(end_reaches(&mut findings, &sight, front, rear));
+    }
     let not_measured = not_measured(&mut findings, not_covered);
     let plane = settled.plane;
     let heading = frame.x_axis_in_cloud;
@@ -1537,61 +1533,40 @@ fn find_angles(
     out
 }
 
+/// What the scanner saw from its path (`visibility`), with its view and the path in `config`;
+/// `None` without them. `noise_m` is the calculator's noise sigma, which sets the floor's cut-off
+/// as in `classify`; the body's sets the tolerance.
+fn scan_sight(
+    config: &AnglesConfig,
+    frame: &VehicleFrame,
+    in_frame: &[V3],
+    body: &Body,
+    noise_m: f64,
+) -> Option<visibility::Sight> {
+    let path: Vec<V3> = config
+        .scan_path_in_cloud
+        .iter()
+        .map(|p| frame.vehicle_from_cloud(*p))
+        .collect();
+    visibility::Sight::new(
+        in_frame,
+        body_floor_m(config, noise_m),
+        &path,
+        config.scanner_view?,
+        3.0 * body.noise_sigma_m,
+    )
+}
+
 /// How far the approach's and the departure's witness parts may go on beyond the witnesses
 /// (`visibility`), into their uncertainties; a part the scan does not show ending within
-/// [`visibility::MAX_REACH_M`] leaves its angle not measured (returned). Needs the scanner's view
-/// and the scan's path (else the findings stay as they are). `in_frame`: every usable point,
-/// vehicle frame; `noise`: the body's noise sigma and the floor's cut-off height.
+/// [`visibility::MAX_REACH_M`] leaves its angle not measured (returned).
 fn end_reaches(
     findings: &mut Findings,
-    (in_frame, frame): (&[V3], &VehicleFrame),
-    config: &AnglesConfig,
-    (front, rear): (Axle, Axle),
-    (noise_sigma_m, floor_m): (f64, f64),
+    sight: &visibility::Sight,
+    front: Axle,
+    rear: Axle,
 ) -> Vec<NotMeasured> {
     let mut out = Vec::new();
-    let Some(view) = config.scanner_view else {
-        return out;
-    };
-    let path = visibility::thin_path(
-        &config
-            .scan_path_in_cloud
-            .iter()
-            .map(|p| frame.vehicle_from_cloud(*p))
-            .collect::<Vec<_>>(),
-    );
-    let path = path.as_slice();
-    let Some((path_lo, path_hi)) = path
-        .iter()
-        .map(|p| p[0])
-        .fold(None, |r: Option<(f64, f64)>, x| {
-            Some(r.map_or((x, x), |(a, b)| (a.min(x), b.max(x))))
-        })
-    else {
-        return out;
-    };
-    // The rays of interest run from the path to the vehicle's underside: the map covers the path
-    // and the vehicle's width beside it.
-    let half_width_m = path.iter().map(|p| p[1].abs()).fold(0.0, f64::max) + 2.0;
-    let map = visibility::HeightMap::new(
-        in_frame,
-        floor_m,
-        [path_lo - 1.0, path_hi + 1.0],
-        [-half_width_m, half_width_m],
-    );
-    let mut body_by_x: Vec<V3> = in_frame
-        .iter()
-        .filter(|p| p[2] > floor_m)
-        .copied()
-        .collect();
-    body_by_x.sort_by(|a, b| a[0].total_cmp(&b[0]));
-    let sight = visibility::Sight {
-        map: &map,
-        body_by_x: &body_by_x,
-        path,
-        view,
-        tolerance_m: 3.0 * noise_sigma_m,
-    };
     for (finding, quantity, axle, outward, name) in [
         (
             &mut findings.approach,
@@ -1610,7 +1585,7 @@ fn end_reaches(
     ] {
         let Some(f) = finding else { continue };
         let w = f.witness_in_vehicle;
-        let Some(reach) = visibility::end_reach(&sight, w, outward) else {
+        let Some(reach) = visibility::end_reach(sight, w, outward) else {
             out.push(NotMeasured {
                 quantity,
                 kind: Absence::NotCovered,

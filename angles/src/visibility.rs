@@ -91,7 +91,7 @@ const PATH_STEP_M: f64 = 0.02;
 const MAX_EXTENT_M: f64 = 30.0;
 
 /// The lowest body point of each column of the vehicle frame's x-y grid.
-pub(crate) struct HeightMap {
+struct HeightMap {
     x0: f64,
     y0: f64,
     nx: usize,
@@ -103,7 +103,7 @@ impl HeightMap {
     /// Columns over `x_range` x `y_range` (vehicle frame, metres; each at most
     /// [`MAX_EXTENT_M`] long, the rest is left out); points at or below `floor_m` (ground) and
     /// outside the box are left out.
-    pub(crate) fn new(points: &[V3], floor_m: f64, x_range: [f64; 2], y_range: [f64; 2]) -> Self {
+    fn new(points: &[V3], floor_m: f64, x_range: [f64; 2], y_range: [f64; 2]) -> Self {
         let cells = |[lo, hi]: [f64; 2]| {
             let n = ((hi - lo).min(MAX_EXTENT_M) / CELL_M).floor() + 1.0;
             if n.is_finite() && n >= 1.0 {
@@ -138,14 +138,14 @@ impl HeightMap {
     }
 
     /// The lowest body point of the column holding `(x, y)`; infinity where there is none.
-    pub(crate) fn lowest(&self, x: f64, y: f64) -> f64 {
+    fn lowest(&self, x: f64, y: f64) -> f64 {
         self.index(x, y)
             .map_or(f64::INFINITY, |i| f64::from(self.lowest[i]))
     }
 }
 
 /// The path's positions at least [`PATH_STEP_M`] apart, in order.
-pub(crate) fn thin_path(path: &[V3]) -> Vec<V3> {
+fn thin_path(path: &[V3]) -> Vec<V3> {
     let mut kept: Vec<V3> = Vec::with_capacity(path.len());
     for &p in path {
         if kept.last().is_none_or(|q| (p - q).norm() >= PATH_STEP_M) {
@@ -155,22 +155,61 @@ pub(crate) fn thin_path(path: &[V3]) -> Vec<V3> {
     kept
 }
 
-/// Line of sight from the scan's path, vehicle frame.
-pub(crate) struct Sight<'a> {
+/// What the scanner saw and from where, vehicle frame: the rays' blockers, the returns, the
+/// path.
+pub(crate) struct Sight {
     /// Blocks the rays.
-    pub map: &'a HeightMap,
+    map: HeightMap,
     /// The body's points (above the floor), sorted by x.
-    pub body_by_x: &'a [V3],
+    body_by_x: Vec<V3>,
     /// Where the scanner was ([`thin_path`]).
-    pub path: &'a [V3],
+    path: Vec<V3>,
     /// What it sees from there.
-    pub view: ScannerView,
+    view: ScannerView,
     /// How far a ray may climb above a column's lowest point before it counts as blocked, and how
     /// far above a place a return still counts as the part going on there (metres; noise).
-    pub tolerance_m: f64,
+    tolerance_m: f64,
 }
 
-impl Sight<'_> {
+impl Sight {
+    /// The sight of a scan: `points` every usable point (those at or below `floor_m` are floor),
+    /// `path` the scanner's positions; `None` without a path.
+    pub(crate) fn new(
+        points: &[V3],
+        floor_m: f64,
+        path: &[V3],
+        view: ScannerView,
+        tolerance_m: f64,
+    ) -> Option<Self> {
+        let path = thin_path(path);
+        let (lo, hi) = path
+            .iter()
+            .map(|p| p[0])
+            .fold(None, |r: Option<(f64, f64)>, x| {
+                Some(r.map_or((x, x), |(a, b)| (a.min(x), b.max(x))))
+            })?;
+        // The rays of interest run from the path to the vehicle's underside: the map covers the
+        // path and the vehicle's width beside it.
+        let half_width_m = path.iter().map(|p| p[1].abs()).fold(0.0, f64::max) + 2.0;
+        let map = HeightMap::new(
+            points,
+            floor_m,
+            [lo - 1.0, hi + 1.0],
+            [-half_width_m, half_width_m],
+        );
+        let mut body_by_x: Vec<V3> = points.iter().filter(|p| p[2] > floor_m).copied().collect();
+        body_by_x.sort_by(|a, b| a[0].total_cmp(&b[0]));
+        Some(Self {
+            map,
+            body_by_x,
+            path,
+            view,
+            tolerance_m,
+        })
+    }
+}
+
+impl Sight {
     /// Whether `c` was in view, unblocked, from some position of the path.
     fn seen(&self, c: V3) -> bool {
         self.path.iter().any(|&o| self.seen_from(o, c))
@@ -215,7 +254,7 @@ impl Sight<'_> {
 /// Two things lengthen it: returns beyond the witness at its height (the envelope's end
 /// estimate weighed them as the range noise's smear, but the surface may go on among them), and
 /// places out of view (the part may go on unseen).
-pub(crate) fn end_reach(sight: &Sight<'_>, witness: V3, outward: f64) -> Option<f64> {
+pub(crate) fn end_reach(sight: &Sight, witness: V3, outward: f64) -> Option<f64> {
     let steps = (MAX_REACH_M / WALK_M).round() as usize;
     (1..=steps).find_map(|k| {
         let walked = k as f64 * WALK_M;
@@ -254,16 +293,7 @@ mod tests {
     }
 
     fn reach(points: &[V3], path: &[V3], witness: V3) -> Option<f64> {
-        let map = HeightMap::new(points, 0.03, [-4.0, 5.0], [-2.0, 2.0]);
-        let mut by_x = points.to_vec();
-        by_x.sort_by(|a, b| a[0].total_cmp(&b[0]));
-        let sight = Sight {
-            map: &map,
-            body_by_x: &by_x,
-            path,
-            view: ScannerView::VLP16,
-            tolerance_m: 0.01,
-        };
+        let sight = Sight::new(points, 0.03, path, ScannerView::VLP16, 0.01)?;
         end_reach(&sight, witness, 1.0)
     }
 
