@@ -67,7 +67,7 @@ use self::map::{CloudAccumulator, FeatureMap, FloorAccumulator};
 use self::registration::{
     JointProblem, Scan, keep_components, register_joint, register_two_step, unaided,
 };
-use self::slip::SlipMeter;
+use self::slip::{ScanAt, SlipMeter};
 use self::visual_odometry::{VisualOdometry, VisualStep};
 
 /// One lidar return as the pipeline needs it.
@@ -781,14 +781,15 @@ impl Pipeline {
         self.stats.wheel_scale = self.fusion.wheel_scale();
         self.stats.wheel_yaw_bias_radps = self.fusion.wheel_yaw_bias_radps();
         if let Some(wheel) = wheel_pose_at(&self.wheel, stamp_s) {
-            self.measure_slip((stamp_s, &wheel), scan, &world_from_robot);
+            let at = ScanAt {
+                frame: frame_index,
+                stamp_s,
+                wheel,
+                world_from_robot,
+            };
+            self.measure_slip(&at, scan);
             if self.slip.wants_keyframe(frame_index, &wheel) {
-                self.slip.add_keyframe(
-                    (frame_index, stamp_s),
-                    wheel,
-                    world_from_robot,
-                    Arc::clone(&target),
-                );
+                self.slip.add_keyframe(at, Arc::clone(&target));
             }
         }
         self.previous = Some(PreviousFrame {
@@ -800,16 +801,9 @@ impl Pipeline {
 
     /// Register the frame against the keyframe a baseline behind it, if any, and hand the
     /// distance pairs and the yaw evidence to fusion.
-    fn measure_slip(
-        &mut self,
-        (stamp_s, wheel): (f64, &Pose),
-        scan: Scan<'_>,
-        world_from_robot: &Pose,
-    ) {
-        if self.slip.is_due(wheel) {
-            let measured =
-                self.slip
-                    .measure((stamp_s, wheel), world_from_robot, scan, &self.config.laser);
+    fn measure_slip(&mut self, at: &ScanAt, scan: Scan<'_>) {
+        if self.slip.is_due(&at.wheel) {
+            let measured = self.slip.measure(at, scan, &self.config.laser);
             for (laser_m, wheel_m) in measured.distances {
                 self.fusion
                     .add_scale_measurement(laser_m, wheel_m, measured.interval_s);

@@ -287,7 +287,8 @@ impl CloudAccumulator {
                 &mut self.blocks,
                 None,
                 &self.pending,
-                (self.voxel_m, self.blocking),
+                self.voxel_m,
+                self.blocking,
             );
             self.pending.clear();
         }
@@ -301,7 +302,8 @@ impl CloudAccumulator {
             &mut overlay,
             Some(&self.blocks),
             &self.pending,
-            (self.voxel_m, self.blocking),
+            self.voxel_m,
+            self.blocking,
         );
         (overlay, added)
     }
@@ -383,7 +385,8 @@ fn add_grouped(
     blocks: &mut VoxelMap<Block>,
     base: Option<&VoxelMap<Block>>,
     points: &[V3],
-    (voxel_m, blocking): (f64, Blocking),
+    voxel_m: f64,
+    blocking: Blocking,
 ) -> usize {
     // Counting sort of the points by block, stable (first-seen block order).
     let mut group_of_block: VoxelMap<u32> = VoxelMap::default();

@@ -67,6 +67,20 @@ struct Keyframe {
     target: Arc<FeatureTarget>,
 }
 
+/// A scan as the slip meter takes it: its frame index, its start, and the robot's pose then by
+/// the wheels and by the pipeline's estimate.
+#[derive(Debug, Clone, Copy)]
+pub struct ScanAt {
+    /// The scan's frame index.
+    pub frame: u64,
+    /// The scan's start, seconds.
+    pub stamp_s: f64,
+    /// Wheel odometry's pose at the scan's start.
+    pub wheel: Pose,
+    /// The estimated pose at the scan's start.
+    pub world_from_robot: Pose,
+}
+
 /// What one long-baseline registration measured ([`SlipMeter::measure`]).
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct Measurement {
@@ -103,19 +117,18 @@ impl SlipMeter {
         }
     }
 
-    /// Register `scan` (starting at `stamp_s`, estimated at `world_from_robot`, wheel pose
-    /// `wheel`) against the newest keyframe at least a baseline behind it by the wheels, and drop
+    /// Register `scan` (taken `at`) against the newest keyframe at least a baseline behind it by the wheels, and drop
     /// that keyframe and the older ones. Returns the `(laser, wheel)` distance pairs of the
     /// translation components (x, y of the keyframe's robot frame) that the registration
     /// determined and the wheels moved along by at least half the baseline, and the yaw evidence
     /// when it determined the yaw; empty when no keyframe is far enough behind.
     pub fn measure(
         &mut self,
-        (stamp_s, wheel): (f64, &Pose),
-        world_from_robot: &Pose,
+        at: &ScanAt,
         scan: Scan<'_>,
         config: &LaserOdometryConfig,
     ) -> Measurement {
+        let (stamp_s, wheel, world_from_robot) = (at.stamp_s, &at.wheel, &at.world_from_robot);
         let far_enough = |k: &Keyframe| travelled(&k.wheel, wheel) >= self.baseline_m;
         let Some(newest_far) = self.keyframes.iter().rposition(far_enough) else {
             return Measurement::default();
@@ -165,19 +178,14 @@ impl SlipMeter {
             })
     }
 
-    /// Keep scan number `frame` as a keyframe (see [`Self::wants_keyframe`]).
-    pub fn add_keyframe(
-        &mut self,
-        (frame, stamp_s): (u64, f64),
-        wheel: Pose,
-        world_from_robot: Pose,
-        target: Arc<FeatureTarget>,
-    ) {
+    /// Keep the scan taken `at` as a keyframe (see [`Self::wants_keyframe`]), with its features
+    /// indexed as a registration `target`.
+    pub fn add_keyframe(&mut self, at: ScanAt, target: Arc<FeatureTarget>) {
         self.keyframes.push_back(Keyframe {
-            frame,
-            stamp_s,
-            wheel,
-            world_from_robot,
+            frame: at.frame,
+            stamp_s: at.stamp_s,
+            wheel: at.wheel,
+            world_from_robot: at.world_from_robot,
             target,
         });
     }
@@ -193,6 +201,16 @@ fn travelled(a: &Pose, b: &Pose) -> f64 {
 mod tests {
     use super::*;
     use crate::test_support::{moved, scan_of, scene, target_of};
+
+    /// A scan taken at `pose` by both the wheels and the estimate.
+    fn scan_at(frame: u64, stamp_s: f64, pose: Pose) -> ScanAt {
+        ScanAt {
+            frame,
+            stamp_s,
+            wheel: pose,
+            world_from_robot: pose,
+        }
+    }
 
     fn at(x_m: f64) -> Pose {
         Pose::from_xyz_rpy([x_m, 0.0, 0.0], [0.0; 3])
@@ -214,9 +232,7 @@ mod tests {
         let mut meter = SlipMeter::new(0.25);
         assert!(meter.wants_keyframe(0, &at(0.0)));
         meter.add_keyframe(
-            (0, 0.0),
-            at(0.0),
-            at(0.0),
+            scan_at(0, 0.0, at(0.0)),
             Arc::new(target_of(&planes, &corners)),
         );
         // The next keyframe is due a quarter baseline and two frames on.
@@ -231,7 +247,7 @@ mod tests {
         assert!(!meter.is_due(&at(0.2)));
         assert!(
             meter
-                .measure((1.0, &at(0.2)), &at(0.2), scan, &config())
+                .measure(&scan_at(1, 1.0, at(0.2)), scan, &config())
                 .is_empty()
         );
         // The robot moved 0.26 m; the wheels (5 % slip), and the estimate built on them, 0.273 m.
@@ -240,7 +256,7 @@ mod tests {
         let scan = scan_of(&sp, &sc);
         let wheel = at(0.26 * 1.05);
         assert!(meter.is_due(&wheel));
-        let measured = meter.measure((1.0, &wheel), &wheel, scan, &config());
+        let measured = meter.measure(&scan_at(1, 1.0, wheel), scan, &config());
         let pairs = &measured.distances;
         // x only: the wheels did not move along y.
         assert_eq!(pairs.len(), 1, "{pairs:?}");
@@ -257,7 +273,7 @@ mod tests {
         // The keyframe is used up.
         assert!(
             meter
-                .measure((1.0, &wheel), &wheel, scan, &config())
+                .measure(&scan_at(1, 1.0, wheel), scan, &config())
                 .is_empty()
         );
     }
@@ -269,9 +285,7 @@ mod tests {
         let (planes, corners) = scene(false);
         let mut meter = SlipMeter::new(0.25);
         meter.add_keyframe(
-            (0, 0.0),
-            at(0.0),
-            at(0.0),
+            scan_at(0, 0.0, at(0.0)),
             Arc::new(target_of(&planes, &corners)),
         );
         let truth = at(0.26);
@@ -280,7 +294,7 @@ mod tests {
         let wheel = at(0.273);
         assert!(
             meter
-                .measure((1.0, &wheel), &wheel, scan, &config())
+                .measure(&scan_at(1, 1.0, wheel), scan, &config())
                 .is_empty()
         );
         // Off: no keyframes at all.
