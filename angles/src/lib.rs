@@ -515,6 +515,17 @@ impl AnglesConfig {
         if self.min_support == 0 {
             return bad("min support must be >= 1");
         }
+        if let Some(i) = self
+            .scan_path_in_cloud
+            .iter()
+            .position(|p| !p.iter().all(|v| v.is_finite()))
+        {
+            return Err(AnglesError::InvalidConfig(format!(
+                "scan path position {} of {} is not finite",
+                i + 1,
+                self.scan_path_in_cloud.len()
+            )));
+        }
         if self.scanner_view.is_some_and(|v| !v.is_valid()) {
             return bad(
                 "scanner view: elevations must be finite with min < max, min range finite and >= 0",
@@ -1804,6 +1815,20 @@ mod tests {
             y_m: 0.0,
             support: 10,
         }
+    }
+
+    #[test]
+    fn a_non_finite_scan_path_position_is_refused_by_number() {
+        let config = AnglesConfig {
+            scan_path_in_cloud: vec![V3::new(0.0, 0.0, 0.1), V3::new(f64::NAN, 0.0, 0.1)],
+            ..AnglesConfig::default()
+        };
+        let err = compute_angles(&[V3::zeros(); 200], &config).unwrap_err();
+        assert!(
+            err.to_string()
+                .contains("scan path position 2 of 2 is not finite"),
+            "{err}"
+        );
     }
 
     #[test]

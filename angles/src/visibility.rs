@@ -144,10 +144,11 @@ impl HeightMap {
     }
 }
 
-/// The path's positions at least [`PATH_STEP_M`] apart, in order.
+/// The path's finite positions at least [`PATH_STEP_M`] apart, in order. (A non-finite
+/// position would pass every test of a ray from it and make every place seen.)
 fn thin_path(path: &[V3]) -> Vec<V3> {
     let mut kept: Vec<V3> = Vec::with_capacity(path.len());
-    for &p in path {
+    for &p in path.iter().filter(|p| p.iter().all(|v| v.is_finite())) {
         if kept.last().is_none_or(|q| (p - q).norm() >= PATH_STEP_M) {
             kept.push(p);
         }
@@ -336,6 +337,19 @@ mod tests {
             r.is_some_and(|r| (0.3..=0.4 + RESOLUTION_M).contains(&r)),
             "{r:?}"
         );
+    }
+
+    #[test]
+    fn a_non_finite_path_position_sees_nothing() {
+        // As in the test above, hidden from the path; a NaN position among the path's must not
+        // make the place seen.
+        let mut points = block([0.0, 1.0], [0.65, 0.66]);
+        points.extend(block([0.0, 1.0], [0.26, 0.66]));
+        let mut with_nan = path(-3.0, 1.5);
+        with_nan.insert(10, V3::new(f64::NAN, 0.0, 0.25));
+        with_nan.push(V3::new(2.0, f64::INFINITY, 0.25));
+        let r = reach(&points, &with_nan, V3::new(1.0, 0.0, 0.65));
+        assert!(r.is_none(), "{r:?}");
     }
 
     #[test]
