@@ -208,9 +208,7 @@ impl Sight {
             tolerance_m,
         })
     }
-}
 
-impl Sight {
     /// Whether `c` was in view, unblocked, from some position of the path.
     fn seen(&self, c: V3) -> bool {
         self.path.iter().any(|&o| self.seen_from(o, c))

@@ -31,7 +31,6 @@
 //! often the true value lies within the calculator's expanded uncertainty U, the median U;
 //! runs with every angle within 0.5 degree; runs without angles). Timing goes to stderr only.
 
-use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 use std::time::Instant;
@@ -360,7 +359,7 @@ fn cloud_stem(entry: &Entry, oracle: bool) -> String {
     )
 }
 
-/// `--save-clouds`: the cloud as binary PLY, the path as text, one `x y z` line per pose, and the
+/// `--save-clouds`: the cloud as binary PLY, the path as XYZ text (one `x y z` line per pose), and the
 /// trajectory's stated error along x per metre in `.x-sigma`.
 fn save_cloud(
     dir: &Path,
@@ -384,11 +383,14 @@ fn save_cloud(
     )
     .with_context(|| ply.display().to_string())?;
     let xyz = dir.join(format!("{stem}.path.xyz"));
-    let mut text = String::new();
-    for p in path {
-        writeln!(text, "{:.4} {:.4} {:.4}", p[0], p[1], p[2])?;
-    }
-    std::fs::write(&xyz, text).with_context(|| xyz.display().to_string())?;
+    let file = std::fs::File::create(&xyz).with_context(|| xyz.display().to_string())?;
+    cloud_io::write_xyz(
+        std::io::BufWriter::new(file),
+        &cloud_io::Cloud {
+            points_m: path.to_vec(),
+        },
+    )
+    .with_context(|| xyz.display().to_string())?;
     Ok(())
 }
 
@@ -400,26 +402,14 @@ fn load_cloud(dir: &Path, entry: &Entry, oracle: bool) -> anyhow::Result<Saved> 
     let ply = dir.join(format!("{stem}.ply"));
     let (cloud, _) = cloud_io::read_cloud(&ply).with_context(|| ply.display().to_string())?;
     let xyz = dir.join(format!("{stem}.path.xyz"));
-    let text = std::fs::read_to_string(&xyz).with_context(|| xyz.display().to_string())?;
-    let mut path = Vec::new();
-    for (i, line) in text.lines().enumerate() {
-        let v: Vec<f64> = line
-            .split_whitespace()
-            .map(str::parse)
-            .collect::<Result<_, _>>()
-            .with_context(|| format!("{}:{}", xyz.display(), i + 1))?;
-        let [x, y, z] = v[..] else {
-            bail!("{}:{}: expected x y z", xyz.display(), i + 1);
-        };
-        path.push([x, y, z]);
-    }
+    let (path, _) = cloud_io::read_cloud(&xyz).with_context(|| xyz.display().to_string())?;
     let sigma = dir.join(format!("{stem}.x-sigma"));
     let x_sigma_per_m = std::fs::read_to_string(&sigma)
         .with_context(|| sigma.display().to_string())?
         .trim()
         .parse()
         .with_context(|| sigma.display().to_string())?;
-    Ok((cloud.points_m, path, x_sigma_per_m))
+    Ok((cloud.points_m, path.points_m, x_sigma_per_m))
 }
 
 /// `--detail`: each angle's witness and uncertainty budget against the truth's witness, the axles
