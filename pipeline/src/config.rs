@@ -1,68 +1,57 @@
 //! The pipeline's configuration: one struct per stage, each with documented defaults, grouped in
-//! [`PipelineConfig`]. Deserialised from TOML (the onboard service embeds it as `[pipeline]`) with
-//! kebab-case keys; unknown keys are rejected so a typo never silently falls back to a default.
+//! [`PipelineConfig`].
+//!
+//! **What an operator sets** (TOML, kebab-case keys; the onboard service embeds it as
+//! `[processing.pipeline]`; unknown keys are rejected so a typo never silently falls back to a
+//! default) is what differs from one robot to the next: where its sensors are mounted, the
+//! lidar's near limit on this robot, the depth camera's band, which sensors it has and uses, and
+//! its wheels' stated errors. Fourteen keys:
 //!
 //! ```toml
-//! [pipeline.ground]
-//! distance-threshold-m = 0.03
-//! [pipeline.features]
-//! window-half-width = 5
+//! [pipeline.mounts]
+//! lidar-xyz-m = [0.0, 0.0, 0.12]
+//! [pipeline.fusion]
+//! wheel-speed-sigma-mps = 0.003
 //! ```
+//!
+//! **The method's parameters** (thresholds, iteration counts, voxels, tolerances, the ablation
+//! switches of the paper's Figure 14) are fields too, so that tests and the ablation bench can
+//! vary them in code, but `#[serde(skip)]`: no file sets them, a run's software version fixes
+//! them, and each is documented where it is defined. They were settable keys once; none had a
+//! reason to differ between robots (decision record 036).
 
 use serde::{Deserialize, Serialize};
 
 use crate::PipelineError;
 
-/// Every stage's settings. `PipelineConfig::default()` is the tuned configuration (every stage's
-/// own default, except that the bilateral filter is off: see its `Default` impl).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+/// Every stage's settings; `PipelineConfig::default()` is every stage's own default.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, rename_all = "kebab-case", default)]
 pub struct PipelineConfig {
     /// Sensor mounts on the robot.
     pub mounts: MountConfig,
     /// Step 2: ground removal (paper 3.1).
+    #[serde(skip)]
     pub ground: GroundConfig,
     /// Step 3: motion compensation (paper 3.2, eq. 1).
+    #[serde(skip)]
     pub deskew: DeskewConfig,
     /// Step 4: feature extraction and outlier rejection (paper 3.3, eqs. 2-5).
     pub features: FeatureConfig,
     /// Step 5: scan-to-scan laser odometry (two-step Levenberg-Marquardt).
+    #[serde(skip)]
     pub laser: LaserOdometryConfig,
     /// Step 6a: visual odometry from D435 depth frames.
     pub visual: VisualOdometryConfig,
     /// Step 6b: fusion of laser, visual and wheel odometry (paper Algorithm 1, eqs. 6-7).
     pub fusion: FusionConfig,
-    /// Step 7a: scan-to-map refinement and the output cloud.
+    /// Step 7: scan-to-map refinement and the output cloud.
+    #[serde(skip)]
     pub map: MapConfig,
-    /// Step 7b: bilateral filter of the output cloud.
-    pub filter: FilterConfig,
-}
-
-impl Default for PipelineConfig {
-    /// Each stage's default, but the bilateral filter off: on lidar-only clouds it pulls small
-    /// parts that hang a few centimetres below the underside (an exhaust silencer, a spare
-    /// wheel) into it and lifts the witnesses of the departure angle. A `[filter]` section turns
-    /// it on (its keys default to [`FilterConfig::default`], which is enabled).
-    fn default() -> Self {
-        Self {
-            mounts: MountConfig::default(),
-            ground: GroundConfig::default(),
-            deskew: DeskewConfig::default(),
-            features: FeatureConfig::default(),
-            laser: LaserOdometryConfig::default(),
-            visual: VisualOdometryConfig::default(),
-            fusion: FusionConfig::default(),
-            map: MapConfig::default(),
-            filter: FilterConfig {
-                enabled: false,
-                ..FilterConfig::default()
-            },
-        }
-    }
 }
 
 /// How many keys [`PipelineConfig::positive_values`] checks.
-const POSITIVE_KEYS: usize = 18;
+const POSITIVE_KEYS: usize = 15;
 
 impl PipelineConfig {
     /// The values that must be positive numbers, by key.
@@ -101,9 +90,6 @@ impl PipelineConfig {
                 "fusion.wheel-yaw-rate-sigma-radps",
                 self.fusion.wheel_yaw_rate_sigma_radps,
             ),
-            ("filter.radius-m", self.filter.radius_m),
-            ("filter.sigma-spatial-m", self.filter.sigma_spatial_m),
-            ("filter.sigma-normal-m", self.filter.sigma_normal_m),
         ]
     }
 
@@ -114,6 +100,29 @@ impl PipelineConfig {
             toml::from_str(text).map_err(|e| PipelineError::InvalidConfig(e.to_string()))?;
         config.validate()?;
         Ok(config)
+    }
+
+    /// The near limit of the lidar's and the camera's range bands lies below the far one.
+    fn check_bands(&self) -> Result<(), PipelineError> {
+        for (key, near, far) in [
+            (
+                "features.min-range-m",
+                self.features.min_range_m,
+                self.features.max_range_m,
+            ),
+            (
+                "visual.min-depth-m",
+                self.visual.min_depth_m,
+                self.visual.max_depth_m,
+            ),
+        ] {
+            if !(near >= 0.0 && near < far) {
+                return Err(PipelineError::InvalidConfig(format!(
+                    "{key} = {near}: must be 0 or positive and under the far limit ({far} m)"
+                )));
+            }
+        }
+        Ok(())
     }
 
     /// Check every value the stages divide by or loop on; the error names the key.
@@ -172,12 +181,7 @@ impl PipelineConfig {
                 self.fusion.wheel_scale_min_slip
             )));
         }
-        if !(0.0..=1.0).contains(&self.fusion.rotation_gap_decay) {
-            return Err(PipelineError::InvalidConfig(format!(
-                "fusion.rotation-gap-decay = {}: must lie in 0..=1",
-                self.fusion.rotation_gap_decay
-            )));
-        }
+        self.check_bands()?;
         if !(self.ground.confidence > 0.0 && self.ground.confidence < 1.0) {
             return Err(PipelineError::InvalidConfig(
                 "ground.confidence must lie strictly between 0 and 1".into(),
@@ -242,8 +246,7 @@ impl Default for MountConfig {
 }
 
 /// RANSAC ground plane per frame.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, rename_all = "kebab-case", default)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct GroundConfig {
     /// Remove ground points from the features used for registration (the ablation switch).
     pub enabled: bool,
@@ -278,16 +281,13 @@ impl Default for GroundConfig {
 }
 
 /// Motion compensation.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, rename_all = "kebab-case", default)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct DeskewConfig {
     /// Compensate motion at all.
     pub enabled: bool,
     /// Below this yaw rate (rad/s) the straight-line model of eq. 1 is used; above it the general
     /// constant-twist model.
     pub straight_max_yaw_rate_radps: f64,
-    /// The paper's empirical scale factor alpha of eq. 1 (1.0: trust the odometry's speed).
-    pub alpha: f64,
 }
 
 impl Default for DeskewConfig {
@@ -295,7 +295,6 @@ impl Default for DeskewConfig {
         Self {
             enabled: true,
             straight_max_yaw_rate_radps: 0.02,
-            alpha: 1.0,
         }
     }
 }
@@ -305,27 +304,37 @@ impl Default for DeskewConfig {
 #[serde(deny_unknown_fields, rename_all = "kebab-case", default)]
 pub struct FeatureConfig {
     /// N: neighbours on each side of the window's centre (|W| = 2N).
+    #[serde(skip)]
     pub window_half_width: usize,
     /// Largest azimuth span of a window, radians (paper eq. 2: pi / 16).
+    #[serde(skip)]
     pub max_window_angle_rad: f64,
     /// Reject outliers (mean-distance test, eqs. 3-4, plus statistical outlier removal).
+    #[serde(skip)]
     pub outlier_removal: bool,
     /// Statistical outlier removal: reject points whose mean neighbour distance over range
     /// exceeds the frame's mean by this many standard deviations.
+    #[serde(skip)]
     pub outlier_std_ratio: f64,
     /// Corner threshold lambda_c1 on the smoothness c of eq. 5.
+    #[serde(skip)]
     pub corner_threshold: f64,
     /// Plane threshold lambda_c2 on c.
+    #[serde(skip)]
     pub plane_threshold: f64,
     /// Sectors per ring for balancing.
+    #[serde(skip)]
     pub sectors: usize,
     /// Corners kept per sector at most.
+    #[serde(skip)]
     pub corners_per_sector: usize,
     /// Planar points kept per sector at most.
+    #[serde(skip)]
     pub planes_per_sector: usize,
     /// Points closer than this to the lidar are ignored, metres.
     pub min_range_m: f64,
     /// Points farther than this are ignored, metres (far returns only add drift under a car).
+    #[serde(skip)]
     pub max_range_m: f64,
 }
 
@@ -348,8 +357,7 @@ impl Default for FeatureConfig {
 }
 
 /// Scan-to-scan registration.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, rename_all = "kebab-case", default)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct LaserOdometryConfig {
     /// Levenberg-Marquardt iterations per step.
     pub iterations: u32,
@@ -414,14 +422,17 @@ pub struct VisualOdometryConfig {
     /// Use depth frames at all.
     pub enabled: bool,
     /// Take every this-many-th pixel in each direction.
+    #[serde(skip)]
     pub pixel_stride: usize,
     /// Depths outside this band are ignored, metres (D435: 0.17 m minimum at 848x480).
     pub min_depth_m: f64,
     /// Depths outside this band are ignored, metres.
     pub max_depth_m: f64,
     /// Gauss-Newton iterations.
+    #[serde(skip)]
     pub iterations: u32,
     /// Largest point-to-plane residual accepted, metres.
+    #[serde(skip)]
     pub max_residual_m: f64,
     /// Add depth points to the output cloud. Off by default: on the simulated passes the
     /// camera's points moved the angles away from the truth more often than towards it
@@ -458,43 +469,41 @@ pub struct FusionConfig {
     /// odometry still runs when `visual.enabled` is set (its figures are in the run's statistics).
     pub use_visual: bool,
     /// The laser must also agree with the wheel odometry (within the tolerances) to win a group.
+    #[serde(skip)]
     pub gate_laser_by_wheel: bool,
     /// Frames averaged for the constant-velocity reference (eq. 6: ten).
+    #[serde(skip)]
     pub reference_frames: usize,
     /// Per-axis rotation deviation (rx, ry, rz) from the reference below which the laser is
     /// trusted, radians per second of motion. The paper's [0.1, 0.1, 0.1] quaternion components
     /// are per frame of its own rate; rates make the threshold independent of the frame rate.
+    #[serde(skip)]
     pub rotation_tolerance_radps: [f64; 3],
     /// Per-axis translation deviation (x, y, z) below which the laser is trusted, m/s (the paper's
     /// [0.1, 0.5, 0.1] allows more along the direction of travel).
+    #[serde(skip)]
     pub translation_tolerance_mps: [f64; 3],
-    /// Laser-wheel pairs (per translation component and interval) the wheel scale (slip) factor
-    /// is estimated over; 0 takes the wheels' distances as they are (see `fusion`).
-    pub wheel_scale_frames: usize,
     /// Wheel travel between the two scans of one long-baseline slip measurement, metres (see
     /// `slip`); 0 turns the long-baseline wheel-scale estimator off.
+    #[serde(skip)]
     pub wheel_scale_baseline_m: f64,
     /// The long-baseline wheel scale is applied only when it differs from 1 by more than this
     /// fraction (and by more than three standard errors); see `fusion`. 0.025: approaching a car
     /// the measurements read up to 2 % short on slip-free simulated passes (the off-roader).
+    #[serde(skip)]
     pub wheel_scale_min_slip: f64,
     /// Seconds of lidar frames kept from the start of the run so that, once the long-baseline
     /// wheel scale is first significant, steps 2-7 run again over them with that scale from the
     /// first frame (0: off). The slip of the travel before the scale is significant (about a
     /// metre) otherwise stays in the trajectory and the cloud. Frames are kept until then or
     /// until this window has passed, whichever is first (a VLP-16 second is about 7 MB by count: 300,000 points of 24 bytes).
+    #[serde(skip)]
     pub slip_replay_s: f64,
-    /// Rotation rates (rx, ry, rz) that no source determines come from the constant-velocity
-    /// reference multiplied by this factor per frame: 1 holds the reference's rate (translation
-    /// always does), 0 takes zero (the robot drives straight by design). See `fusion`.
-    pub rotation_gap_decay: f64,
-    /// Gate the scan-to-map refinement by wheel odometry as `gate-laser-by-wheel` gates the
-    /// scan-to-scan laser: a group (rotation, translation) of the refined increment that differs
-    /// from the wheels by a tolerance or more keeps the fused prediction's values.
-    pub gate_refinement_by_wheel: bool,
-    /// The same gate for the refinement's rotation group only: a refined increment whose rotation
+    /// Gate the scan-to-map refinement's rotation by wheel odometry as `gate-laser-by-wheel`
+    /// gates the scan-to-scan laser: a refined increment whose rotation
     /// rates differ from the wheels' (yaw; the wheels know no roll or pitch) by a tolerance or more
     /// keeps the fused prediction's rotation, and its x, y stay the map's.
+    #[serde(skip)]
     pub gate_refinement_rotation_by_wheel: bool,
     /// The wheel odometry's velocity error (along and across, each), m/s: the standard deviation
     /// the scan-to-map refinement's wheel prior (`map.wheel-prior`) gives a frame's wheel
@@ -510,6 +519,7 @@ pub struct FusionConfig {
     /// wheels' yaw rate once it is significant (three standard errors, at least four
     /// measurements), as the slip scale is taken off their distance. Needs
     /// `wheel-scale-baseline-m` > 0.
+    #[serde(skip)]
     pub wheel_yaw_bias: bool,
 }
 
@@ -523,19 +533,9 @@ impl Default for FusionConfig {
             reference_frames: 10,
             rotation_tolerance_radps: [0.01, 0.01, 0.01],
             translation_tolerance_mps: [0.02, 0.02, 0.02],
-            // Off: the scan-to-scan x is too noisy to measure a slip of a few per cent per frame;
-            // the long-baseline estimator (`wheel-scale-baseline-m`) replaces it (`slip`,
-            // decision record 005).
-            wheel_scale_frames: 0,
             wheel_scale_baseline_m: 0.25,
             wheel_scale_min_slip: 0.025,
             slip_replay_s: 8.0,
-            // Zero: the robot drives straight by design, and a held laser yaw rate integrates
-            // to large headings over a gap (`fusion`, decision record 005).
-            rotation_gap_decay: 0.0,
-            // Off: gating the whole refined increment by the wheels also rejects the map's
-            // drift corrections (decision record 005).
-            gate_refinement_by_wheel: false,
             // On: where the map determines the yaw weakly (leaving the car) the refinement's
             // yaw can jump by degrees in a frame; the wheels bound it (decision record 005).
             gate_refinement_rotation_by_wheel: true,
@@ -551,8 +551,7 @@ impl Default for FusionConfig {
 /// Scan-to-map refinement and the output cloud.
 // Independent on/off switches of a config file, not a state machine.
 #[allow(clippy::struct_excessive_bools)]
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, rename_all = "kebab-case", default)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct MapConfig {
     /// Refine each fused pose against the local feature map.
     pub refine: bool,
@@ -585,8 +584,6 @@ pub struct MapConfig {
     /// robot passes under the whole vehicle, so every part of it comes within 4 m
     /// (decision record 010).
     pub output_max_range_m: f64,
-    /// Keep ground points in the output cloud (the angle calculator fits the ground plane).
-    pub keep_ground: bool,
     /// Side of the floor's columns in the output cloud, metres: the ground points (each frame's
     /// plane inliers) become one point per column of this side, their mean
     /// ([`super::map::FloorAccumulator`]); 0: they go into the output voxels like every other
@@ -620,39 +617,12 @@ impl Default for MapConfig {
             iterations: 6,
             output_voxel_m: 0.005,
             output_max_range_m: 4.0,
-            keep_ground: true,
             ground_voxel_m: 0.02,
             level_with_ground: true,
             // On: the robot's mecanum wheels are not exact; weighing the map against them
             // bounds both (decision record 001).
             wheel_prior: true,
             residual_sigma_m: 0.01,
-        }
-    }
-}
-
-/// Edge-preserving bilateral filter of the output cloud.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, rename_all = "kebab-case", default)]
-pub struct FilterConfig {
-    /// Filter at all.
-    pub enabled: bool,
-    /// Neighbourhood radius, metres.
-    pub radius_m: f64,
-    /// Spatial Gaussian sigma, metres.
-    pub sigma_spatial_m: f64,
-    /// Range (along-normal offset) Gaussian sigma, metres: offsets much larger than this (edges)
-    /// barely move a point.
-    pub sigma_normal_m: f64,
-}
-
-impl Default for FilterConfig {
-    fn default() -> Self {
-        Self {
-            enabled: true,
-            radius_m: 0.05,
-            sigma_spatial_m: 0.025,
-            sigma_normal_m: 0.02,
         }
     }
 }
@@ -665,11 +635,40 @@ mod tests {
     fn empty_toml_gives_defaults_and_unknown_keys_are_rejected() {
         let c: PipelineConfig = toml::from_str("").unwrap();
         assert_eq!(c, PipelineConfig::default());
-        let c: PipelineConfig = toml::from_str("[ground]\ndistance-threshold-m = 0.05\n").unwrap();
-        assert!((c.ground.distance_threshold_m - 0.05).abs() < 1e-12);
-        let e = toml::from_str::<PipelineConfig>("[ground]\ndistance-threshold = 0.05\n")
+        let c: PipelineConfig =
+            toml::from_str("[fusion]\nwheel-speed-sigma-mps = 0.005\n").unwrap();
+        assert!((c.fusion.wheel_speed_sigma_mps - 0.005).abs() < 1e-12);
+        let e = toml::from_str::<PipelineConfig>("[fusion]\nwheel-speed-sigma = 0.005\n")
             .unwrap_err()
             .to_string();
-        assert!(e.contains("distance-threshold"), "{e}");
+        assert!(e.contains("wheel-speed-sigma"), "{e}");
+    }
+
+    #[test]
+    fn the_methods_parameters_are_not_settable() {
+        for text in [
+            "[ground]\ndistance-threshold-m = 0.05\n",
+            "[map]\noutput-voxel-m = 0.01\n",
+            "[features]\ncorner-threshold = 0.01\n",
+            "[fusion]\nreference-frames = 5\n",
+            "[visual]\npixel-stride = 4\n",
+        ] {
+            let e = toml::from_str::<PipelineConfig>(text)
+                .unwrap_err()
+                .to_string();
+            assert!(e.contains("unknown"), "{text}: {e}");
+        }
+    }
+
+    #[test]
+    fn the_operator_sets_fourteen_keys() {
+        let table = toml::Value::try_from(PipelineConfig::default()).unwrap();
+        let keys: usize = table
+            .as_table()
+            .unwrap()
+            .values()
+            .map(|t| t.as_table().map_or(1, toml::Table::len))
+            .sum();
+        assert_eq!(keys, 14, "{table}");
     }
 }

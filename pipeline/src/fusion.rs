@@ -20,17 +20,16 @@
 //!    slowly biased laser otherwise wins every frame).
 //! 4. **Gaps**: a component the winner does not determine is taken from the available source
 //!    closest to the reference, else from the reference itself (constant velocity), else zero.
-//!    A rotation rate taken from the reference is multiplied by `rotation_gap_decay` (the same
-//!    factor applies to the prediction, [`Fusion::predict`]): the reference is the mean of the last
-//!    fused rates, so holding it (factor 1) keeps whatever rotation rate the
-//!    laser last reported, noise included, and integrates it for as long as the laser stays
-//!    degenerate (laser only under a car: tens of degrees of yaw over a pass). The robot drives
-//!    straight by design (docs/architecture.md, section 1), so without a source the best guess of a rotation rate
-//!    is zero; a factor below 1 decays the held rate towards it frame by frame. Translation keeps
-//!    the reference as it is (the robot does keep driving at its speed).
+//!    A rotation rate is never taken from the reference (the prediction, [`Fusion::predict`],
+//!    follows the same rule): the reference is the mean of the last fused rates, so holding it
+//!    keeps whatever rotation rate the laser last reported, noise included, and integrates it for
+//!    as long as the laser stays degenerate (laser only under a car: tens of degrees of yaw over a
+//!    pass). The robot drives straight by design (docs/architecture.md, section 1), so without a
+//!    source the best guess of a rotation rate is zero. Translation keeps the reference (the
+//!    robot does keep driving at its speed).
 //!
-//! The same wheel gate is offered to the scan-to-map refinement ([`Fusion::refinement_gate`]): by
-//! default for its rotation only.
+//! The same wheel gate is offered to the scan-to-map refinement ([`Fusion::refinement_gate`]), for
+//! its rotation only.
 //!
 //! Until the reference holds `reference_frames` rates, the laser is used wherever it is determined
 //! and, with `gate-laser-by-wheel`, agrees with the wheels (else the wheels). Ungated, the
@@ -41,8 +40,8 @@
 //! nearly constant factor on one floor. The wheels' translation is multiplied by the factor
 //! [`Fusion::wheel_scale`] in selection and gap filling (not in the prediction, see
 //! [`Fusion::predict`]), so where the laser is degenerate (between two planes) the calibrated
-//! wheels fill in. The evidence comes from one of two places:
-//! - **Long baseline** (the default, `wheel-scale-baseline-m` > 0): `(laser, wheel)` distance
+//! wheels fill in. The evidence comes from long baselines (`wheel-scale-baseline-m` > 0):
+//! `(laser, wheel)` distance
 //!   pairs over 0.25 m of travel from [`super::slip::SlipMeter`], via
 //!   [`Fusion::add_scale_measurement`]. The factor is the least-squares
 //!   `s = sum(laser * wheel) / sum(wheel^2)` over the last [`MAX_SCALE_MEASUREMENTS`] pairs, and
@@ -51,12 +50,8 @@
 //!   both `wheel-scale-min-slip` and three standard errors of `s` (from the pairs' scatter about
 //!   the fit, over the independent count). Otherwise it is 1: a slip-free run keeps its exact wheels
 //!   instead of taking the measurement's noise as a correction.
-//! - **Per frame** (`wheel-scale-frames` > 0, off by default; it takes precedence): the same
-//!   least-squares factor over the last `wheel-scale-frames` intervals where the scan-to-scan
-//!   laser determined a translation component that the wheels also report (and the robot moved
-//!   faster than [`MIN_SCALE_SPEED_MPS`] along it), applied as it is. Over one frame the laser's
-//!   x is too noisy and biased for a few per cent (see [`super::slip`]): it found slip on the
-//!   slip-free simulated passes.
+//! Over one frame instead of a long baseline, the laser's x is too noisy and biased for a few per
+//! cent (see [`super::slip`]): a per-frame estimate found slip on slip-free simulated passes.
 //!
 //! **Wheel yaw-rate bias** (`wheel-yaw-bias`): the same long-baseline registrations, where they
 //! determine the yaw, give the wheels' turn minus the laser's over the baseline's duration
@@ -105,14 +100,8 @@ pub struct Fused {
     pub chosen: [Source; 6],
 }
 
-/// Slower than this along a component (m/s), an interval says too little about the wheel scale.
-pub const MIN_SCALE_SPEED_MPS: f64 = 0.05;
-
 /// The wheel scale factor is clamped to this range (a robot slipping more than 20 % is stuck).
 pub const WHEEL_SCALE_RANGE: (f64, f64) = (0.8, 1.2);
-
-/// Fewer per-frame laser-wheel pairs than this: the per-frame wheel scale stays 1.
-const MIN_SCALE_PAIRS: usize = 30;
 
 /// Fewer long-baseline distance measurements than this, counted as independent
 /// (`Slope::independent`: four back-to-back baselines, or 1 m covered by overlapping ones at
@@ -143,9 +132,6 @@ struct Baseline {
 pub struct Fusion {
     config: FusionConfig,
     history: VecDeque<Twist6>,
-    /// `(laser, wheel)` translation rates of recent intervals where both determined a component
-    /// (the per-frame estimator).
-    scale_pairs: VecDeque<(f64, f64)>,
     /// `(laser, wheel)` distances of the latest long-baseline measurements, with their
     /// intervals.
     scale_measurements: VecDeque<Baseline>,
@@ -163,7 +149,6 @@ impl Fusion {
         Self {
             config,
             history: VecDeque::new(),
-            scale_pairs: VecDeque::new(),
             scale_measurements: VecDeque::new(),
             yaw_measurements: VecDeque::new(),
             preset_scale: None,
@@ -223,17 +208,10 @@ impl Fusion {
     }
 
     /// The current wheel scale factor: laser distance over wheel distance. 1 until there is
-    /// enough evidence, while the long-baseline estimate is not significant, and when both
-    /// estimators are off (see the module docs); a preset scale
-    /// ([`Fusion::preset_wheel_scale`]) instead of 1 in the long-baseline cases.
+    /// enough evidence, while the long-baseline estimate is not significant, and when the
+    /// estimator is off (see the module docs); a preset scale ([`Fusion::preset_wheel_scale`])
+    /// instead of 1.
     pub fn wheel_scale(&self) -> f64 {
-        if self.config.wheel_scale_frames > 0 {
-            if self.scale_pairs.len() < MIN_SCALE_PAIRS {
-                return 1.0;
-            }
-            let (s, _) = slope_through_origin(self.scale_pairs.iter().copied());
-            return s.clamp(WHEEL_SCALE_RANGE.0, WHEEL_SCALE_RANGE.1);
-        }
         let fit = least_squares_slope(&self.scale_measurements);
         let s = fit.value;
         let significant = fit.independent >= MIN_SCALE_MEASUREMENTS as f64
@@ -296,28 +274,6 @@ impl Fusion {
         out
     }
 
-    /// Remember the laser-wheel pairs of one interval (raw wheel rates).
-    fn update_scale(&mut self, laser: Option<&SourceRate>, wheel: Option<&SourceRate>) {
-        let window = self.config.wheel_scale_frames;
-        let (Some(l), Some(w)) = (laser, wheel) else {
-            return;
-        };
-        if window == 0 {
-            return;
-        }
-        for k in 3..6 {
-            let (lk, wk) = (l.rate[k], w.rate[k]);
-            let usable = l.available[k] && w.available[k] && wk.abs() > MIN_SCALE_SPEED_MPS;
-            let ratio = lk / wk;
-            if usable && ratio > WHEEL_SCALE_RANGE.0 && ratio < WHEEL_SCALE_RANGE.1 {
-                self.scale_pairs.push_back((lk, wk));
-            }
-        }
-        while self.scale_pairs.len() > window {
-            self.scale_pairs.pop_front();
-        }
-    }
-
     /// The constant-velocity reference (eq. 6), once the history is full.
     pub fn reference(&self) -> Option<Twist6> {
         let n = self.config.reference_frames.max(1);
@@ -333,12 +289,11 @@ impl Fusion {
         Some(mean)
     }
 
-    /// The reference with its rotation rates multiplied by `rotation_gap_decay`: the value for a
-    /// component no source determines.
+    /// The reference with its rotation rates zero: the value for a component no source
+    /// determines (see the module docs).
     fn gap_reference(&self) -> Option<Twist6> {
-        let decay = self.config.rotation_gap_decay;
         self.reference()
-            .map(|r| std::array::from_fn(|k| if k < 3 { r[k] * decay } else { r[k] }))
+            .map(|r| std::array::from_fn(|k| if k < 3 { 0.0 } else { r[k] }))
     }
 
     /// Per group (rotation, translation): whether `rate` lies within the tolerances of the wheel
@@ -355,22 +310,20 @@ impl Fusion {
     }
 
     /// Which groups (rotation, translation) of the scan-to-map refinement's increment `rate` to
-    /// keep: a group is rejected (the fused prediction's values stay) when its gate is on and it
-    /// disagrees with the wheels ([`Self::agrees_with_wheel`]). The rotation is gated with
-    /// `gate-refinement-rotation-by-wheel` or `gate-refinement-by-wheel`, the translation only
-    /// with the latter: the map's x and y corrections are kept, its weakly determined yaw jumps
-    /// (up to 1-2 degrees a frame on the simulated `suv-offset` pass) are not.
+    /// keep: with `gate-refinement-rotation-by-wheel`, the rotation is rejected (the fused
+    /// prediction's stays) when it disagrees with the wheels ([`Self::agrees_with_wheel`]); the
+    /// translation is always kept. The map's x and y corrections are what the refinement is for;
+    /// its weakly determined yaw jumps (up to 1-2 degrees a frame on the simulated `suv-offset`
+    /// pass) are not.
     pub fn refinement_gate(&self, rate: &Twist6, wheel: Option<&SourceRate>) -> [bool; 2] {
-        let c = &self.config;
-        if !(c.gate_refinement_by_wheel || c.gate_refinement_rotation_by_wheel) {
+        if !self.config.gate_refinement_rotation_by_wheel {
             return [true; 2];
         }
-        let [rotation, translation] = self.agrees_with_wheel(rate, wheel);
-        [rotation, translation || !c.gate_refinement_by_wheel]
+        [self.agrees_with_wheel(rate, wheel)[0], true]
     }
 
     /// The best prediction before the laser runs: per component visual, then wheel, then the
-    /// reference (rotation decayed, see the module docs), then the last fused rate, else zero.
+    /// reference (rotation zero, see the module docs), then the last fused rate, else zero.
     ///
     /// The wheels enter unscaled: the prediction is the laser's starting point, and a laser that
     /// converges only part of the way would otherwise confirm the current wheel scale and drive
@@ -454,7 +407,6 @@ impl Fusion {
                 fused.chosen[k] = source;
             }
         }
-        self.update_scale(laser, raw_wheel);
         let n = self.config.reference_frames.max(1);
         self.history.push_back(fused.rate);
         while self.history.len() > n {
@@ -733,47 +685,6 @@ mod tests {
     }
 
     #[test]
-    fn a_laser_that_sees_x_calibrates_slipping_wheels() {
-        // The wheels report 3 % more than the robot travels; the laser sees x every other frame.
-        let mut f = Fusion::new(FusionConfig {
-            wheel_scale_frames: 100,
-            ..FusionConfig::default()
-        });
-        let wheel = SourceRate {
-            rate: [0.0, 0.0, 0.0, 0.3, 0.0, 0.0],
-            available: [false, false, true, true, true, false],
-        };
-        let truth = 0.3 * 0.97;
-        for i in 0..80 {
-            let mut laser = rate([0.0, 0.0, 0.0, truth, 0.0, 0.0]);
-            laser.available[3] = i % 2 == 0;
-            f.fuse(Some(&laser), None, Some(&wheel));
-        }
-        assert!((f.wheel_scale() - 0.97).abs() < 1e-9, "{}", f.wheel_scale());
-        // Where the laser is degenerate in x, the calibrated wheels fill it in.
-        let mut laser = rate([0.0, 0.0, 0.0, 0.0, 0.0, 0.0]);
-        laser.available[3] = false;
-        let out = f.fuse(Some(&laser), None, Some(&wheel));
-        assert_eq!(out.chosen[3], Source::Wheel);
-        assert!((out.rate[3] - truth).abs() < 1e-9, "{:?}", out.rate);
-        // The prediction (the laser's starting point) keeps the raw wheels.
-        assert!((f.predict(None, Some(&wheel))[3] - 0.3).abs() < 1e-9);
-        // Switched off, the wheels are taken as they are.
-        let mut off = Fusion::new(FusionConfig {
-            wheel_scale_frames: 0,
-            ..FusionConfig::default()
-        });
-        for _ in 0..60 {
-            off.fuse(
-                Some(&rate([0.0, 0.0, 0.0, truth, 0.0, 0.0])),
-                None,
-                Some(&wheel),
-            );
-        }
-        assert!((off.wheel_scale() - 1.0).abs() < 1e-12);
-    }
-
-    #[test]
     fn a_significant_long_baseline_slip_scales_the_wheels_and_noise_does_not() {
         use rand::{Rng, SeedableRng};
         use rand_chacha::ChaCha8Rng;
@@ -974,28 +885,21 @@ mod tests {
         let turning = [0.0, 0.0, 0.05, 0.3, 0.0, 0.0];
         let mut blind = rate([0.0; 6]);
         blind.available = [true, true, false, false, true, true];
-        let run = |decay: f64| {
-            let mut f = Fusion::new(FusionConfig {
-                use_wheel: false,
-                rotation_gap_decay: decay,
-                ..FusionConfig::default()
-            });
-            warm(&mut f, turning);
-            let out = f.fuse(Some(&blind), None, None);
-            assert_eq!(out.chosen[2], Source::Reference);
-            assert_eq!(out.chosen[3], Source::Reference);
-            assert!((out.rate[3] - 0.3).abs() < 1e-12, "{:?}", out.rate);
-            (out.rate[2], f.predict(None, None)[2])
-        };
-        let (held, held_prediction) = run(1.0);
-        assert!((held - 0.05).abs() < 1e-12 && (held_prediction - 0.05).abs() < 1e-12);
-        let (fused, prediction) = run(FusionConfig::default().rotation_gap_decay);
+        let mut f = Fusion::new(FusionConfig {
+            use_wheel: false,
+            ..FusionConfig::default()
+        });
+        warm(&mut f, turning);
+        let out = f.fuse(Some(&blind), None, None);
+        assert_eq!(out.chosen[2], Source::Reference);
+        assert_eq!(out.chosen[3], Source::Reference);
+        assert!((out.rate[3] - 0.3).abs() < 1e-12, "{:?}", out.rate);
+        let prediction = f.predict(None, None)[2];
         assert!(
-            fused.abs() < 1e-12 && prediction.abs() < 1e-12,
-            "{fused} {prediction}"
+            out.rate[2].abs() < 1e-12 && prediction.abs() < 1e-12,
+            "{} {prediction}",
+            out.rate[2]
         );
-        let (half, _) = run(0.5);
-        assert!((half - 0.025).abs() < 1e-12, "{half}");
     }
 
     #[test]
@@ -1034,11 +938,6 @@ mod tests {
         assert_eq!(f.refinement_gate(&refined, None), [true, true]);
         let agreeing = [0.0, 0.0, 0.005, 0.35, 0.0, 0.0];
         assert_eq!(f.refinement_gate(&agreeing, Some(&wheel)), [true, true]);
-        let both = Fusion::new(FusionConfig {
-            gate_refinement_by_wheel: true,
-            ..FusionConfig::default()
-        });
-        assert_eq!(both.refinement_gate(&refined, Some(&wheel)), [false, false]);
         let off = Fusion::new(FusionConfig {
             gate_refinement_rotation_by_wheel: false,
             ..FusionConfig::default()

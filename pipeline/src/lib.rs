@@ -16,12 +16,13 @@
 //!    and wheel odometry, under the ten-frame constant-velocity reference (eqs. 6-7), with the
 //!    wheels' slip scale measured by the laser over a long baseline ([`slip`]);
 //! 7. [`map`]: scan-to-map refinement against the local feature map (3.5), then the frame's points
-//!    (and the depth points in its interval) are fused into the output cloud; at
-//!    [`Pipeline::finish`] the [`filter`] (bilateral) runs once over the fused cloud.
+//!    (and the depth points in its interval) are fused into the output cloud. The paper's
+//!    bilateral filter of the fused cloud is not applied: it pulls small parts that hang a few
+//!    centimetres below the underside into it (decision record 036).
 //!
 //! **Streaming**: a lidar frame is processed as soon as every source in use (wheel, depth) has
 //! reported past the frame's end, so the odometry of its interval is complete; [`Pipeline::finish`]
-//! flushes what is left. The result is ready one filter pass after the last frame.
+//! flushes what is left.
 //!
 //! **Slip replay** (`fusion.slip-replay-s`): the slip scale is significant only after about a
 //! metre of travel, and the frames before it were placed with the unscaled wheels (3 % slip: 3 cm
@@ -41,7 +42,6 @@ pub mod config;
 pub use passangle_geom as geom;
 pub mod deskew;
 pub mod features;
-pub mod filter;
 pub mod fusion;
 pub mod ground;
 pub mod laser_odometry;
@@ -166,7 +166,8 @@ pub struct PipelineStats {
     /// Frames where the scan-to-map refinement was degenerate, per component.
     pub refine_degenerate: [usize; 6],
     /// Frames where the refinement's rotation / translation group disagreed with the wheels and
-    /// was rejected (`fusion.gate-refinement-by-wheel`).
+    /// was rejected (`fusion.gate-refinement-rotation-by-wheel`; the translation is never
+    /// rejected, so its count stays 0).
     pub refine_gated: [usize; 2],
     /// Frames deskewed with the general twist model.
     pub twist_deskews: usize,
@@ -196,7 +197,7 @@ pub struct PipelineStats {
 /// The run's result.
 #[derive(Debug, Clone, PartialEq)]
 pub struct BuiltCloud {
-    /// The fused, filtered cloud in the world frame (robot frame at the first lidar frame: x
+    /// The fused cloud in the world frame (robot frame at the first lidar frame: x
     /// forward, y left, z up, origin on the ground below the robot's centre), metres.
     pub points_in_world: Vec<V3>,
     /// One pose per lidar frame.
@@ -493,7 +494,7 @@ impl Pipeline {
         Ok(())
     }
 
-    /// Process everything still queued, filter, and return the result.
+    /// Process everything still queued and return the result.
     pub fn finish(mut self) -> BuiltCloud {
         self.drain(true);
         self.flush_depth_points(f64::INFINITY);
@@ -501,9 +502,8 @@ impl Pipeline {
         if let Some(ground) = &self.ground_cloud {
             raw.extend(ground.points());
         }
-        let points_in_world = filter::bilateral(&raw, &self.config.filter);
         BuiltCloud {
-            points_in_world,
+            points_in_world: raw,
             trajectory: self.trajectory,
             stats: self.stats,
         }
@@ -756,10 +756,9 @@ impl Pipeline {
         is_outlier: &[bool],
         world_from_robot: &Pose,
     ) {
-        let keep_ground = self.config.map.keep_ground;
         let max_range_m = self.config.map.output_max_range_m;
         for (i, &p) in robot.points.iter().enumerate() {
-            if is_outlier[i] || (is_ground[i] && !keep_ground) || robot.ranges_m[i] > max_range_m {
+            if is_outlier[i] || robot.ranges_m[i] > max_range_m {
                 continue;
             }
             self.add_output(world_from_robot.apply(p), is_ground[i]);
@@ -937,7 +936,7 @@ impl Pipeline {
             config: &odometry.laser_config,
         });
         count(&mut self.stats.refine_degenerate, refined.degenerate);
-        // The refinement's yaw (by default; x, y too with `gate-refinement-by-wheel`) is gated
+        // The refinement's yaw is gated
         // by the wheels like the scan-to-scan laser in Algorithm 1: the refined increment over
         // the interval must agree with the wheels' rate.
         let refined_rate = scale_twist(
@@ -1062,15 +1061,10 @@ impl Pipeline {
 }
 
 /// Whether the run's start is kept for a slip replay: the window is set and the long-baseline
-/// scale, the one that turns significant once, is measured (the per-frame estimator changes
-/// from frame to frame and would replay every time).
+/// scale, the one that turns significant once, is measured.
 fn replays_slip(config: &PipelineConfig) -> bool {
     let f = &config.fusion;
-    f.slip_replay_s > 0.0
-        && f.use_laser
-        && f.use_wheel
-        && f.wheel_scale_baseline_m > 0.0
-        && f.wheel_scale_frames == 0
+    f.slip_replay_s > 0.0 && f.use_laser && f.use_wheel && f.wheel_scale_baseline_m > 0.0
 }
 
 /// Correct roll, pitch and height of `world_from_robot` so that the frame's ground plane

@@ -10,7 +10,7 @@
 //! x has a few millimetres of noise, about 10 % of the increment, and whatever small bias the
 //! registration has is a large share of it: over the frames where it was determined, the
 //! scan-to-scan x read 0.974-1.039 of the true distance on the five simulated passes, so a
-//! factor estimated from it (`fusion.wheel-scale-frames`) found "slip" on slip-free passes.
+//! factor estimated from it found "slip" on slip-free passes (decision record 005).
 //!
 //! **Long baseline.** Here a scan is registered against a keyframe scan `baseline_m` behind it by
 //! the wheels (0.25 m: ten 10 Hz frames at 0.25 m/s), starting from the estimated relative pose,

@@ -357,7 +357,6 @@ fn levelling_restores_roll_pitch_and_height_and_keeps_yaw() {
 #[test]
 fn a_coarser_ground_voxel_thins_the_floor_and_keeps_the_rest() {
     let mut config = PipelineConfig::default();
-    config.filter.enabled = false;
     config.map.ground_voxel_m = 0.0;
     let (_, fine) = run(config.clone(), 10, Some(0.0));
     config.map.ground_voxel_m = 0.05;
@@ -382,30 +381,35 @@ fn a_coarser_ground_voxel_thins_the_floor_and_keeps_the_rest() {
 
 #[test]
 fn a_config_text_is_parsed_and_checked_and_errors_name_the_key() {
-    let c = PipelineConfig::from_toml("[map]\nwheel-prior = false\n").unwrap();
-    assert!(!c.map.wheel_prior);
+    let c = PipelineConfig::from_toml("[fusion]\nuse-visual = true\n").unwrap();
+    assert!(c.fusion.use_visual);
     assert_eq!(
         PipelineConfig::from_toml("").unwrap(),
         PipelineConfig::default()
     );
-    let e = PipelineConfig::from_toml("[map]\nresidual-sigma-m = -1.0\n")
+    let e = PipelineConfig::from_toml("[fusion]\nwheel-speed-sigma-mps = -1.0\n")
         .unwrap_err()
         .to_string();
-    assert!(e.contains("map.residual-sigma-m"), "{e}");
-    let e = PipelineConfig::from_toml("[laser]\nmax-residual-rad = -0.1\n")
+    assert!(e.contains("fusion.wheel-speed-sigma-mps"), "{e}");
+    let e = PipelineConfig::from_toml("[visual]\nmax-depth-m = nan\n")
         .unwrap_err()
         .to_string();
+    assert!(e.contains("visual.max-depth-m"), "{e}");
+    let e = PipelineConfig::from_toml("[fusion]\nuse-visuals = true\n")
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("use-visuals"), "{e}");
+    // The method's parameters are checked too, where code sets them.
+    let mut config = PipelineConfig::default();
+    config.laser.max_residual_rad = -0.1;
+    let e = Pipeline::new(config).unwrap_err().to_string();
     assert!(e.contains("laser.max-residual-rad"), "{e}");
-    for spacing in ["-0.01", "0.2", "nan"] {
-        let e = PipelineConfig::from_toml(&format!("[map]\nmin-point-spacing-m = {spacing}\n"))
-            .unwrap_err()
-            .to_string();
+    for spacing in [-0.01, 0.2, f64::NAN] {
+        let mut config = PipelineConfig::default();
+        config.map.min_point_spacing_m = spacing;
+        let e = Pipeline::new(config).unwrap_err().to_string();
         assert!(e.contains("map.min-point-spacing-m"), "{spacing}: {e}");
     }
-    let e = PipelineConfig::from_toml("[map]\nwheel-priors = true\n")
-        .unwrap_err()
-        .to_string();
-    assert!(e.contains("wheel-priors"), "{e}");
 }
 
 /// The synthetic runs' outputs, bit for bit, against a committed golden file: a refactor must

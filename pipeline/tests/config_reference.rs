@@ -72,10 +72,13 @@ fn reference() -> String {
     md.push_str(example.trim_end());
     md.push_str(
         "\n```\n\n## `[processing.pipeline]`: the point-cloud pipeline\n\n\
-         Each stage has its own table; `passangle replay RUN_DIR --pipeline-config FILE` takes \
-         the same tables (without the `processing.pipeline.` prefix) to rebuild a recorded run \
-         with other settings. Why each default is what it is: the decision records \
-         (`docs/decisions/`).\n",
+         These keys describe the robot: where its sensors sit, the lidar's near limit on it, the \
+         depth camera's band, which sensors it uses, and its wheels' stated errors. The method's \
+         own parameters (thresholds, voxels, iteration counts) are not settable: the software \
+         version fixes them, and each is documented where `pipeline/src/config.rs` defines it \
+         (decision record 036). `passangle replay RUN_DIR --pipeline-config FILE` takes the same \
+         tables (without the `processing.pipeline.` prefix) to rebuild a recorded run with other \
+         settings.\n",
     );
     let top = &docs["PipelineConfig"];
     let sections = defaults.as_table().expect("a table");
