@@ -48,7 +48,6 @@ use std::time::Instant;
 
 use angles::{AnglesConfig, compute_angles};
 use cloud_io::{Cloud, PlyEncoding, write_ply};
-use hil_sim::d435::D435Sim;
 use hil_sim::geometry::{Isometry, Vec3};
 use hil_sim::scenario::Scenario;
 use hil_sim::trajectory::Trajectory;
@@ -157,32 +156,6 @@ fn mounts_from(scenario: &Scenario, config: &mut PipelineConfig) {
     config.mounts.lidar_rpy_rad = rpy_of(&lidar.rotation).into();
     config.mounts.camera_xyz_m = camera.translation.into();
     config.mounts.camera_rpy_rad = rpy_of(&camera.rotation).into();
-}
-
-/// Depth frames at 10 Hz (every 3rd of the 30 Hz stream).
-fn depth_frames(scenario: &Scenario, scene: &Scene) -> Vec<DepthImage> {
-    let motion = scenario.motion();
-    let sim = D435Sim::new(
-        scene,
-        &motion,
-        scenario.file.depth.clone(),
-        scenario.depth_seed(),
-    );
-    let k = scenario.file.depth.intrinsics();
-    (0..sim.frames_in(scenario.duration_s))
-        .step_by(3)
-        .map(|i| {
-            let f = sim.frame(i);
-            DepthImage {
-                stamp_s: sim.frame_time_s(i),
-                width: f.width as usize,
-                height: f.height as usize,
-                intrinsics_px: [k.fx_px, k.fy_px, k.cx_px, k.cy_px],
-                depth_scale_m: 0.001,
-                depth: f.depth_mm,
-            }
-        })
-        .collect()
 }
 
 /// CPU time this thread has run, seconds, from the kernel's scheduler statistics
@@ -710,7 +683,7 @@ fn main() -> anyhow::Result<()> {
                 vs.retain(|v| !v.depth);
             }
             let depth = if vs.iter().any(|v| v.depth) {
-                depth_frames(&scenario, &scene)
+                scenario.depth_images(&scene, 1.0, 3)
             } else {
                 Vec::new()
             };

@@ -4,7 +4,7 @@
 //!
 //! Run: `cargo run --release -p hil-sim --example evaluate -- [--set tuning|held-out|both]
 //! [--protocol FILE] [--jobs N] [--only TEXT] [--oracle] [--detail] [--save-clouds DIR |
-//! --from-clouds DIR]` (defaults: both sets,
+//! --from-clouds DIR] [--camera none|cloud|fused|both]` (defaults: both sets,
 //! `hil-sim/evaluation.toml`, two worker threads; `--only` keeps the runs whose `vehicle/world/seed`
 //! contains TEXT; `--oracle` replaces the pipeline by the true poses: every simulated return
 //! placed with the exact pose of its firing, one centroid per 5 mm voxel as the pipeline's output,
@@ -12,7 +12,8 @@
 //! `--detail` adds, per run, each witness and its uncertainty budget against the truth's witness,
 //! the fitted axles against the true tyre and, for the pipeline, the trajectory's largest errors;
 //! `--save-clouds` keeps each run's cloud, path and trajectory error, and `--from-clouds` runs the
-//! calculator alone on them, in seconds instead of the pipeline's minutes).
+//! calculator alone on them, in seconds instead of the pipeline's minutes; `--camera` adds the
+//! simulated D435's points to the cloud, its odometry to the fusion, or both).
 //!
 //! Per run (all seeded; the same command prints the same tables): the protocol's template
 //! scenario with the run's vehicle, world and seed, the robot starting 1 m ahead of the vehicle's
@@ -43,7 +44,7 @@ use hil_sim::trajectory::Trajectory;
 use hil_sim::truth::{TruthOptions, true_angles};
 use hil_sim::vehicle::Vehicle;
 use pipeline::geom::{Pose, rpy_of};
-use pipeline::{BuiltCloud, LidarFrame, Pipeline, PipelineConfig, WheelOdometry};
+use pipeline::{BuiltCloud, DepthImage, LidarFrame, Pipeline, PipelineConfig, WheelOdometry};
 use serde::Deserialize;
 
 /// The protocol file.
@@ -156,33 +157,79 @@ fn thread_cpu_s() -> f64 {
         .map_or(0.0, |ns| ns as f64 * 1e-9)
 }
 
-/// The pipeline on lidar frames and wheel odometry in arrival order (a lidar frame is available
-/// after its 0.1 s sweep), laser + wheel with the default settings and the scenario's mounts.
+/// What the pipeline takes from the D435 (`--camera`).
+#[derive(Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+enum Camera {
+    /// Nothing: lidar + wheels (the product's defaults).
+    None,
+    /// Its points in the output cloud (`visual.add-to-cloud`).
+    Cloud,
+    /// Its visual odometry in the fusion (`fusion.use-visual`).
+    Fused,
+    /// Both.
+    Both,
+}
+
+impl Camera {
+    /// The saved clouds' file-name suffix.
+    fn suffix(self) -> &'static str {
+        match self {
+            Self::None => "",
+            Self::Cloud => "-camera-cloud",
+            Self::Fused => "-camera-fused",
+            Self::Both => "-camera-both",
+        }
+    }
+}
+
+/// The camera's image scale in the evaluation: a quarter of the D435's 848 x 480, read with a
+/// pixel stride of a quarter of the pipeline's default, so the pipeline samples the same rays as
+/// at full resolution while the simulator renders a sixteenth of them (per-pixel noise and the
+/// stereo bands are then modelled on the coarse pixels: an approximation).
+const CAMERA_SCALE: f64 = 0.25;
+
+/// One input of the pipeline.
+enum Input<'a> {
+    Lidar(&'a LidarFrame),
+    Depth(&'a DepthImage),
+    Wheel(&'a WheelOdometry),
+}
+
+/// The pipeline on lidar frames, depth frames and wheel odometry in arrival order (a lidar frame
+/// is available after its 0.1 s sweep, a depth frame at its exposure), with the default settings,
+/// the scenario's mounts and what `camera` asks of the D435.
 fn run_pipeline(
     scenario: &Scenario,
     lidar: &[LidarFrame],
+    depth: &[DepthImage],
     wheel: &[WheelOdometry],
+    camera: Camera,
 ) -> anyhow::Result<BuiltCloud> {
     let mut config = PipelineConfig::default();
-    config.fusion.use_visual = false;
-    config.visual.enabled = false;
+    config.visual.enabled = camera != Camera::None;
+    config.visual.add_to_cloud = matches!(camera, Camera::Cloud | Camera::Both);
+    config.fusion.use_visual = matches!(camera, Camera::Fused | Camera::Both);
+    config.visual.pixel_stride =
+        ((config.visual.pixel_stride as f64 * CAMERA_SCALE).round() as usize).max(1);
     let lidar_mount = pose_of(&scenario.file.lidar.robot_from_lidar());
     let camera_mount = pose_of(&scenario.file.depth.robot_from_camera());
     config.mounts.lidar_xyz_m = lidar_mount.translation.into();
     config.mounts.lidar_rpy_rad = rpy_of(&lidar_mount.rotation).into();
     config.mounts.camera_xyz_m = camera_mount.translation.into();
     config.mounts.camera_rpy_rad = rpy_of(&camera_mount.rotation).into();
-    let mut events: Vec<(f64, Result<&LidarFrame, &WheelOdometry>)> = lidar
+    let mut events: Vec<(f64, Input)> = lidar
         .iter()
-        .map(|f| (f.stamp_s + 0.1, Ok(f)))
-        .chain(wheel.iter().map(|w| (w.stamp_s, Err(w))))
+        .map(|f| (f.stamp_s + 0.1, Input::Lidar(f)))
+        .chain(depth.iter().map(|d| (d.stamp_s, Input::Depth(d))))
+        .chain(wheel.iter().map(|w| (w.stamp_s, Input::Wheel(w))))
         .collect();
     events.sort_by(|a, b| a.0.total_cmp(&b.0));
     let mut pipeline = Pipeline::new(config).context("pipeline settings")?;
     for (_, e) in events {
         match e {
-            Ok(f) => pipeline.push_lidar_frame(f.clone()),
-            Err(w) => pipeline.push_wheel_odometry(*w),
+            Input::Lidar(f) => pipeline.push_lidar_frame(f.clone()),
+            Input::Depth(d) => pipeline.push_depth_frame(d.clone()),
+            Input::Wheel(w) => pipeline.push_wheel_odometry(*w),
         }
         .context("simulated input")?;
     }
@@ -266,7 +313,7 @@ fn run(
     let scene = scenario.scene();
     let mut detail = Vec::new();
     let (cloud, path, frames, cpu_s, x_sigma_per_m) = if let Some(dir) = &args.from_clouds {
-        let (cloud, path, x_sigma_per_m) = load_cloud(dir, entry, oracle)?;
+        let (cloud, path, x_sigma_per_m) = load_cloud(dir, entry, args)?;
         (cloud, path, 0, 0.0, x_sigma_per_m)
     } else if oracle {
         let (cloud, path, packets) = oracle_cloud(&scenario, &scene);
@@ -274,8 +321,14 @@ fn run(
     } else {
         let lidar = scenario.decoded_lidar_frames(&scene);
         let wheel = scenario.wheel_odometry(0.2);
+        // Every third frame of the 30 Hz stream, as the service records it (`camera.record-every`).
+        let depth = if args.camera == Camera::None {
+            Vec::new()
+        } else {
+            scenario.depth_images(&scene, CAMERA_SCALE, 3)
+        };
         let cpu0 = thread_cpu_s();
-        let built = run_pipeline(&scenario, &lidar, &wheel)?;
+        let built = run_pipeline(&scenario, &lidar, &depth, &wheel, args.camera)?;
         let cpu_s = thread_cpu_s() - cpu0;
         let Some(first) = built.trajectory.first() else {
             bail!("the pipeline built no trajectory");
@@ -298,7 +351,7 @@ fn run(
         (cloud, path, lidar.len(), cpu_s, x_sigma_per_m)
     };
     if let Some(dir) = &args.save_clouds {
-        save_cloud(dir, entry, oracle, (&cloud, &path, x_sigma_per_m))?;
+        save_cloud(dir, entry, args, (&cloud, &path, x_sigma_per_m))?;
     }
     let config = AnglesConfig {
         scan_path_in_cloud: path.into_iter().map(Into::into).collect(),
@@ -349,13 +402,17 @@ fn run(
 }
 
 /// The file stem of a run's saved cloud.
-fn cloud_stem(entry: &Entry, oracle: bool) -> String {
+fn cloud_stem(entry: &Entry, args: &Args) -> String {
     format!(
         "{}-{}-{}{}",
         entry.vehicle_name(),
         entry.world_name(),
         entry.seed,
-        if oracle { "-oracle" } else { "" }
+        if args.oracle {
+            "-oracle"
+        } else {
+            args.camera.suffix()
+        }
     )
 }
 
@@ -364,11 +421,11 @@ fn cloud_stem(entry: &Entry, oracle: bool) -> String {
 fn save_cloud(
     dir: &Path,
     entry: &Entry,
-    oracle: bool,
+    args: &Args,
     (cloud, path, x_sigma_per_m): (&[[f64; 3]], &[[f64; 3]], f64),
 ) -> anyhow::Result<()> {
     std::fs::create_dir_all(dir).with_context(|| dir.display().to_string())?;
-    let stem = cloud_stem(entry, oracle);
+    let stem = cloud_stem(entry, args);
     let sigma = dir.join(format!("{stem}.x-sigma"));
     std::fs::write(&sigma, format!("{x_sigma_per_m:e}\n"))
         .with_context(|| sigma.display().to_string())?;
@@ -397,8 +454,8 @@ fn save_cloud(
 /// `--from-clouds`: a run's cloud, path and trajectory error as `--save-clouds` wrote them.
 type Saved = (Vec<[f64; 3]>, Vec<[f64; 3]>, f64);
 
-fn load_cloud(dir: &Path, entry: &Entry, oracle: bool) -> anyhow::Result<Saved> {
-    let stem = cloud_stem(entry, oracle);
+fn load_cloud(dir: &Path, entry: &Entry, args: &Args) -> anyhow::Result<Saved> {
+    let stem = cloud_stem(entry, args);
     let ply = dir.join(format!("{stem}.ply"));
     let (cloud, _) = cloud_io::read_cloud(&ply).with_context(|| ply.display().to_string())?;
     let xyz = dir.join(format!("{stem}.path.xyz"));
@@ -709,6 +766,29 @@ struct Args {
     /// (no trajectory detail, no CPU figures).
     #[arg(long, value_name = "DIR", conflicts_with = "save_clouds")]
     from_clouds: Option<PathBuf>,
+    /// What the pipeline takes from the simulated D435: nothing (the defaults), its points in the
+    /// cloud, its odometry in the fusion, or both.
+    #[arg(long, value_enum, default_value = "none")]
+    camera: Camera,
+}
+
+/// What the tables measure.
+fn print_header(args: &Args, shown: &str) {
+    if args.oracle {
+        println!(
+            "Protocol {shown}, oracle: lidar returns placed with the true poses (5 mm voxel centroids), angle calculator at its defaults; errors are measured - true, degrees.\n"
+        );
+    } else {
+        let sources = match args.camera {
+            Camera::None => "lidar + wheel odometry",
+            Camera::Cloud => "lidar + wheel odometry, D435 points in the cloud",
+            Camera::Fused => "lidar + wheel + D435 visual odometry",
+            Camera::Both => "lidar + wheel + D435 visual odometry, D435 points in the cloud",
+        };
+        println!(
+            "Protocol {shown}: {sources}, pipeline and angle calculator at their defaults otherwise; errors are measured - true, degrees.\n"
+        );
+    }
 }
 
 fn main() -> anyhow::Result<()> {
@@ -737,15 +817,7 @@ fn main() -> anyhow::Result<()> {
         ],
         other => bail!("--set must be tuning, held-out or both, not {other:?}"),
     };
-    if args.oracle {
-        println!(
-            "Protocol {shown}, oracle: lidar returns placed with the true poses (5 mm voxel centroids), angle calculator at its defaults; errors are measured - true, degrees.\n"
-        );
-    } else {
-        println!(
-            "Protocol {shown}: lidar + wheel odometry, pipeline and angle calculator at their defaults; errors are measured - true, degrees.\n"
-        );
-    }
+    print_header(&args, &shown);
     for (name, groups) in sets {
         let mut list = entries(dir, groups);
         if let Some(o) = &args.only {

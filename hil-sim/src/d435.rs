@@ -206,6 +206,24 @@ impl D435Config {
         }
     }
 
+    /// The same camera with its image scaled by `q` (0.25: a quarter of the width and height),
+    /// the intrinsics scaled with it, so a pixel sees what a `1/q` by `1/q` block of the full image
+    /// sees at its centre. The simulator renders fewer rays; the noise and stereo models stay per
+    /// pixel, so the scaled image is an approximation of a stride through the full one.
+    #[must_use]
+    pub fn scaled(&self, q: f64) -> Self {
+        let k = self.intrinsics();
+        Self {
+            width: (f64::from(k.width) * q).round() as u32,
+            height: (f64::from(k.height) * q).round() as u32,
+            fx_px: Some(k.fx_px * q),
+            fy_px: Some(k.fy_px * q),
+            cx_px: Some(k.cx_px * q),
+            cy_px: Some(k.cy_px * q),
+            ..self.clone()
+        }
+    }
+
     /// `robot_from_camera` for the optical frame (x right, y down, z forward).
     pub fn robot_from_camera(&self) -> Isometry {
         // Optical axes in a level, forward-looking robot frame: z -> +x, x -> -y, y -> -z.

@@ -273,18 +273,9 @@ fn lidar_thread(
 /// It exercises the service's whole depth path (camera channel, liveness check, recording,
 /// live processing with visual odometry); its points stay out of the cloud (`DEMO_PIPELINE`).
 pub(crate) fn demo_camera(scenario: &Scenario) -> crate::d435::D435Config {
-    let full = scenario.file.depth.clone();
-    let k = full.intrinsics();
-    let q = 0.25;
     crate::d435::D435Config {
-        width: (f64::from(k.width) * q).round() as u32,
-        height: (f64::from(k.height) * q).round() as u32,
         fps: 6.0,
-        fx_px: Some(k.fx_px * q),
-        fy_px: Some(k.fy_px * q),
-        cx_px: Some(k.cx_px * q),
-        cy_px: Some(k.cy_px * q),
-        ..full
+        ..scenario.file.depth.scaled(0.25)
     }
 }
 

@@ -285,6 +285,31 @@ impl Scenario {
         frames
     }
 
+    /// The run's depth frames as the onboard pipeline takes them: every `every`-th frame of the
+    /// scenario's D435, its image scaled by `q` ([`D435Config::scaled`]), stamped at exposure in
+    /// simulation time, depth in millimetres. For benches and diagnostics that feed `pipeline`
+    /// directly.
+    pub fn depth_images(&self, scene: &Scene, q: f64, every: usize) -> Vec<pipeline::DepthImage> {
+        let config = self.file.depth.scaled(q);
+        let k = config.intrinsics();
+        let motion = self.motion();
+        let sim = crate::d435::D435Sim::new(scene, &motion, config, self.depth_seed());
+        (0..sim.frames_in(self.duration_s))
+            .step_by(every.max(1))
+            .map(|i| {
+                let f = sim.frame(i);
+                pipeline::DepthImage {
+                    stamp_s: sim.frame_time_s(i),
+                    width: f.width as usize,
+                    height: f.height as usize,
+                    intrinsics_px: [k.fx_px, k.fy_px, k.cx_px, k.cy_px],
+                    depth_scale_m: 0.001,
+                    depth: f.depth_mm,
+                }
+            })
+            .collect()
+    }
+
     /// Read a scenario and its vehicle.
     pub fn load(path: &Path) -> Result<Self, ScenarioError> {
         let text = std::fs::read_to_string(path).map_err(|source| ScenarioError::Io {
