@@ -107,7 +107,48 @@ pub(crate) fn refine(
     Some(Plane::through(normal, point))
 }
 
-/// Robust noise estimate (1.4826 x median absolute height) of the points within `threshold_m`.
+/// Side of the floor cells over which [`local_noise_sigma`] takes the floor as flat, metres.
+const LOCAL_CELL_M: f64 = 0.25;
+
+/// Fewer floor points than this in a cell: the cell says nothing about the noise.
+const LOCAL_CELL_MIN_POINTS: usize = 5;
+
+/// The returns' own scatter on the floor: 1.4826 x the median absolute deviation of the points
+/// within `threshold_m` of the plane from their [`LOCAL_CELL_M`] cell's median height. A hall's
+/// floor undulates by centimetres over metres; over a quarter metre it is flat to a millimetre, so
+/// the plane's residuals ([`noise_sigma`]) hold the floor's shape and these hold the sensor's
+/// noise. `None` when no cell holds enough points.
+pub(crate) fn local_noise_sigma(
+    points: &[V3],
+    plane: Plane,
+    threshold_m: f64,
+    keep: impl Fn(V3) -> bool,
+) -> Option<f64> {
+    let mut cells: std::collections::HashMap<(i64, i64), Vec<f64>> =
+        std::collections::HashMap::new();
+    for &p in points.iter().filter(|&&p| keep(p)) {
+        let h = plane.height(p);
+        if h.abs() < threshold_m {
+            let key = (
+                (p[0] / LOCAL_CELL_M).floor() as i64,
+                (p[1] / LOCAL_CELL_M).floor() as i64,
+            );
+            cells.entry(key).or_default().push(h);
+        }
+    }
+    let mut deviations = Vec::new();
+    for heights in cells.values_mut() {
+        if heights.len() >= LOCAL_CELL_MIN_POINTS
+            && let Some(m) = median(heights)
+        {
+            deviations.extend(heights.iter().map(|h| (h - m).abs()));
+        }
+    }
+    median(&mut deviations).map(|m| 1.4826 * m)
+}
+
+/// Robust noise estimate (1.4826 x median absolute height) of the points within `threshold_m`:
+/// the sensor's noise and the floor's departure from the plane together.
 pub(crate) fn noise_sigma(
     points: &[V3],
     plane: Plane,

@@ -692,6 +692,7 @@ fn settle_frame(
     };
     let mut frame = frame_on(plane, points, forward).ok_or(no_ground)?;
     let (mut sigma, _) = ground::noise_sigma(points, plane, thr, |_| true);
+    let mut local_sigma = ground::local_noise_sigma(points, plane, thr, |_| true);
     let mut ground_inliers = 0;
     for round in 0..4 {
         let in_frame: Vec<V3> = points
@@ -699,7 +700,14 @@ fn settle_frame(
             .map(|&p| frame.vehicle_from_cloud(p))
             .collect();
         let noise = config.noise_m.unwrap_or(sigma);
-        let seed_low = config.seed_low_m.max(5.0 * noise);
+        // The footprint band starts above the returns' own scatter on the floor, not the floor's
+        // shape: on an undulating hall floor the plane's residuals are several times the
+        // sensor's noise and would leave no band below `seed_high_m`. A floor bump inside the
+        // band is wide, and seeds must be compact (`tyres::find_seeds`).
+        let band_noise = config
+            .noise_m
+            .unwrap_or_else(|| local_sigma.map_or(sigma, |l| l.min(sigma)));
+        let seed_low = config.seed_low_m.max(5.0 * band_noise);
         let (seeds, clusters) = tyres::find_seeds(&in_frame, seed_low, config.seed_high_m);
         let mut round_warnings = Vec::new();
         if clusters > 4 {
@@ -745,6 +753,7 @@ fn settle_frame(
             plane = refined;
         }
         (sigma, ground_inliers) = ground::noise_sigma(points, plane, thr, off_tyres);
+        local_sigma = ground::local_noise_sigma(points, plane, thr, off_tyres);
         let heading = axle_heading(&frame, &fits).unwrap_or(frame.x_axis_in_cloud);
         frame = frame_on(plane, points, heading)
             .ok_or(AnglesError::Tyres("degenerate axle heading".into()))?;

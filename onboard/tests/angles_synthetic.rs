@@ -522,3 +522,40 @@ fn lifted_floor_arcs_are_neither_underside_nor_a_footprint() {
     let (without, _) = angles_and_tyres(&clean, &config);
     assert_same_angles(with, without, 0.05, "the lifted arcs");
 }
+
+#[test]
+fn an_undulating_floor_leaves_the_tyres_footprints_found() {
+    // A hall floor that rises and falls by 3 cm over 1.5 m between and beyond the axles (flat
+    // within 0.4 m of them, where the tyres stand). Its scatter about the fitted plane is about
+    // 2 cm, five times of which is above the footprint band's top (8 cm): the band was empty and
+    // the tyres "not found". The returns' own scatter, measured over quarter-metre cells, is
+    // what the band needs.
+    let v = synth::sedan();
+    let scan = Scan {
+        noise_m: 0.002,
+        seed: 5,
+        ..Scan::noiseless(0.005)
+    };
+    let flat = synth::sample(&v, scan);
+    let near_axle = |x: f64| (x - v.front_x()).abs() < 0.4 || (x - v.rear_x()).abs() < 0.4;
+    let wavy: Vec<[f64; 3]> = flat
+        .iter()
+        .map(|&[x, y, z]| {
+            let floor = z.abs() < 0.01 && !near_axle(x);
+            let lift = if floor {
+                0.03 * (std::f64::consts::TAU * x / 1.5).sin()
+            } else {
+                0.0
+            };
+            [x, y, z + lift]
+        })
+        .collect();
+    let config = AnglesConfig::default();
+    let (with, tyres) = angles_and_tyres(&wavy, &config);
+    let (without, _) = angles_and_tyres(&flat, &config);
+    assert_eq!(tyres, 4);
+    // The plane through the wave lies about 4 mm from the flat floor, which moves the breakover
+    // (its witnesses are 1.4 m from the axles) by about 0.35 degree: the ground a wavy floor
+    // offers is not one height.
+    assert_same_angles(with, without, 0.5, "an undulating floor");
+}
