@@ -13,13 +13,15 @@
 //! the fitted axles against the true tyre and, for the pipeline, the trajectory's largest errors;
 //! `--save-clouds` keeps each run's cloud, path and trajectory error, and `--from-clouds` runs the
 //! calculator alone on them, in seconds instead of the pipeline's minutes; `--camera` adds the
-//! simulated D435's points to the cloud, its odometry to the fusion, or both).
+//! simulated D435's points to the cloud (the default, as on the robot), its odometry to the fusion,
+//! both, or neither).
 //!
 //! Per run (all seeded; the same command prints the same tables): the protocol's template
 //! scenario with the run's vehicle, world and seed, the robot starting 1 m ahead of the vehicle's
 //! front and driving to 1 m behind its rear; the simulated VLP-16 packets decoded by
 //! `vlp16::FrameAssembler`; wheel odometry at 100 Hz with the template's wheel errors; the
-//! pipeline with its default settings, laser + wheel (the camera is off in the defaults); the built
+//! pipeline with its default settings: laser + wheel, the D435's points where the lidar does not
+//! see (the camera at a quarter of its resolution, see [`CAMERA_SCALE`]); the built
 //! cloud moved into the vehicle frame by the true start pose (on the hall's floor) with the
 //! estimated trajectory as the scan's path; `angles::compute_angles` with its default
 //! settings; `hil_sim::truth::true_angles` (49 CFR zone, flexible parts included). Nothing is
@@ -160,9 +162,9 @@ fn thread_cpu_s() -> f64 {
 /// What the pipeline takes from the D435 (`--camera`).
 #[derive(Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 enum Camera {
-    /// Nothing: lidar + wheels (the product's defaults).
+    /// Nothing: lidar + wheels.
     None,
-    /// Its points in the output cloud (`visual.add-to-cloud`).
+    /// Its points in the output cloud (`visual.add-to-cloud`, the product's default).
     Cloud,
     /// Its visual odometry in the fusion (`fusion.use-visual`).
     Fused,
@@ -174,8 +176,8 @@ impl Camera {
     /// The saved clouds' file-name suffix.
     fn suffix(self) -> &'static str {
         match self {
-            Self::None => "",
-            Self::Cloud => "-camera-cloud",
+            Self::None => "-no-camera",
+            Self::Cloud => "",
             Self::Fused => "-camera-fused",
             Self::Both => "-camera-both",
         }
@@ -757,7 +759,7 @@ struct Args {
     /// trajectory's largest errors.
     #[arg(long)]
     detail: bool,
-    /// Write each run's cloud (vehicle frame) as `DIR/VEHICLE-WORLD-SEED[-oracle].ply` and its
+    /// Write each run's cloud (vehicle frame) as `DIR/VEHICLE-WORLD-SEED[-oracle|-no-camera|...].ply` and its
     /// scan path as `.path.xyz` beside it, for `passangle angles` and a look by eye.
     #[arg(long, value_name = "DIR")]
     save_clouds: Option<PathBuf>,
@@ -766,9 +768,9 @@ struct Args {
     /// (no trajectory detail, no CPU figures).
     #[arg(long, value_name = "DIR", conflicts_with = "save_clouds")]
     from_clouds: Option<PathBuf>,
-    /// What the pipeline takes from the simulated D435: nothing (the defaults), its points in the
-    /// cloud, its odometry in the fusion, or both.
-    #[arg(long, value_enum, default_value = "none")]
+    /// What the pipeline takes from the simulated D435: nothing, its points in the cloud (the
+    /// product's default), its odometry in the fusion, or both.
+    #[arg(long, value_enum, default_value = "cloud")]
     camera: Camera,
 }
 
@@ -781,9 +783,11 @@ fn print_header(args: &Args, shown: &str) {
     } else {
         let sources = match args.camera {
             Camera::None => "lidar + wheel odometry",
-            Camera::Cloud => "lidar + wheel odometry, D435 points in the cloud",
+            Camera::Cloud => "lidar + wheel odometry, D435 points where the lidar does not see",
             Camera::Fused => "lidar + wheel + D435 visual odometry",
-            Camera::Both => "lidar + wheel + D435 visual odometry, D435 points in the cloud",
+            Camera::Both => {
+                "lidar + wheel + D435 visual odometry, D435 points where the lidar does not see"
+            }
         };
         println!(
             "Protocol {shown}: {sources}, pipeline and angle calculator at their defaults otherwise; errors are measured - true, degrees.\n"

@@ -496,3 +496,16 @@ fn the_stated_x_error_mixes_the_wheels_and_the_map_by_frames() {
     let map = built(false).x_sigma_per_m(&fusion);
     assert!((map - MAP_X_SIGMA_PER_M).abs() < 1e-12, "{map}");
 }
+
+#[test]
+fn the_cameras_points_join_the_cloud_only_where_the_lidar_does_not_see() {
+    let min_range_m = 0.4;
+    // 1 m ahead (lidar frame: z up): at 0.2 m up the lidar sees it (11 degrees), at 0.5 m not
+    // (27 degrees); likewise below; within the near limit nothing is seen.
+    assert!(!outside_lidar_view(V3::new(0.0, 1.0, 0.2), min_range_m));
+    assert!(outside_lidar_view(V3::new(0.0, 1.0, 0.5), min_range_m));
+    assert!(outside_lidar_view(V3::new(1.0, 0.0, -0.3), min_range_m));
+    assert!(outside_lidar_view(V3::new(0.2, 0.1, 0.0), min_range_m));
+    // The underside right above the robot.
+    assert!(outside_lidar_view(V3::new(0.1, 0.2, 0.3), min_range_m));
+}
