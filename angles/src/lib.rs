@@ -945,6 +945,7 @@ fn fit_tyres(
     }
     let centre_y = seeds.iter().map(|s| s.y).sum::<f64>() / seeds.len() as f64;
     let mut fits = Vec::new();
+    let mut unfitted = Vec::new();
     for s in &seeds {
         let params = TyreParams {
             h_lo: seed_low,
@@ -954,12 +955,14 @@ fn fit_tyres(
             inward_sign: if s.y < centre_y { 1.0 } else { -1.0 },
             seed: config.seed,
         };
-        match tyres::fit_tyre(in_frame, s, params) {
-            Some(f) => fits.push(f),
-            None => warnings.push(format!(
+        if let Some(f) = tyres::fit_tyre(in_frame, s, params) {
+            fits.push(f);
+        } else {
+            unfitted.push(format!("x {:.2} m, y {:.2} m", s.x, s.y));
+            warnings.push(format!(
                 "footprint at x {:.2} m, y {:.2} m: no consistent tyre circle, ignored",
                 s.x, s.y
-            )),
+            ));
         }
     }
     fits.sort_by(|a, b| a.centre_x.total_cmp(&b.centre_x));
@@ -971,9 +974,25 @@ fn fit_tyres(
         })
         .filter(|&i| fits[i].centre_x - fits[i - 1].centre_x > 0.8)
         .ok_or_else(|| {
+            let fitted: Vec<String> = fits
+                .iter()
+                .map(|f| {
+                    format!(
+                        "x {:.2} m, y {:.2} m (centre height {:.3} m)",
+                        f.centre_x, f.centre_y, f.loaded_radius_m
+                    )
+                })
+                .collect();
+            let unfitted = if unfitted.is_empty() {
+                String::new()
+            } else {
+                format!("; footprints without a circle at {}", unfitted.join(", "))
+            };
             AnglesError::Tyres(format!(
-                "{} tyre circle(s) fitted, but no front and rear axle more than 0.8 m apart",
-                fits.len()
+                "{} tyre circle(s) fitted, but no front and rear axle more than 0.8 m apart \
+                 (circles at {}{unfitted})",
+                fits.len(),
+                fitted.join(", ")
             ))
         })?;
     let centre_y = fits.iter().map(|f| f.centre_y).sum::<f64>() / fits.len() as f64;

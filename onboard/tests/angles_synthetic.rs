@@ -240,6 +240,21 @@ fn clear_errors_for_unusable_clouds() {
         err.to_string().contains("need a front and a rear tyre"),
         "{err}"
     );
+    // Only the front tyres: the error says where the circles it did fit stand.
+    let v = synth::sedan();
+    let front_only: Vec<[f64; 3]> = synth::sample(&v, Scan::noiseless(0.01))
+        .into_iter()
+        .filter(|p| {
+            let rear_tyre = (p[0] - v.rear_x()).abs() < 0.5 && p[1].abs() > v.inner_face_y() - 0.01;
+            !(rear_tyre && p[2] > 0.005)
+        })
+        .collect();
+    let err = compute_angles(&front_only, &AnglesConfig::default()).unwrap_err();
+    let text = err.to_string();
+    assert!(
+        text.contains("2 tyre circle(s) fitted") && text.contains("(centre height 0.30"),
+        "{err}"
+    );
     let wall: Vec<[f64; 3]> = (0..10_000)
         .map(|i| [0.0, f64::from(i % 100) * 0.05, f64::from(i / 100) * 0.05])
         .collect();
