@@ -759,8 +759,10 @@ struct Args {
     /// trajectory's largest errors.
     #[arg(long)]
     detail: bool,
-    /// Write each run's cloud (vehicle frame) as `DIR/VEHICLE-WORLD-SEED[-oracle|-no-camera|...].ply` and its
-    /// scan path as `.path.xyz` beside it, for `passangle angles` and a look by eye.
+    /// Write each run's cloud (vehicle frame) as `DIR/VEHICLE-WORLD-SEED[SUFFIX].ply` (suffix
+    /// `-oracle`, or `-no-camera`, `-camera-fused`, `-camera-both` for a `--camera` other than
+    /// the default) and its scan path as `.path.xyz` beside it, for `passangle angles` and a
+    /// look by eye.
     #[arg(long, value_name = "DIR")]
     save_clouds: Option<PathBuf>,
     /// Read each run's cloud, path and trajectory error from DIR, as `--save-clouds` wrote them,

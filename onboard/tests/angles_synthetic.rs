@@ -542,9 +542,9 @@ fn lifted_floor_arcs_are_neither_underside_nor_a_footprint() {
 fn an_undulating_floor_leaves_the_tyres_footprints_found() {
     // A hall floor that rises and falls by 3 cm over 1.5 m between and beyond the axles (flat
     // within 0.4 m of them, where the tyres stand). Its scatter about the fitted plane is about
-    // 2 cm, five times of which is above the footprint band's top (8 cm): the band was empty and
-    // the tyres "not found". The returns' own scatter, measured over quarter-metre cells, is
-    // what the band needs.
+    // 2 cm, five times of which is above the footprint band's top (8 cm), which would leave the
+    // band empty and the tyres "not found". The returns' own scatter, measured over quarter-metre
+    // cells, is what the band needs.
     let v = synth::sedan();
     let scan = Scan {
         noise_m: 0.002,

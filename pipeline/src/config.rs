@@ -17,8 +17,8 @@
 //! **The method's parameters** (thresholds, iteration counts, voxels, tolerances, the ablation
 //! switches of the paper's Figure 14) are fields too, so that tests and the ablation bench can
 //! vary them in code, but `#[serde(skip)]`: no file sets them, a run's software version fixes
-//! them, and each is documented where it is defined. They were settable keys once; none had a
-//! reason to differ between robots (decision record 036).
+//! them, and each is documented where it is defined. None has a reason to differ between robots
+//! (decision record 036).
 
 use serde::{Deserialize, Serialize};
 

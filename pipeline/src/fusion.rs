@@ -41,17 +41,16 @@
 //! [`Fusion::wheel_scale`] in selection and gap filling (not in the prediction, see
 //! [`Fusion::predict`]), so where the laser is degenerate (between two planes) the calibrated
 //! wheels fill in. The evidence comes from long baselines (`wheel-scale-baseline-m` > 0):
-//! `(laser, wheel)` distance
-//!   pairs over 0.25 m of travel from [`super::slip::SlipMeter`], via
-//!   [`Fusion::add_scale_measurement`]. The factor is the least-squares
-//!   `s = sum(laser * wheel) / sum(wheel^2)` over the last [`MAX_SCALE_MEASUREMENTS`] pairs, and
-//!   it is applied only when it is **significant**: at least [`MIN_SCALE_MEASUREMENTS`] pairs
-//!   counted as independent (overlapping baselines share their errors), and `|s - 1|` above
-//!   both `wheel-scale-min-slip` and three standard errors of `s` (from the pairs' scatter about
-//!   the fit, over the independent count). Otherwise it is 1: a slip-free run keeps its exact wheels
-//!   instead of taking the measurement's noise as a correction.
-//! Over one frame instead of a long baseline, the laser's x is too noisy and biased for a few per
-//! cent (see [`super::slip`]): a per-frame estimate found slip on slip-free simulated passes.
+//! `(laser, wheel)` distance pairs over 0.25 m of travel from [`super::slip::SlipMeter`], via
+//! [`Fusion::add_scale_measurement`]. The factor is the least-squares
+//! `s = sum(laser * wheel) / sum(wheel^2)` over the last [`MAX_SCALE_MEASUREMENTS`] pairs, and it
+//! is applied only when it is **significant**: at least [`MIN_SCALE_MEASUREMENTS`] pairs counted
+//! as independent (overlapping baselines share their errors), and `|s - 1|` above both
+//! `wheel-scale-min-slip` and three standard errors of `s` (from the pairs' scatter about the fit,
+//! over the independent count). Otherwise it is 1: a slip-free run keeps its exact wheels instead
+//! of taking the measurement's noise as a correction. Over one frame instead of a long baseline,
+//! the laser's x is too noisy and biased for a few per cent (see [`super::slip`]): a per-frame
+//! estimate finds slip on slip-free simulated passes.
 //!
 //! **Wheel yaw-rate bias** (`wheel-yaw-bias`): the same long-baseline registrations, where they
 //! determine the yaw, give the wheels' turn minus the laser's over the baseline's duration
