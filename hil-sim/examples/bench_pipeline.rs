@@ -180,27 +180,13 @@ fn run_pipeline(
     depth: &[DepthImage],
     wheel: &[WheelOdometry],
 ) -> (BuiltCloud, Timing) {
-    enum Ev<'a> {
-        L(&'a LidarFrame),
-        D(&'a DepthImage),
-        W(&'a WheelOdometry),
-    }
-    let mut events: Vec<(f64, Ev)> = Vec::new();
-    // A message is available when it is complete: a lidar frame after its sweep (0.1 s).
-    events.extend(lidar.iter().map(|f| (f.stamp_s + 0.1, Ev::L(f))));
-    events.extend(depth.iter().map(|f| (f.stamp_s, Ev::D(f))));
-    events.extend(wheel.iter().map(|w| (w.stamp_s, Ev::W(w))));
-    events.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let events = hil_sim::feed::arrival_order(lidar, depth, wheel);
     let start = Instant::now();
     let cpu_start = thread_cpu_s();
     let mut pipeline = Pipeline::new(config).expect("valid config");
-    for (_, e) in events {
-        let r = match e {
-            Ev::L(f) => pipeline.push_lidar_frame(f.clone()),
-            Ev::D(f) => pipeline.push_depth_frame(f.clone()),
-            Ev::W(w) => pipeline.push_wheel_odometry(*w),
-        };
-        r.expect("simulated input is well-formed");
+    for e in events {
+        e.push_to(&mut pipeline)
+            .expect("simulated input is well-formed");
     }
     let built = pipeline.finish();
     let timing = Timing {

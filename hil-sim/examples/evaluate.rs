@@ -190,13 +190,6 @@ impl Camera {
 /// stereo bands are then modelled on the coarse pixels: an approximation).
 const CAMERA_SCALE: f64 = 0.25;
 
-/// One input of the pipeline.
-enum Input<'a> {
-    Lidar(&'a LidarFrame),
-    Depth(&'a DepthImage),
-    Wheel(&'a WheelOdometry),
-}
-
 /// The pipeline on lidar frames, depth frames and wheel odometry in arrival order (a lidar frame
 /// is available after its 0.1 s sweep, a depth frame at its exposure), with the default settings,
 /// the scenario's mounts and what `camera` asks of the D435.
@@ -219,21 +212,9 @@ fn run_pipeline(
     config.mounts.lidar_rpy_rad = rpy_of(&lidar_mount.rotation).into();
     config.mounts.camera_xyz_m = camera_mount.translation.into();
     config.mounts.camera_rpy_rad = rpy_of(&camera_mount.rotation).into();
-    let mut events: Vec<(f64, Input)> = lidar
-        .iter()
-        .map(|f| (f.stamp_s + 0.1, Input::Lidar(f)))
-        .chain(depth.iter().map(|d| (d.stamp_s, Input::Depth(d))))
-        .chain(wheel.iter().map(|w| (w.stamp_s, Input::Wheel(w))))
-        .collect();
-    events.sort_by(|a, b| a.0.total_cmp(&b.0));
     let mut pipeline = Pipeline::new(config).context("pipeline settings")?;
-    for (_, e) in events {
-        match e {
-            Input::Lidar(f) => pipeline.push_lidar_frame(f.clone()),
-            Input::Depth(d) => pipeline.push_depth_frame(d.clone()),
-            Input::Wheel(w) => pipeline.push_wheel_odometry(*w),
-        }
-        .context("simulated input")?;
+    for e in hil_sim::feed::arrival_order(lidar, depth, wheel) {
+        e.push_to(&mut pipeline).context("simulated input")?;
     }
     Ok(pipeline.finish())
 }

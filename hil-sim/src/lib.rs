@@ -29,6 +29,7 @@ pub mod can_bus;
 pub mod d435;
 pub mod demo;
 pub mod esc_model;
+pub mod feed;
 pub mod fil;
 pub mod fil_scenarios;
 pub mod geometry;

@@ -21,6 +21,7 @@
 
 use std::io::{Read, Write};
 
+pub mod chunks;
 pub mod client;
 pub mod handheld;
 pub mod keys;

@@ -10,6 +10,8 @@ use std::collections::BTreeMap;
 use protocol::bounded::List;
 use protocol::radio::{CHUNK_POINTS, CloudChunk};
 
+use crate::chunks::ChunkSet;
+
 /// Decimates `points_m` to at most `max_points` points, quantised to millimetres.
 ///
 /// Points fall into cubic voxels of `voxel_m`; each voxel keeps its lowest point (the underside
@@ -76,8 +78,7 @@ pub fn chunks(run_id: u32, points_mm: &[[i16; 3]]) -> Vec<CloudChunk> {
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Assembler {
     run_id: u32,
-    count: u16,
-    got: BTreeMap<u16, Vec<[i16; 3]>>,
+    chunks: ChunkSet<[i16; 3]>,
 }
 
 impl Assembler {
@@ -85,8 +86,7 @@ impl Assembler {
     pub fn new(run_id: u32, count: u16) -> Self {
         Self {
             run_id,
-            count,
-            got: BTreeMap::new(),
+            chunks: ChunkSet::new(count),
         }
     }
 
@@ -97,32 +97,24 @@ impl Assembler {
 
     /// Takes a chunk; returns whether it was new. Chunks of other runs or out of range are ignored.
     pub fn add(&mut self, chunk: &CloudChunk) -> bool {
-        if chunk.run_id != self.run_id || chunk.index >= self.count || chunk.count != self.count {
-            return false;
-        }
-        if self.got.contains_key(&chunk.index) {
-            return false;
-        }
-        self.got
-            .insert(chunk.index, chunk.points_mm.as_slice().to_vec());
-        true
+        chunk.run_id == self.run_id
+            && chunk.count == self.chunks.count()
+            && self.chunks.insert(chunk.index, chunk.points_mm.as_slice())
     }
 
     /// Chunk indices still missing, ascending.
     pub fn missing(&self) -> Vec<u16> {
-        (0..self.count)
-            .filter(|i| !self.got.contains_key(i))
-            .collect()
+        self.chunks.missing()
     }
 
     /// Whether every chunk arrived.
     pub fn is_complete(&self) -> bool {
-        self.got.len() == usize::from(self.count)
+        self.chunks.is_complete()
     }
 
     /// The points received so far, in chunk order.
     pub fn points_mm(&self) -> Vec<[i16; 3]> {
-        self.got.values().flatten().copied().collect()
+        self.chunks.joined()
     }
 }
 

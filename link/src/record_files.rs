@@ -5,12 +5,12 @@
 //! A file longer than [`MAX_RECORD_LEN`] is named with its length and not sent; the handheld
 //! reports it ([`RecordError::TooLarge`]) instead of allocating for it.
 
-use std::collections::BTreeMap;
-
 use protocol::bounded::List;
 use protocol::radio::{
     MAX_RECORD_LEN, RECORD_CHUNK_LEN, RecordChunk, RecordFile, RecordInfo, record_chunk_count,
 };
+
+use crate::chunks::ChunkSet;
 
 /// A record file the robot offers with a result.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -105,8 +105,7 @@ pub fn chunks(run_id: u32, record: &OutgoingRecord) -> Vec<RecordChunk> {
 pub struct Assembler {
     run_id: u32,
     info: RecordInfo,
-    count: u16,
-    got: BTreeMap<u16, Vec<u8>>,
+    chunks: ChunkSet<u8>,
 }
 
 impl Assembler {
@@ -124,8 +123,7 @@ impl Assembler {
         Ok(Self {
             run_id,
             info,
-            count,
-            got: BTreeMap::new(),
+            chunks: ChunkSet::new(count),
         })
     }
 
@@ -136,7 +134,7 @@ impl Assembler {
 
     /// Chunks expected.
     pub fn count(&self) -> u16 {
-        self.count
+        self.chunks.count()
     }
 
     /// Takes a chunk; returns whether it was new and fits.
@@ -144,9 +142,7 @@ impl Assembler {
         if chunk.run_id != self.run_id
             || chunk.file != self.info.file
             || chunk.total_len != self.info.len
-            || chunk.count != self.count
-            || chunk.index >= self.count
-            || self.got.contains_key(&chunk.index)
+            || chunk.count != self.chunks.count()
         {
             return false;
         }
@@ -154,29 +150,23 @@ impl Assembler {
         let want = (self.info.len as usize)
             .saturating_sub(start)
             .min(RECORD_CHUNK_LEN);
-        if chunk.bytes.as_slice().len() != want {
-            return false;
-        }
-        self.got
-            .insert(chunk.index, chunk.bytes.as_slice().to_vec());
-        true
+        chunk.bytes.as_slice().len() == want
+            && self.chunks.insert(chunk.index, chunk.bytes.as_slice())
     }
 
     /// Chunk indices still missing, ascending.
     pub fn missing(&self) -> Vec<u16> {
-        (0..self.count)
-            .filter(|i| !self.got.contains_key(i))
-            .collect()
+        self.chunks.missing()
     }
 
     /// Chunks received.
     pub fn received(&self) -> usize {
-        self.got.len()
+        self.chunks.received()
     }
 
     /// Whether every chunk arrived.
     pub fn is_complete(&self) -> bool {
-        self.got.len() == usize::from(self.count)
+        self.chunks.is_complete()
     }
 
     /// The whole file once complete (its length is the announced one).
@@ -184,7 +174,7 @@ impl Assembler {
         if !self.is_complete() {
             return None;
         }
-        let bytes: Vec<u8> = self.got.values().flatten().copied().collect();
+        let bytes = self.chunks.joined();
         (bytes.len() == self.info.len as usize).then_some(bytes)
     }
 }

@@ -407,6 +407,13 @@ impl Rig {
         handle
     }
 
+    /// A client with the paired key, once the firmware is ready.
+    fn ready_client(&mut self) -> Client {
+        self.wait_firmware_ready();
+        let key = self.key.clone();
+        self.client(key)
+    }
+
     fn wait_firmware_ready(&self) {
         // The service needs the firmware's hello, config and a status before checks pass.
         thread::sleep(Duration::from_millis(800));
@@ -444,9 +451,7 @@ fn params(distance_m: f32) -> StartMeasurement {
 #[test]
 fn full_run_over_a_radio_with_20_percent_loss_and_corruption_delivers_the_exact_result() {
     let mut rig = Rig::start("lossy", PipeConfig::radio_lossy(0.2, 0.2), None);
-    rig.wait_firmware_ready();
-    let key = rig.key.clone();
-    let mut client = rig.client(key);
+    let mut client = rig.ready_client();
     client.connect(Duration::from_secs(10)).unwrap();
     let mut trace = Trace::new();
     let m = client
@@ -528,9 +533,7 @@ fn measure_and_fetch_bring_back_the_robots_signed_result_json() {
         78,
         Some(seed),
     );
-    rig.wait_firmware_ready();
-    let key = rig.key.clone();
-    let mut client = rig.client(key);
+    let mut client = rig.ready_client();
     client.connect(Duration::from_secs(10)).unwrap();
     let mut trace = Trace::new();
     let m = client
@@ -604,9 +607,7 @@ fn measure_and_fetch_bring_back_the_robots_signed_result_json() {
 fn an_unsigned_robot_sends_its_result_json_and_no_signature() {
     use protocol::radio::RecordFile;
     let mut rig = Rig::start("unsigned", PipeConfig::radio_lossy(0.0, 0.0), None);
-    rig.wait_firmware_ready();
-    let key = rig.key.clone();
-    let mut client = rig.client(key);
+    let mut client = rig.ready_client();
     client.connect(Duration::from_secs(10)).unwrap();
     let m = client
         .measure(&params(0.4), Duration::from_secs(60), &mut Quiet)
@@ -645,9 +646,7 @@ fn runs_deliver_on_every_seed_at_30_percent_loss_and_10_percent_corruption() {
     for seed in 1..=10 {
         let name = format!("seeds-{seed}");
         let mut rig = Rig::start_seeded(&name, PipeConfig::radio_lossy(0.3, 0.1), None, seed);
-        rig.wait_firmware_ready();
-        let key = rig.key.clone();
-        let mut client = rig.client(key);
+        let mut client = rig.ready_client();
         let t0 = Instant::now();
         client
             .connect(Duration::from_secs(30))
@@ -728,9 +727,7 @@ fn attack_bytes(seq: u16) -> Vec<u8> {
 #[test]
 fn a_flood_of_unauthenticated_frames_while_driving_changes_nothing() {
     let mut rig = Rig::start("flood", PipeConfig::CLEAN, None);
-    rig.wait_firmware_ready();
-    let key = rig.key.clone();
-    let mut client = rig.client(key);
+    let mut client = rig.ready_client();
     let mut attacker = rig.attacker.clone().unwrap();
     let stop = Arc::new(AtomicBool::new(false));
     let flood = {
@@ -872,9 +869,7 @@ fn fetches_of_a_large_cloud_never_stall_the_loop() {
 #[test]
 fn the_handheld_vanishing_mid_run_stops_the_robot() {
     let mut rig = Rig::start("vanish", PipeConfig::CLEAN, None);
-    rig.wait_firmware_ready();
-    let key = rig.key.clone();
-    let mut client = rig.client(key);
+    let mut client = rig.ready_client();
     let handle =
         thread::spawn(move || client.measure(&params(5.0), Duration::from_secs(30), &mut Quiet));
     // Wait until the robot moves, then cut the radio.
@@ -916,9 +911,7 @@ fn the_handheld_vanishing_mid_run_stops_the_robot() {
 #[test]
 fn the_onboard_killed_mid_run_leaves_an_incomplete_recording_and_the_firmware_stops() {
     let mut rig = Rig::start("kill", PipeConfig::CLEAN, None);
-    rig.wait_firmware_ready();
-    let key = rig.key.clone();
-    let mut client = rig.client(key);
+    let mut client = rig.ready_client();
     let handle =
         thread::spawn(move || client.measure(&params(5.0), Duration::from_secs(8), &mut Quiet));
     let handle = rig.wait_until_driving(handle);
@@ -952,9 +945,7 @@ fn the_onboard_killed_mid_run_leaves_an_incomplete_recording_and_the_firmware_st
 #[test]
 fn malformed_lidar_packets_change_nothing_but_a_counter() {
     let mut rig = Rig::start("malformed", PipeConfig::CLEAN, Some(10));
-    rig.wait_firmware_ready();
-    let key = rig.key.clone();
-    let mut client = rig.client(key);
+    let mut client = rig.ready_client();
     let m = client
         .measure(&params(0.6), Duration::from_secs(60), &mut Quiet)
         .unwrap();
