@@ -10,7 +10,7 @@ use std::path::PathBuf;
 
 use angles::profiles::{
     Classification, DECISION_RULE, Decision, Measure, ProfileResult, QuantityKind, Standard,
-    Thresholds, Unit, classify_all, compute_profiles,
+    Thresholds, Unit, classify_all, compute_profiles, decision_lines, side_by_side,
 };
 use angles::{
     AngleFinding, AnglesConfig, AnglesResult, Band, ExclusionBox, Quantity, Uncertainty, V3, Zone,
@@ -656,88 +656,6 @@ pub fn profiles_json(p: &Profiles) -> Value {
         })
         .collect();
     json!(v)
-}
-
-/// A quantity as `value ± U` (degrees to 2 decimals, metres to 3), or `not measured [n]` with
-/// the reason's footnote number.
-fn cell(kind: QuantityKind, m: &Measure, footnotes: &mut Vec<String>) -> String {
-    match m {
-        Measure::Value { value, u, .. } => match kind.unit() {
-            Unit::Degree => format!("{value:.2} ± {u:.2}"),
-            Unit::Metre => format!("{value:.3} ± {u:.3}"),
-        },
-        Measure::NotMeasured(why) => {
-            let n = footnotes.iter().position(|f| f == why).unwrap_or_else(|| {
-                footnotes.push(why.clone());
-                footnotes.len() - 1
-            });
-            format!("not measured [{}]", n + 1)
-        }
-    }
-}
-
-/// The side-by-side table: a header (quantity, then one column per standard), one row per
-/// quantity any standard reports (`-`: the standard does not define it), and the footnotes
-/// giving each not-measured reason. Shared by the table and the lab report.
-pub fn side_by_side(profiles: &[ProfileResult]) -> (Vec<String>, Vec<Vec<String>>, Vec<String>) {
-    let mut header = vec!["quantity (deg / m), value ± U (k = 2)".to_owned()];
-    header.extend(profiles.iter().map(|p| p.standard.short().to_owned()));
-    let mut footnotes = Vec::new();
-    let rows = QuantityKind::ALL
-        .into_iter()
-        .filter(|k| profiles.iter().any(|p| p.get(*k).is_some()))
-        .map(|k| {
-            let mut row = vec![k.label().to_owned()];
-            row.extend(profiles.iter().map(|p| {
-                p.get(k)
-                    .map_or_else(|| "-".to_owned(), |m| cell(k, m, &mut footnotes))
-            }));
-            row
-        })
-        .collect();
-    (header, rows, footnotes)
-}
-
-/// One line per decision set: the verdict, then each criterion's decision.
-pub fn decision_lines(c: &Classification) -> Vec<String> {
-    let mut lines = vec![format!(
-        "{}: {} ({} of {} criteria pass, {} fail; needs {})",
-        c.thresholds.title(),
-        c.verdict.label().to_uppercase(),
-        c.passed,
-        c.criteria.len(),
-        c.failed,
-        c.thresholds.required()
-    )];
-    for d in &c.criteria {
-        let values: Vec<String> = d
-            .parts
-            .iter()
-            .map(|(k, m, dec)| {
-                let v = match (m, k.unit()) {
-                    (Measure::Value { value, u, .. }, Unit::Degree) => {
-                        format!("{value:.2} ± {u:.2} deg")
-                    }
-                    (Measure::Value { value, u, .. }, Unit::Metre) => {
-                        format!("{value:.3} ± {u:.3} m")
-                    }
-                    (Measure::NotMeasured(why), _) => format!("not measured ({why})"),
-                };
-                if d.parts.len() > 1 {
-                    format!("{}: {v} {}", k.label(), dec.label())
-                } else {
-                    v
-                }
-            })
-            .collect();
-        lines.push(format!(
-            "  {:<14} {}: {}",
-            d.decision.label(),
-            d.criterion.label,
-            values.join("; ")
-        ));
-    }
-    lines
 }
 
 /// The table's standards section: the side-by-side table, the reasons, and the decisions.

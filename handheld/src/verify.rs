@@ -16,7 +16,8 @@ use std::process::ExitCode;
 
 use anyhow::Context;
 use clap::Args;
-use signing::{PublicKey, Sidecar, Verdict};
+use onboard::signed::{Check, SIGNED_IN_A_RUN, check_file};
+use signing::PublicKey;
 
 /// Every file verified.
 pub const OK: u8 = 0;
@@ -26,16 +27,6 @@ pub const CHANGED: u8 = 3;
 pub const UNTRUSTED: u8 = 4;
 /// A file has no usable signature.
 pub const UNSIGNED: u8 = 5;
-
-/// The whole files a robot with a device key signs in every run directory: in a directory,
-/// one of these without its `.sig` is reported as unsigned.
-pub const SIGNED_IN_A_RUN: [&str; 5] = [
-    "config.toml",
-    "meta.json",
-    "result.json",
-    "cloud.ply",
-    "side_view.svg",
-];
 
 /// The largest trust list read, bytes.
 const MAX_KEYS_FILE: u64 = 1 << 20;
@@ -132,69 +123,14 @@ fn trusted_keys(args: &VerifyArgs) -> anyhow::Result<Vec<PublicKey>> {
     Ok(keys)
 }
 
-/// Reads a sidecar without reading more than a sidecar may be.
-pub fn read_sidecar(path: &Path) -> Result<Sidecar, String> {
-    let mut bytes = Vec::new();
-    std::fs::File::open(path)
-        .and_then(|f| {
-            f.take(signing::MAX_SIDECAR_BYTES as u64 + 1)
-                .read_to_end(&mut bytes)
-        })
-        .map_err(|e| format!("{}: {e}", path.display()))?;
-    Sidecar::parse(&bytes).map_err(|e| format!("{}: {e}", path.display()))
-}
-
-/// What a file's signature says about it.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub enum Check {
-    /// The file is what the key with this id signed.
-    Verified {
-        /// The signer's key id.
-        key_id: String,
-    },
-    /// A trusted key signed the file, which was changed since.
-    Changed {
-        /// The signer's key id.
-        key_id: String,
-        /// The name the file was signed as.
-        signed_as: String,
-        /// What was changed (JSON pointers and the like).
-        changes: Vec<String>,
-    },
-    /// The signature is not by a trusted key, or does not hold.
-    Untrusted(String),
-    /// No usable signature (missing, too large, not a signature file).
-    Unsigned(String),
-}
-
-impl Check {
-    /// The exit code of `passangle verify` for this outcome.
-    pub fn code(&self) -> u8 {
-        match self {
-            Check::Verified { .. } => OK,
-            Check::Changed { .. } => CHANGED,
-            Check::Untrusted(_) => UNTRUSTED,
-            Check::Unsigned(_) => UNSIGNED,
-        }
+/// The exit code of `passangle verify` for a check's outcome.
+pub fn code(check: &Check) -> u8 {
+    match check {
+        Check::Verified { .. } => OK,
+        Check::Changed { .. } => CHANGED,
+        Check::Untrusted(_) => UNTRUSTED,
+        Check::Unsigned(_) => UNSIGNED,
     }
-}
-
-/// Checks one file against its sidecar.
-pub fn check_file(file: &Path, sig: &Path, trusted: &[PublicKey]) -> anyhow::Result<Check> {
-    let sidecar = match read_sidecar(sig) {
-        Ok(s) => s,
-        Err(e) => return Ok(Check::Unsigned(e)),
-    };
-    let bytes = std::fs::read(file).with_context(|| format!("reading {}", file.display()))?;
-    Ok(match sidecar.verify(&bytes, trusted) {
-        Ok(Verdict::Verified { key }) => Check::Verified { key_id: key.id() },
-        Ok(Verdict::Changed { key, changes }) => Check::Changed {
-            key_id: key.id(),
-            signed_as: sidecar.manifest.name.clone(),
-            changes: changes.iter().map(ToString::to_string).collect(),
-        },
-        Err(e) => Check::Untrusted(e.to_string()),
-    })
 }
 
 /// Verifies one file against its sidecar; prints the outcome; returns the exit code.
@@ -227,7 +163,7 @@ fn verify_file(
         Check::Untrusted(e) => writeln!(out, "FAILED: {shown}: {e}")?,
         Check::Unsigned(e) => writeln!(out, "FAILED: {shown}: no usable signature: {e}")?,
     }
-    Ok(check.code())
+    Ok(code(&check))
 }
 
 /// `passangle verify`.

@@ -237,7 +237,7 @@ fn named_by_meta(dir: &Path, key_id: &str) {
     std::fs::remove_file(dir.join("result.json.sig")).unwrap();
     let (code, text) = passangle(&["report", dir.to_str().unwrap()], None);
     assert_eq!(code, 0, "{text}");
-    let html = std::fs::read_to_string(dir.join("report.html")).unwrap();
+    let html = std::fs::read_to_string(dir.join("report-handheld.html")).unwrap();
     assert!(
         html.contains(&format!("device key <span class=\"hash\">{key_id}")),
         "the robot is not named from meta.json"
@@ -285,12 +285,12 @@ fn decisions_when_asked(dir: &Path, lab: &Path, root: &Path) {
 fn without_key_or_lab(dir: &Path, lab: &Path, id: &str) {
     let (code, text) = passangle(&["report", dir.to_str().unwrap()], None);
     assert_eq!(code, 0, "{text}");
-    let bare = std::fs::read_to_string(dir.join("report.html")).unwrap();
+    let bare = std::fs::read_to_string(dir.join("report-handheld.html")).unwrap();
     assert_balanced(&bare);
     assert!(bare.contains("signatures not checked"));
     assert!(bare.contains("not given"));
     assert!(
-        !bare.contains(">report.html<"),
+        !bare.contains(">report-handheld.html<"),
         "the report does not list itself"
     );
     assert!(bare.contains(id), "same run, same id");
@@ -322,7 +322,7 @@ fn tampered(dir: &Path, key: &str) {
         None,
     );
     assert_eq!(code, 0, "{text}");
-    let html = std::fs::read_to_string(dir.join("report.html")).unwrap();
+    let html = std::fs::read_to_string(dir.join("report-handheld.html")).unwrap();
     assert!(
         html.contains("1 file(s) FAILED"),
         "the summary names the failure"

@@ -12,6 +12,7 @@ pub mod frames;
 pub mod mcu_clock;
 pub mod process;
 pub mod recorder;
+pub mod report;
 pub mod run;
 #[cfg(feature = "service")]
 pub mod service;

@@ -78,7 +78,7 @@ pub enum RecorderError {
 }
 
 impl RecorderError {
-    fn io(path: &Path, source: io::Error) -> Self {
+    pub(crate) fn io(path: &Path, source: io::Error) -> Self {
         if source.kind() == io::ErrorKind::StorageFull || source.raw_os_error() == Some(28) {
             Self::DiskFull {
                 path: path.to_owned(),

@@ -1,5 +1,5 @@
-//! Embeds the git commit the handheld is built from (`PASSANGLE_GIT_HASH`), for `passangle
-//! report`'s provenance. Outside a git checkout, or without git, it is "unknown": the build never
+//! Embeds the git commit onboard is built from (`PASSANGLE_GIT_HASH`), for the lab report's
+//! provenance (`onboard::report`). Outside a git checkout, or without git, it is "unknown": the build never
 //! fails for it. `PASSANGLE_GIT_HASH` set in the environment wins (a packager's build from a
 //! tarball).
 
