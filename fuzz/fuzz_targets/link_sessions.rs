@@ -72,6 +72,7 @@ fuzz_target!(|data: &[u8]| {
         speed_mps: 0.2,
         distance_m: 1.0,
         zone: Zone::Tyre,
+        lab: protocol::radio::LabRef::NONE,
     };
     sender.start(&params).expect("a start encodes");
     sender.poll(later + 1);

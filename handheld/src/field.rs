@@ -78,6 +78,11 @@ pub struct MeasureArgs {
     /// Zone convention for approach and departure.
     #[arg(long, value_enum, default_value_t = ZoneArg::Tyre)]
     zone: ZoneArg,
+    /// Lab, customer and vehicle details (TOML, at most 4096 bytes; see
+    /// docs/operator/lab.example.toml), sent to the robot for the run's record and the lab
+    /// report it writes and signs.
+    #[arg(long, value_name = "FILE")]
+    lab: Option<PathBuf>,
     /// Directory for the result JSON, the preview PLY and the side-view SVG.
     #[arg(long, default_value = ".")]
     out: PathBuf,
@@ -437,10 +442,20 @@ fn save_and_print(m: &Measured, dir: &Path, out: &mut dyn Write) -> anyhow::Resu
 pub fn measure(args: &MeasureArgs, out: &mut dyn Write) -> anyhow::Result<()> {
     let vehicle_id = Text::new(&args.vehicle_id)
         .with_context(|| format!("--vehicle-id {:?} is longer than 32 bytes", args.vehicle_id))?;
+    let lab_bytes = match &args.lab {
+        Some(p) => Some(read_lab(p)?),
+        None => None,
+    };
     let mut client = open(&args.link)?;
     client
         .connect(timeout(args.link.timeout_s))
         .context("connecting to the robot")?;
+    let lab = match &lab_bytes {
+        Some(bytes) => client
+            .send_lab(bytes, timeout(args.link.timeout_s))
+            .context("sending the lab file")?,
+        None => protocol::radio::LabRef::NONE,
+    };
     let params = StartMeasurement {
         vehicle_id,
         speed_mps: args.speed,
@@ -449,11 +464,31 @@ pub fn measure(args: &MeasureArgs, out: &mut dyn Write) -> anyhow::Result<()> {
             ZoneArg::Tyre => Zone::Tyre,
             ZoneArg::Axle => Zone::Axle,
         },
+        lab,
     };
     let mut display = Display::on_stderr();
     let m = client.measure(&params, timeout(args.run_timeout_s), display.observer());
     display.finish();
     save_and_print(&m?, &args.out, out)
+}
+
+/// The lab file for `measure --lab`, checked here as the robot will check it, so a typo is
+/// named before anything moves.
+fn read_lab(path: &Path) -> anyhow::Result<Vec<u8>> {
+    let bytes = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
+    let max = usize::from(protocol::radio::MAX_LAB_LEN);
+    if bytes.len() > max {
+        anyhow::bail!(
+            "{}: {} bytes; the radio carries a lab file of at most {max}",
+            path.display(),
+            bytes.len()
+        );
+    }
+    let text = std::str::from_utf8(&bytes)
+        .with_context(|| format!("{}: lab file is not UTF-8", path.display()))?;
+    onboard::report::LabFile::parse(text)
+        .with_context(|| format!("{}: lab file", path.display()))?;
+    Ok(bytes)
 }
 
 /// `passangle fetch`.

@@ -74,6 +74,7 @@ fn record_run(root: &Path) -> PathBuf {
         speed_mps: 0.2,
         distance_m: 1.0,
         zone: Zone::Tyre,
+        lab: protocol::radio::LabRef::NONE,
     };
     let config = include_str!("../../onboard/onboard.example.toml");
     let mut rec = RunRecorder::begin(root, 1, &params, BASE_US, config).unwrap();

@@ -295,6 +295,14 @@ fn without_key_or_lab(dir: &Path, lab: &Path, id: &str) {
     );
     assert!(bare.contains(id), "same run, same id");
 
+    // The run's own lab.toml (the one `measure --lab` sent) stands in for --lab.
+    std::fs::write(dir.join("lab.toml"), "[lab]\nname = \"Hall B lab\"\n").unwrap();
+    let (code, text) = passangle(&["report", dir.to_str().unwrap()], None);
+    assert_eq!(code, 0, "{text}");
+    let own = std::fs::read_to_string(dir.join("report-handheld.html")).unwrap();
+    assert!(own.contains("Hall B lab") && own.contains("lab.toml of the run"));
+    std::fs::remove_file(dir.join("lab.toml")).unwrap();
+
     // An unknown key in the lab file is an error naming it.
     std::fs::write(lab, "[vehicle]\ncolour = \"red\"\n").unwrap();
     let (code, text) = passangle(

@@ -441,6 +441,7 @@ pub(crate) fn prepare(options: &DemoOptions) -> anyhow::Result<Prepared> {
         speed_mps: run_spec.speed_mps as f32,
         distance_m: run_spec.distance_m as f32,
         zone: Zone::Tyre,
+        lab: protocol::radio::LabRef::NONE,
     };
     let time_limit = Duration::from_secs_f64(run_spec.distance_m / run_spec.speed_mps + 300.0);
     Ok(Prepared {

@@ -368,6 +368,41 @@ impl<C: ClientClock> Client<C> {
         Ok(out)
     }
 
+    /// Sends a lab file (lab, customer, vehicle: TOML) for the next start and waits until the
+    /// robot has every chunk; returns what the start names ([`StartMeasurement::lab`]).
+    ///
+    /// # Errors
+    /// [`ClientError::NotDelivered`] when a chunk is given up, [`ClientError::Send`] for a file
+    /// longer than [`protocol::radio::MAX_LAB_LEN`], the link's errors.
+    pub fn send_lab(
+        &mut self,
+        bytes: &[u8],
+        timeout: Duration,
+    ) -> Result<protocol::radio::LabRef, ClientError> {
+        self.ensure_connected(timeout)?;
+        // Any id unlike the last upload's will do: the robot keeps one upload at a time.
+        #[allow(clippy::cast_possible_truncation)] // the low 16 bits, on purpose
+        let upload = (self.now_us() / 1000) as u16;
+        let (lab, seqs) = self.radio.send_lab(upload, bytes)?;
+        let mut waiting: std::collections::BTreeSet<u16> = seqs.into_iter().collect();
+        if waiting.is_empty() {
+            return Ok(lab);
+        }
+        self.pump(timeout, |radio, e, _| match e {
+            HandheldEvent::Acked { msg_id, seq } if *msg_id == ids::LAB_CHUNK => {
+                waiting.remove(seq);
+                waiting.is_empty().then_some(Ok(lab))
+            }
+            HandheldEvent::Lost { msg_id, .. } if *msg_id == ids::LAB_CHUNK => {
+                Some(Err(ClientError::NotDelivered {
+                    what: "the lab file",
+                    attempts: radio.link().config().max_attempts,
+                }))
+            }
+            _ => None,
+        })
+    }
+
     /// Starts a measurement and follows it to the result and its preview.
     pub fn measure(
         &mut self,
@@ -542,6 +577,13 @@ fn save_records(dir: &Path, m: &Measured, files: &mut SavedFiles) -> io::Result<
             "the robot sent no result.json.sig: it does not sign its records (no signing.key-file)"
                 .to_owned(),
         );
+    }
+    // The robot sends its report only for a run started with a lab file; one left here by an
+    // earlier copy of the run is not this robot's answer now.
+    for file in [RecordFile::ReportHtml, RecordFile::ReportSig] {
+        if !m.records.iter().any(|r| r.file == file) {
+            remove_if_present(&run_dir.join(file.file_name()))?;
+        }
     }
     Ok(())
 }

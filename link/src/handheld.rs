@@ -22,8 +22,9 @@ use protocol::frame::{Deframer, Frame, Header, MAX_FRAME_LEN};
 use protocol::ids;
 use protocol::message::{self, DecodeError};
 use protocol::radio::{
-    Abort, FetchRun, HandshakeReply, MeasurementResult, Progress, Refused, ResendChunks,
-    ResendRecordChunks, ResultAck, RobotStatus, StartMeasurement, StatusRequest, ToHandheld,
+    Abort, FetchRun, HandshakeReply, LAB_CHUNK_LEN, LabChunk, LabRef, MAX_LAB_LEN,
+    MeasurementResult, Progress, Refused, ResendChunks, ResendRecordChunks, ResultAck, RobotStatus,
+    StartMeasurement, StatusRequest, ToHandheld,
 };
 
 use super::preview::Assembler;
@@ -230,6 +231,37 @@ impl HandheldRadio {
     pub fn start(&mut self, params: &StartMeasurement) -> Result<u16, SendError> {
         self.link
             .send(params, Delivery::Reliable, Priority::Control)
+    }
+
+    /// Sends a lab file as [`LabChunk`]s of upload `upload` (reliable, in order), for the start
+    /// that names the returned [`LabRef`]. Returns the chunks' seqs, whose acks say it arrived.
+    ///
+    /// # Errors
+    /// [`SendError::Encode`] for a file longer than [`MAX_LAB_LEN`]; any error of the link.
+    pub fn send_lab(&mut self, upload: u16, bytes: &[u8]) -> Result<(LabRef, Vec<u16>), SendError> {
+        let too_long = SendError::Encode {
+            name: "LabChunk",
+            error: protocol::frame::EncodeError::PayloadTooLarge,
+        };
+        let len = u16::try_from(bytes.len())
+            .ok()
+            .filter(|l| *l <= MAX_LAB_LEN)
+            .ok_or(too_long)?;
+        let count = u8::try_from(protocol::radio::lab_chunk_count(len)).map_err(|_| too_long)?;
+        let mut seqs = Vec::new();
+        for (index, part) in (0..count).zip(bytes.chunks(LAB_CHUNK_LEN)) {
+            let chunk = LabChunk {
+                upload,
+                index,
+                count,
+                bytes: List::from_slice(part).ok_or(too_long)?,
+            };
+            seqs.push(
+                self.link
+                    .send(&chunk, Delivery::Reliable, Priority::Control)?,
+            );
+        }
+        Ok((LabRef { upload, len }, seqs))
     }
 
     /// Sends an abort (reliable, ahead of every queued frame).

@@ -25,11 +25,13 @@ use protocol::common::{Hello, LogLevel, LogLine, Role};
 use protocol::frame::{Deframer, Header, MAX_FRAME_LEN};
 use protocol::message::{self, DecodeError};
 use protocol::radio::{
-    CloudChunk, HandshakeInit, MeasurementResult, Progress, RecordChunk, RecordFile, RefuseReason,
-    Refused, RobotStatus, StartMeasurement, ToOnboard,
+    CloudChunk, HandshakeInit, LAB_CHUNK_LEN, LabChunk, LabRef, MAX_LAB_LEN, MeasurementResult,
+    Progress, RecordChunk, RecordFile, RefuseReason, Refused, RobotStatus, StartMeasurement,
+    ToOnboard, lab_chunk_count,
 };
 use protocol::{Message, bounded::Text, ids};
 
+use super::chunks::ChunkSet;
 use super::preview;
 use super::record_files::{self, OutgoingRecord};
 use super::reliable::{Delivery, LinkConfig, Priority, Received, ReliableLink, SendError};
@@ -54,6 +56,10 @@ pub enum RadioRequest {
     Start {
         /// The command.
         params: StartMeasurement,
+        /// The lab file the start names ([`StartMeasurement::lab`]): `None` when it names none,
+        /// `Err` (what is wrong, for the refusal) when its chunks did not all arrive in this
+        /// session or do not add up to its length.
+        lab: Option<Result<Vec<u8>, String>>,
         /// Its seq (for a refusal).
         seq: u16,
         /// Id of the pairing key of the session it came in.
@@ -169,6 +175,17 @@ pub struct OnboardRadio {
     stats: RadioStats,
     replies: Bucket,
     limits: Vec<(u16, Bucket)>,
+    /// The lab file being sent ahead of a start (one at a time: a chunk of another upload or
+    /// session starts over; bounded by [`MAX_LAB_LEN`]).
+    lab: Option<LabUpload>,
+}
+
+/// A lab file's chunks as they arrive.
+#[derive(Debug)]
+struct LabUpload {
+    session: u16,
+    upload: u16,
+    chunks: ChunkSet<u8>,
 }
 
 impl OnboardRadio {
@@ -184,6 +201,7 @@ impl OnboardRadio {
             stats: RadioStats::default(),
             replies: Bucket::new(REPLIES_PER_S, 0),
             limits: Vec::new(),
+            lab: None,
         }
     }
 
@@ -329,10 +347,12 @@ impl OnboardRadio {
         match msg {
             ToOnboard::Hello(_) | ToOnboard::Heartbeat(_) => {}
             ToOnboard::Start(params) => out.push(RadioRequest::Start {
+                lab: self.take_lab(session, params.lab),
                 params,
                 seq: header.seq,
                 key_id: self.sessions.key_of(session).unwrap_or(0),
             }),
+            ToOnboard::LabChunk(c) => self.on_lab_chunk(session, &c),
             ToOnboard::Abort(a) => out.push(RadioRequest::Abort { run_id: a.run_id }),
             ToOnboard::ResultAck(a) => {
                 if let Some(i) = self
@@ -371,6 +391,64 @@ impl OnboardRadio {
                 seq: header.seq,
             }),
         }
+    }
+
+    /// Keeps a lab chunk: one whose count is out of range, or whose bytes do not fit its place
+    /// (every chunk but the last is full), is dropped; the start then finds the file incomplete.
+    fn on_lab_chunk(&mut self, session: u16, c: &LabChunk) {
+        let count = u16::from(c.count);
+        let full = usize::from(c.index) + 1 < usize::from(c.count);
+        if count == 0
+            || count > lab_chunk_count(MAX_LAB_LEN)
+            || (full && c.bytes.as_slice().len() != LAB_CHUNK_LEN)
+        {
+            return;
+        }
+        let same = self.lab.as_ref().is_some_and(|l| {
+            l.session == session && l.upload == c.upload && l.chunks.count() == count
+        });
+        if !same {
+            self.lab = Some(LabUpload {
+                session,
+                upload: c.upload,
+                chunks: ChunkSet::new(count),
+            });
+        }
+        if let Some(l) = &mut self.lab {
+            l.chunks.insert(u16::from(c.index), c.bytes.as_slice());
+        }
+    }
+
+    /// The lab file a start names, taken from what arrived in its session.
+    fn take_lab(&mut self, session: u16, lab: LabRef) -> Option<Result<Vec<u8>, String>> {
+        if lab.len == 0 {
+            return None;
+        }
+        let expected = lab_chunk_count(lab.len);
+        Some(
+            match self
+                .lab
+                .take_if(|l| l.session == session && l.upload == lab.upload)
+            {
+                None => Err(format!("lab file: none of its {expected} chunks arrived")),
+                Some(l) if l.chunks.count() != expected || !l.chunks.is_complete() => Err(format!(
+                    "lab file: {} of its {expected} chunks arrived",
+                    l.chunks.received()
+                )),
+                Some(l) => {
+                    let bytes = l.chunks.joined();
+                    if bytes.len() == usize::from(lab.len) {
+                        Ok(bytes)
+                    } else {
+                        Err(format!(
+                            "lab file: {} bytes arrived, the start names {}",
+                            bytes.len(),
+                            lab.len
+                        ))
+                    }
+                }
+            },
+        )
     }
 
     fn send_hello(&mut self, now_us: u64) {

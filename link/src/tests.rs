@@ -26,6 +26,7 @@ fn params() -> StartMeasurement {
         speed_mps: 0.2,
         distance_m: 6.0,
         zone: Zone::Tyre,
+        lab: protocol::radio::LabRef::NONE,
     }
 }
 
@@ -1032,4 +1033,92 @@ fn result_json_carries_the_profiles_and_older_files_still_parse() {
         record.to_wire(),
         ResultRecord::from_wire(&result(7)).to_wire()
     );
+}
+
+/// The lab file the first start of `req` carries.
+fn start_lab(req: &[RadioRequest]) -> Option<Result<Vec<u8>, String>> {
+    req.iter().find_map(|r| match r {
+        RadioRequest::Start { lab, .. } => Some(lab.clone()),
+        _ => None,
+    })?
+}
+
+#[test]
+fn a_lab_file_arrives_whole_over_a_lossy_radio_with_its_start() {
+    let lab: Vec<u8> = (0..1000u32).map(|i| b'a' + (i % 26) as u8).collect();
+    for seed in 0..3 {
+        let mut p = Pair::new(PipeConfig::radio_lossy(0.2, 0.2), seed * 10, key(1), key(1));
+        p.hh.connect(0).unwrap();
+        let (lab_ref, seqs) = p.hh.send_lab(0x55, &lab).unwrap();
+        assert_eq!(seqs.len(), 6, "1000 bytes in chunks of 190");
+        let (hev, _) = p.run(20_000_000);
+        let acked = seqs
+            .iter()
+            .filter(|s| {
+                hev.iter().any(|e| {
+                    matches!(e, HandheldEvent::Acked { msg_id, seq }
+                        if *msg_id == protocol::ids::LAB_CHUNK && seq == *s)
+                })
+            })
+            .count();
+        assert_eq!(acked, 6, "seed {seed}");
+        p.hh.start(&StartMeasurement {
+            lab: lab_ref,
+            ..params()
+        })
+        .unwrap();
+        let (_, req) = p.run(15_000_000);
+        assert_eq!(start_lab(&req), Some(Ok(lab.clone())), "seed {seed}");
+    }
+}
+
+#[test]
+fn a_start_naming_a_lab_file_that_did_not_arrive_whole_says_so() {
+    let mut p = Pair::connected(3);
+    p.hh.start(&StartMeasurement {
+        lab: protocol::radio::LabRef {
+            upload: 9,
+            len: 500,
+        },
+        ..params()
+    })
+    .unwrap();
+    let (_, req) = p.run(1_000_000);
+    let e = start_lab(&req).unwrap().unwrap_err();
+    assert!(e.contains("none of its 3 chunks"), "{e}");
+
+    // The chunks of another length, or of another upload, are not the file the start names.
+    let (lab_ref, _) = p.hh.send_lab(10, &[b'x'; 1000]).unwrap();
+    p.run(2_000_000);
+    p.hh.start(&StartMeasurement {
+        lab: protocol::radio::LabRef {
+            len: 999,
+            ..lab_ref
+        },
+        ..params()
+    })
+    .unwrap();
+    let (_, req) = p.run(1_000_000);
+    let e = start_lab(&req).unwrap().unwrap_err();
+    assert!(e.contains("1000 bytes arrived, the start names 999"), "{e}");
+
+    p.hh.send_lab(11, &[b'x'; 400]).unwrap();
+    p.run(2_000_000);
+    p.hh.start(&StartMeasurement {
+        lab: protocol::radio::LabRef {
+            upload: 12,
+            len: 400,
+        },
+        ..params()
+    })
+    .unwrap();
+    let (_, req) = p.run(1_000_000);
+    assert!(start_lab(&req).unwrap().is_err());
+
+    // A file longer than the protocol allows is refused by the sender.
+    assert!(p.hh.send_lab(13, &[0; 4097]).is_err());
+    // No lab file: the start carries none.
+    p.hh.start(&params()).unwrap();
+    let (_, req) = p.run(1_000_000);
+    assert_eq!(start_lab(&req), None);
 }

@@ -935,6 +935,7 @@ mod tests {
             speed_mps: 0.2,
             distance_m: 1.0,
             zone: Zone::Tyre,
+            lab: protocol::radio::LabRef::NONE,
         };
         let mut r = RunRecorder::begin(&root, 1, &params, 0, "").unwrap();
         let src = std::net::SocketAddrV4::new([192, 168, 1, 201].into(), 2368);

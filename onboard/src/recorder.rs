@@ -416,6 +416,11 @@ impl RunRecorder {
         self.depth_index.write(&mut self.errors, Write::flush);
     }
 
+    /// The key the run's files are signed with.
+    pub fn signer(&self) -> &Signer {
+        &self.signer
+    }
+
     /// Saves a whole file of the run atomically, with its signature when the recorder signs
     /// (errors are recorded, not returned).
     pub fn save_file(&mut self, name: &str, bytes: &[u8]) {
@@ -644,6 +649,7 @@ mod tests {
             speed_mps: 0.2,
             distance_m: 6.0,
             zone: Zone::Axle,
+            lab: protocol::radio::LabRef::NONE,
         }
     }
 

@@ -42,6 +42,8 @@ const CLOSE_UP_Z_M: f64 = 0.6;
 const CLOSE_UP_MAX_POINTS: usize = 6000;
 /// The close-ups' scale, pixels per metre.
 const CLOSE_UP_PX_PER_M: f64 = 600.0;
+/// A close-up's point: a square this wide, pixels.
+const CLOSE_UP_DOT_PX: f64 = 1.6;
 
 /// `[lab]` of the lab file.
 #[derive(Debug, Clone, Default, PartialEq, Eq, Deserialize)]
@@ -370,6 +372,38 @@ pub fn gather(inputs: &Inputs<'_>) -> anyhow::Result<Report> {
     })
 }
 
+/// Writes the run's report as the robot does when the run closes: [`REPORT_FILE`] in the run
+/// directory, with the run's own [`LAB_FILE`] (if the handheld sent one), the run's signatures
+/// checked against this robot's key, and signed by it (`REPORT_FILE.sig`) when it has one.
+/// Returns the report id.
+///
+/// # Errors
+/// What could not be read, parsed or written, naming the file.
+pub fn write_on_robot(
+    run_dir: &Path,
+    signer: &signed::Signer,
+    written_unix_s: u64,
+) -> anyhow::Result<String> {
+    let out = run_dir.join(REPORT_FILE);
+    let trusted: Vec<signing::PublicKey> = signer
+        .key()
+        .map(signing::DeviceKey::public)
+        .into_iter()
+        .collect();
+    let report = gather(&Inputs {
+        run_dir,
+        lab: None,
+        out: &out,
+        trusted: &trusted,
+        written_unix_s,
+        writer: Writer::Robot {
+            signed_by: trusted.first().map(|k| k.id()),
+        },
+    })?;
+    signed::write_signed(&out, render(&report).as_bytes(), signer)?;
+    Ok(report.id)
+}
+
 /// The calculator on `cloud.ply` with the service's settings (`onboard::process`), less the scan
 /// path, which the cloud file does not carry.
 fn recompute(dir: &Path, meta: &RunMeta, enter_at_front: bool) -> Result<Recomputed, String> {
@@ -627,11 +661,15 @@ fn header(h: &mut String, r: &Report) {
 fn lab_section(h: &mut String, r: &Report) {
     let (l, c, v) = (&r.lab.lab, &r.lab.customer, &r.lab.vehicle);
     let _ = write!(h, "<section>\n<h2>Lab, customer and vehicle</h2>\n");
-    if r.lab_path.is_none() {
-        h.push_str(
-            "<p class=\"small\">No lab file was given (<code>--lab lab.toml</code>): the fields \
-             below are not given.</p>\n",
-        );
+    match &r.lab_path {
+        None => h.push_str(
+            "<p class=\"small\">No lab file was given (<code>passangle measure --lab \
+             lab.toml</code>, or <code>passangle report --lab</code>): the fields below are not \
+             given.</p>\n",
+        ),
+        Some(source) => {
+            let _ = writeln!(h, "<p class=\"small\">From {}.</p>", esc(source));
+        }
     }
     h.push_str("<table class=\"kv\">\n");
     for (k, val) in [
@@ -1193,16 +1231,29 @@ fn close_up(rc: &Recomputed, q: Quantity, w: V3, f: Option<&AngleFinding>) -> St
         sx(x1),
         sy(0.0)
     );
-    s.push_str("<g fill=\"#555\">");
-    for p in pts.iter().step_by(step) {
+    // One 1.6 px square per occupied 1.6 px cell (points closer than that would overlap), all in
+    // one path: the drawing is the same as a square per point at a fraction of the bytes.
+    let cells: std::collections::BTreeSet<(i64, i64)> = pts
+        .iter()
+        .step_by(step)
+        .map(|p| {
+            (
+                (sx(p[0]) / CLOSE_UP_DOT_PX).floor() as i64,
+                (sy(p[1]) / CLOSE_UP_DOT_PX).floor() as i64,
+            )
+        })
+        .collect();
+    s.push_str("<path fill=\"#555\" d=\"");
+    for (cx, cy) in cells {
         let _ = write!(
             s,
-            "<rect x=\"{:.1}\" y=\"{:.1}\" width=\"1.6\" height=\"1.6\"/>",
-            sx(p[0]) - 0.8,
-            sy(p[1]) - 0.8
+            "M{:.1} {:.1}h{d}v{d}h-{d}z",
+            cx as f64 * CLOSE_UP_DOT_PX,
+            cy as f64 * CLOSE_UP_DOT_PX,
+            d = CLOSE_UP_DOT_PX
         );
     }
-    s.push_str("</g>");
+    s.push_str("\"/>");
     // The ramp line(s) through the witness: z rises toward the front for the approach ramp,
     // toward the rear for the departure ramp; the breakover's two planes meet at the witness.
     let line = |s: &mut String, xa: f64, xb: f64, slope: f64| {

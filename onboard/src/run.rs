@@ -610,6 +610,7 @@ mod tests {
             speed_mps: speed,
             distance_m: distance,
             zone: Zone::Tyre,
+            lab: protocol::radio::LabRef::NONE,
         }
     }
 

@@ -37,6 +37,7 @@ pub use crate::process::{LiveRun, ProcessInput, Processed, Processor, SensorItem
 
 use crate::config::{self, CameraSource, OnboardConfig};
 use crate::recorder::{self, RecordedOutcome, Recording, ResultRecord, RunRecorder};
+use crate::report::LabFile;
 use crate::run::{Action, Observations, Outcome, RunMachine};
 use crate::signed::{self, Signer};
 use link::Port;
@@ -296,13 +297,33 @@ struct Ready {
     records: Vec<OutgoingRecord>,
 }
 
-/// The record files of the run in `dir` that go to the handheld byte-exact: `result.json` and,
-/// when the robot signs, `result.json.sig`. A file missing is not sent (no signature without a
+/// A lab file sent with a start, if it is one: UTF-8 TOML that [`LabFile::parse`] takes; the
+/// error names what is wrong, for the refusal.
+fn checked_lab(bytes: Vec<u8>) -> Result<Vec<u8>, String> {
+    let text = std::str::from_utf8(&bytes).map_err(|e| format!("lab file: not UTF-8: {e}"))?;
+    LabFile::parse(text).map_err(|e| format!("lab file: {e:#}"))?;
+    Ok(bytes)
+}
+
+/// The record files of the run in `dir` that go to the handheld byte-exact: `result.json`, the
+/// lab report `report.html` when the run has a lab file and, when the robot signs, their
+/// signatures. A file missing is not sent (no signature without a
 /// device key: the handheld says so, nothing is invented); a file longer than the radio carries
 /// is announced by its length, logged, and not read.
 fn read_records(dir: &std::path::Path) -> Vec<OutgoingRecord> {
     let mut out = Vec::new();
-    for file in [RecordFile::ResultJson, RecordFile::ResultSig] {
+    // The report (about 200 kB, half a minute of radio) goes only with a run started with a lab
+    // file: the operator asked for the lab's report. Every run's report stays on the robot.
+    let report = dir.join(crate::report::LAB_FILE).exists();
+    let files = [RecordFile::ResultJson, RecordFile::ResultSig]
+        .into_iter()
+        .chain(
+            report
+                .then_some([RecordFile::ReportHtml, RecordFile::ReportSig])
+                .into_iter()
+                .flatten(),
+        );
+    for file in files {
         let path = dir.join(file.file_name());
         let len = match std::fs::metadata(&path) {
             Ok(m) => m.len(),
@@ -410,11 +431,16 @@ enum IoJob {
     /// Close a run's recording: `result.json` (if any), fsync the streams, the outcome in
     /// `meta.json`, remove `INCOMPLETE`. The jobs run in order, so a later fetch of the run finds
     /// its result on disk.
+    /// With a result, the lab report (`report.html`, signed) is written last, from the closed
+    /// run's files; the loop queues this job only once the processing thread has written the
+    /// cloud and the side view.
     Finish {
         run_id: u32,
         recorder: Box<RunRecorder>,
         result: Option<Box<ResultRecord>>,
         outcome: RecordedOutcome,
+        /// When the run closes (the report's date), Unix seconds.
+        closed_unix_s: u64,
     },
 }
 
@@ -459,12 +485,20 @@ fn run_io_job(root: &std::path::Path, preview: config::PreviewConfig, job: IoJob
             mut recorder,
             result,
             outcome,
+            closed_unix_s,
         } => {
             let dir = recorder.dir().to_path_buf();
+            let signer = recorder.signer().clone();
             if let Some(r) = &result {
                 recorder.save_result(r);
             }
-            let errors = recorder.finish(outcome);
+            let mut errors = recorder.finish(outcome);
+            if result.is_some() {
+                match crate::report::write_on_robot(&dir, &signer, closed_unix_s) {
+                    Ok(id) => tracing::info!(run_id, report = %id, "lab report written"),
+                    Err(e) => errors.push(format!("the lab report: {e:#}")),
+                }
+            }
             IoDone::Finished {
                 run_id,
                 errors,
@@ -639,6 +673,11 @@ pub struct Service {
     io_waiting: std::collections::VecDeque<IoJob>,
     /// The current run's result, saved with its recording when the run ends.
     result_record: Option<ResultRecord>,
+    /// The lab file the last start sent, kept in the run's recording when it begins.
+    start_lab: Option<Vec<u8>>,
+    /// A run's closing job held until its processing thread has written the cloud and the side
+    /// view, which the lab report reads.
+    finish_after_save: Option<IoJob>,
     /// A live run's result and preview, sent once its recording is closed and its record files
     /// can be read.
     awaiting_records: Option<(MeasurementResult, Vec<[i16; 3]>)>,
@@ -797,6 +836,8 @@ impl Service {
             execution: startup.execution,
             io_waiting: std::collections::VecDeque::new(),
             result_record: None,
+            start_lab: None,
+            finish_after_save: None,
             awaiting_records: None,
             logged_radio: link::radio::RadioStats::default(),
             next_drop_log_us: DROP_LOG_PERIOD_US,
@@ -1095,10 +1136,21 @@ impl Service {
         match req {
             RadioRequest::Start {
                 params,
+                lab,
                 seq,
                 key_id,
             } => {
                 tracing::info!(key_id = %format_args!("{key_id:08x}"), "start from a paired handheld");
+                match lab.map(|l| l.and_then(checked_lab)) {
+                    Some(Err(detail)) => {
+                        self.stats.starts_refused += 1;
+                        tracing::warn!("start refused: {detail}");
+                        self.radio
+                            .refuse(START_ID, seq, RefuseReason::InvalidParameter, &detail);
+                        return;
+                    }
+                    lab => self.start_lab = lab.and_then(Result::ok),
+                }
                 let actions = self.run.start(now, params, seq);
                 self.execute(now, actions);
             }
@@ -1346,6 +1398,7 @@ impl Service {
                 Err(TryRecvError::Empty) => return,
                 Err(TryRecvError::Disconnected) if w.delivered => {
                     self.worker = None;
+                    self.release_finish();
                     return;
                 }
                 Err(TryRecvError::Disconnected) => {
@@ -1367,8 +1420,17 @@ impl Service {
                         tracing::error!("{text}");
                         self.radio.send_log(LogLevel::Error, &text);
                     }
+                    self.release_finish();
                 }
             }
+        }
+    }
+
+    /// Queues the closing job held for the processing thread's files.
+    fn release_finish(&mut self) {
+        if let Some(job) = self.finish_after_save.take() {
+            self.io_waiting.push_back(job);
+            self.check_io();
         }
     }
 
@@ -1420,9 +1482,12 @@ impl Service {
                         &self.config_text,
                         self.signer.clone(),
                     ) {
-                        Ok(r) => {
+                        Ok(mut r) => {
                             let signed = self.signer.key().is_some();
                             tracing::info!(run_id, dir = %r.dir().display(), signed, "recording");
+                            if let Some(lab) = self.start_lab.take() {
+                                r.save_file(crate::report::LAB_FILE, &lab);
+                            }
                             self.recorder = Some(r);
                         }
                         Err(e) => {
@@ -1444,6 +1509,7 @@ impl Service {
                 Action::CancelProcessing { .. } => {
                     self.worker = None;
                     self.live = None;
+                    self.release_finish();
                 }
                 Action::FinishRecording { run_id, outcome } => {
                     if !matches!(outcome, Outcome::Completed) {
@@ -1455,14 +1521,21 @@ impl Service {
                             Outcome::Aborted(s) => RecordedOutcome::Aborted(s),
                             Outcome::Failed(s) => RecordedOutcome::Failed(s),
                         };
-                        // The fsyncs and the final files go to the IO worker.
-                        self.io_waiting.push_back(IoJob::Finish {
+                        // The fsyncs and the final files go to the IO worker, once the
+                        // processing thread has written the files the report reads.
+                        let job = IoJob::Finish {
                             run_id,
                             recorder: Box::new(r),
                             result: self.result_record.take().map(Box::new),
                             outcome: recorded,
-                        });
-                        self.check_io();
+                            closed_unix_s: self.wall_of(now) / 1_000_000,
+                        };
+                        if self.worker.as_ref().is_some_and(|w| w.run_id == run_id) {
+                            self.finish_after_save = Some(job);
+                        } else {
+                            self.io_waiting.push_back(job);
+                            self.check_io();
+                        }
                     }
                 }
                 Action::Progress(p) => {

@@ -71,7 +71,7 @@ pub use frame::{Deframer, Flags, Frame, Header};
 pub use message::{DecodeError, Message};
 
 /// Version of this protocol. Bump on any change to the bytes of any message.
-pub const PROTOCOL_VERSION: u8 = 5;
+pub const PROTOCOL_VERSION: u8 = 6;
 
 /// Message ids. Explicit, never derived from declaration order; never reused.
 pub mod ids {
@@ -115,6 +115,8 @@ pub mod ids {
     pub const HANDSHAKE_INIT: u16 = 0x0207;
     /// [`crate::radio::ResendRecordChunks`].
     pub const RESEND_RECORD_CHUNKS: u16 = 0x0208;
+    /// [`crate::radio::LabChunk`].
+    pub const LAB_CHUNK: u16 = 0x0209;
     /// [`crate::radio::Progress`].
     pub const PROGRESS: u16 = 0x0281;
     /// [`crate::radio::MeasurementResult`].

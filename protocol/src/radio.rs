@@ -40,6 +40,49 @@ pub struct StartMeasurement {
     pub distance_m: f32,
     /// Zone convention for the angles.
     pub zone: Zone,
+    /// The lab file sent ahead of this start, if any ([`LabChunk`]s).
+    pub lab: LabRef,
+}
+
+/// The lab file a start refers to: the [`LabChunk`]s of upload `upload`, `len` bytes in all.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, MaxSize)]
+pub struct LabRef {
+    /// The upload's id (the handheld's choice; a new upload replaces an unfinished one).
+    pub upload: u16,
+    /// The file's length, bytes (0: no lab file; at most [`MAX_LAB_LEN`]).
+    pub len: u16,
+}
+
+impl LabRef {
+    /// No lab file.
+    pub const NONE: Self = Self { upload: 0, len: 0 };
+}
+
+/// Largest lab file a start may carry, bytes (the example lab file is about a quarter of it).
+pub const MAX_LAB_LEN: u16 = 4096;
+
+/// Bytes of a lab file per [`LabChunk`] (as [`RECORD_CHUNK_LEN`], which fits a sealed frame).
+pub const LAB_CHUNK_LEN: usize = 190;
+
+/// Chunks of a lab file of `len` bytes (0 for none).
+#[allow(clippy::cast_possible_truncation)] // LAB_CHUNK_LEN is 190: fits a u16
+pub const fn lab_chunk_count(len: u16) -> u16 {
+    len.div_ceil(LAB_CHUNK_LEN as u16)
+}
+
+/// One chunk of the lab file (TOML: lab, customer, vehicle; docs/operator/lab.example.toml),
+/// handheld -> onboard ahead of the [`StartMeasurement`] that names its upload. The robot keeps
+/// the file in the run's record and its signed report.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize, MaxSize)]
+pub struct LabChunk {
+    /// The upload's id ([`LabRef::upload`]).
+    pub upload: u16,
+    /// Chunk index, 0-based: the file's bytes from `index * LAB_CHUNK_LEN`.
+    pub index: u8,
+    /// Number of chunks ([`lab_chunk_count`] of the file's length).
+    pub count: u8,
+    /// The bytes (every chunk but the last is full).
+    pub bytes: List<u8, LAB_CHUNK_LEN>,
 }
 
 /// First handshake message, handheld -> onboard (outside any session): Noise `NNpsk0`'s
@@ -247,6 +290,10 @@ wire_enum! {
         ResultJson = 1,
         /// `result.json.sig`, the device key's detached signature of `result.json`.
         ResultSig = 2,
+        /// `report.html`, the lab report the robot writes when the run closes.
+        ReportHtml = 3,
+        /// `report.html.sig`, the device key's detached signature of `report.html`.
+        ReportSig = 4,
     }
 }
 
@@ -256,6 +303,8 @@ impl RecordFile {
         match self {
             Self::ResultJson => "result.json",
             Self::ResultSig => "result.json.sig",
+            Self::ReportHtml => "report.html",
+            Self::ReportSig => "report.html.sig",
         }
     }
 }
@@ -396,6 +445,7 @@ crate::message::impl_message! {
     Refused => crate::ids::REFUSED,
     RecordChunk => crate::ids::RECORD_CHUNK,
     ResendRecordChunks => crate::ids::RESEND_RECORD_CHUNKS,
+    LabChunk => crate::ids::LAB_CHUNK,
 }
 
 message_set! {
@@ -419,6 +469,8 @@ message_set! {
         FetchRun(FetchRun),
         /// Record chunks wanted again.
         ResendRecordChunks(ResendRecordChunks),
+        /// A chunk of the lab file for the next start.
+        LabChunk(LabChunk),
     }
 }
 
@@ -451,4 +503,5 @@ message_set! {
 const _: () = assert!(ToOnboard::MAX_PAYLOAD_LEN <= crate::auth::MAX_INNER_PAYLOAD_LEN);
 const _: () = assert!(ToHandheld::MAX_PAYLOAD_LEN <= crate::auth::MAX_INNER_PAYLOAD_LEN);
 const _: () = assert!(record_chunk_count(MAX_RECORD_LEN) <= u16::MAX as u32);
+const _: () = assert!(lab_chunk_count(MAX_LAB_LEN) <= u8::MAX as u16);
 const _: () = assert!(HandshakeReply::POSTCARD_MAX_SIZE <= crate::frame::MAX_PAYLOAD_LEN);

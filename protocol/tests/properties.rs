@@ -152,13 +152,31 @@ fn to_onboard() -> impl Strategy<Value = ToOnboard> {
             f(),
             f(),
             proptest::sample::select(radio::Zone::ALL),
+            any::<u16>(),
+            any::<u16>(),
         )
-            .prop_map(|(vehicle_id, speed_mps, distance_m, zone)| {
+            .prop_map(|(vehicle_id, speed_mps, distance_m, zone, upload, len)| {
                 radio::StartMeasurement {
                     vehicle_id,
                     speed_mps,
                     distance_m,
                     zone,
+                    lab: radio::LabRef { upload, len },
+                }
+                .into()
+            }),
+        (
+            any::<u16>(),
+            any::<u8>(),
+            any::<u8>(),
+            proptest::collection::vec(any::<u8>(), 0..=radio::LAB_CHUNK_LEN)
+        )
+            .prop_map(|(upload, index, count, bytes)| {
+                radio::LabChunk {
+                    upload,
+                    index,
+                    count,
+                    bytes: List::from_slice(&bytes).unwrap(),
                 }
                 .into()
             }),

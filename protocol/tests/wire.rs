@@ -66,6 +66,10 @@ fn start() -> radio::StartMeasurement {
         speed_mps: 0.2,
         distance_m: 6.0,
         zone: radio::Zone::Tyre,
+        lab: radio::LabRef {
+            upload: 0x1234,
+            len: 512,
+        },
     }
 }
 
@@ -201,6 +205,15 @@ fn exemplars() -> Vec<(&'static str, u16, usize, Vec<u8>)> {
         ),
         row(&radio::StatusRequest {}, ack),
         row(&radio::FetchRun { run_id: 6 }, ack),
+        row(
+            &radio::LabChunk {
+                upload: 0x1234,
+                index: 2,
+                count: 3,
+                bytes: List::from_slice(b"[vehicle]\nvin = \"WVW\"\n").unwrap(),
+            },
+            ack,
+        ),
         row(
             &radio::ResendRecordChunks {
                 run_id: 7,
@@ -399,6 +412,12 @@ fn worst_case_record_messages_fit_their_bounds() {
         count: u16::MAX,
         total_len: u32::MAX,
         bytes: List::from_slice(&[0xff; radio::RECORD_CHUNK_LEN]).unwrap(),
+    });
+    check(&radio::LabChunk {
+        upload: u16::MAX,
+        index: u8::MAX,
+        count: u8::MAX,
+        bytes: List::from_slice(&[0xff; radio::LAB_CHUNK_LEN]).unwrap(),
     });
     check(&radio::ResendRecordChunks {
         run_id: u32::MAX,

@@ -142,6 +142,7 @@ fn live_processing_builds_the_same_cloud_as_the_recording() {
         speed_mps: 0.2,
         distance_m: 1.0,
         zone: Zone::Tyre,
+        lab: protocol::radio::LabRef::NONE,
     };
     let mut recorder = RunRecorder::begin(&root, 1, &params, BASE_US, "").unwrap();
     let mut live = RunBuilder::new(&config()).unwrap();

@@ -445,6 +445,7 @@ fn params(distance_m: f32) -> StartMeasurement {
         speed_mps: 0.3,
         distance_m,
         zone: Zone::Tyre,
+        lab: protocol::radio::LabRef::NONE,
     }
 }
 
@@ -516,6 +517,40 @@ fn full_run_over_a_radio_with_20_percent_loss_and_corruption_delivers_the_exact_
     rig.finish();
 }
 
+/// The lab file is in the run's signed record; the report the robot wrote shows it, says it
+/// is signed, and verifies. Returns the report's bytes.
+fn assert_signed_report(
+    run_dir: &Path,
+    lab_text: &str,
+    public: onboard::signing::PublicKey,
+) -> Vec<u8> {
+    use onboard::signing::{Sidecar, Verdict};
+    assert_eq!(
+        std::fs::read_to_string(run_dir.join("lab.toml")).unwrap(),
+        lab_text
+    );
+    let report = std::fs::read(run_dir.join("report.html")).unwrap();
+    let report_text = String::from_utf8(report.clone()).unwrap();
+    assert!(report_text.contains("WVWZZZ1JZ3W386752"));
+    assert!(report_text.contains("Written by the robot when the run closed and signed"));
+    assert!(
+        report_text.contains("every signed file verifies"),
+        "{report_text}"
+    );
+    for name in ["lab.toml", "report.html"] {
+        let sidecar =
+            Sidecar::parse(&std::fs::read(run_dir.join(format!("{name}.sig"))).unwrap()).unwrap();
+        let bytes = std::fs::read(run_dir.join(name)).unwrap();
+        assert_eq!(
+            sidecar.verify(&bytes, &[public]),
+            Ok(Verdict::Verified { key: public }),
+            "{name}"
+        );
+    }
+
+    report
+}
+
 /// `passangle measure` and `passangle fetch` bring back the robot's own `result.json` and
 /// `result.json.sig`, byte for byte, over a lossy radio: the copy the handheld saves verifies
 /// with the robot's public key, and one changed digit in it is named. The service's
@@ -536,8 +571,16 @@ fn measure_and_fetch_bring_back_the_robots_signed_result_json() {
     let mut client = rig.ready_client();
     client.connect(Duration::from_secs(10)).unwrap();
     let mut trace = Trace::new();
+    let lab_text = "[lab]\nname = \"Hall B\"\n[vehicle]\nvin = \"WVWZZZ1JZ3W386752\"\n";
+    let lab = client
+        .send_lab(lab_text.as_bytes(), Duration::from_secs(30))
+        .unwrap();
     let m = client
-        .measure(&params(0.4), Duration::from_secs(90), &mut trace)
+        .measure(
+            &StartMeasurement { lab, ..params(0.4) },
+            Duration::from_secs(180),
+            &mut trace,
+        )
         .unwrap_or_else(|e| panic!("{e}; the handheld saw:\n{}", trace.lines.join("\n")));
     let run_dir = rig
         .dir
@@ -545,6 +588,8 @@ fn measure_and_fetch_bring_back_the_robots_signed_result_json() {
         .join(link::record::run_dir_name(m.result.run_id));
     let on_robot = std::fs::read(run_dir.join("result.json")).unwrap();
     let sig_on_robot = std::fs::read(run_dir.join("result.json.sig")).unwrap();
+
+    let report = assert_signed_report(&run_dir, lab_text, public);
 
     // The service wrote the processing's profiles into its result.json.
     let json: serde_json::Value = serde_json::from_slice(&on_robot).unwrap();
@@ -556,9 +601,18 @@ fn measure_and_fetch_bring_back_the_robots_signed_result_json() {
 
     // `measure`: both files, byte-exact.
     let files: Vec<RecordFile> = m.records.iter().map(|r| r.file).collect();
-    assert_eq!(files, [RecordFile::ResultJson, RecordFile::ResultSig]);
+    assert_eq!(
+        files,
+        [
+            RecordFile::ResultJson,
+            RecordFile::ResultSig,
+            RecordFile::ReportHtml,
+            RecordFile::ReportSig
+        ]
+    );
     assert!(m.records[0].bytes.as_ref().unwrap() == &on_robot);
     assert!(m.records[1].bytes.as_ref().unwrap() == &sig_on_robot);
+    assert!(m.records[2].bytes.as_ref().unwrap() == &report);
 
     // `fetch`: the same files read back from the robot's disk; saved and verified offline.
     let again = client
@@ -609,6 +663,22 @@ fn an_unsigned_robot_sends_its_result_json_and_no_signature() {
     let mut rig = Rig::start("unsigned", PipeConfig::radio_lossy(0.0, 0.0), None);
     let mut client = rig.ready_client();
     client.connect(Duration::from_secs(10)).unwrap();
+    // A lab file the robot cannot read refuses the start, naming it; nothing moves.
+    let lab = client
+        .send_lab(b"[garage]\ndoor = 1\n", Duration::from_secs(10))
+        .unwrap();
+    let e = client
+        .measure(
+            &StartMeasurement { lab, ..params(0.4) },
+            Duration::from_secs(20),
+            &mut Quiet,
+        )
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("refused the start") && e.contains("lab file"),
+        "{e}"
+    );
     let m = client
         .measure(&params(0.4), Duration::from_secs(60), &mut Quiet)
         .unwrap();

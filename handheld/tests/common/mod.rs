@@ -51,6 +51,7 @@ pub fn signed_run(
         speed_mps: 0.2,
         distance_m: 7.0,
         zone: Zone::Tyre,
+        lab: protocol::radio::LabRef::NONE,
     };
     let signer = Signer::new(key);
     let mut rec = RunRecorder::begin_signed(
