@@ -77,9 +77,10 @@ pub fn side_view_svg(result: &AnglesResult) -> String {
     tyre_circles(&mut s, &v, fa);
     tyre_circles(&mut s, &v, ra);
     // Envelope of the body in the band.
-    let pts: Vec<String> = env
+    let drawn: Vec<[f64; 2]> = env.iter().map(|e| [v.x(e.x_m), v.y(e.z_m)]).collect();
+    let pts: Vec<String> = simplified(&drawn, ENVELOPE_TOLERANCE_PX)
         .iter()
-        .map(|e| format!("{:.1},{:.1}", v.x(e.x_m), v.y(e.z_m)))
+        .map(|p| format!("{:.1},{:.1}", p[0], p[1]))
         .collect();
     for chunk in pts.chunks(2000) {
         let _ = writeln!(
@@ -237,4 +238,86 @@ fn scale_bar(s: &mut String, v: &View, height_px: f64) {
         y + 6.0,
         y + 20.0
     );
+}
+
+/// How far the drawn envelope may leave its samples, pixels: a third of its stroke's width, so
+/// the line looks the same with a fraction of the points (the samples are millimetres apart,
+/// several per pixel).
+const ENVELOPE_TOLERANCE_PX: f64 = 0.5;
+
+/// The polyline through `points` with the vertices that lie within `tol` of the line through
+/// their neighbours left out (Douglas-Peucker): every point stays within `tol` of the result.
+fn simplified(points: &[[f64; 2]], tol: f64) -> Vec<[f64; 2]> {
+    if points.len() < 3 {
+        return points.to_vec();
+    }
+    let mut keep = vec![false; points.len()];
+    keep[0] = true;
+    keep[points.len() - 1] = true;
+    let mut stack = vec![(0, points.len() - 1)];
+    while let Some((a, b)) = stack.pop() {
+        let (pa, pb) = (points[a], points[b]);
+        let (dx, dy) = (pb[0] - pa[0], pb[1] - pa[1]);
+        let len = dx.hypot(dy);
+        let dist = |p: [f64; 2]| {
+            if len < 1e-12 {
+                (p[0] - pa[0]).hypot(p[1] - pa[1])
+            } else {
+                ((p[0] - pa[0]) * dy - (p[1] - pa[1]) * dx).abs() / len
+            }
+        };
+        let far = (a + 1..b)
+            .map(|i| (i, dist(points[i])))
+            .max_by(|x, y| x.1.total_cmp(&y.1));
+        if let Some((i, d)) = far
+            && d > tol
+        {
+            keep[i] = true;
+            stack.push((a, i));
+            stack.push((i, b));
+        }
+    }
+    points
+        .iter()
+        .zip(keep)
+        .filter_map(|(p, k)| k.then_some(*p))
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::simplified;
+
+    /// Distance from `p` to the segment `a`-`b`.
+    fn to_segment(p: [f64; 2], a: [f64; 2], b: [f64; 2]) -> f64 {
+        let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
+        let t = (((p[0] - a[0]) * dx + (p[1] - a[1]) * dy) / (dx * dx + dy * dy)).clamp(0.0, 1.0);
+        (p[0] - a[0] - t * dx).hypot(p[1] - a[1] - t * dy)
+    }
+
+    #[test]
+    fn a_simplified_polyline_stays_within_its_tolerance_of_every_point() {
+        let points: Vec<[f64; 2]> = (0..2000)
+            .map(|i| {
+                let x = f64::from(i) * 0.2;
+                [
+                    x,
+                    40.0 * (x / 30.0).sin() + if i % 7 == 0 { 0.3 } else { 0.0 },
+                ]
+            })
+            .collect();
+        let kept = simplified(&points, 0.5);
+        assert!(kept.len() < points.len() / 5, "{} points kept", kept.len());
+        assert_eq!(kept.first(), points.first());
+        assert_eq!(kept.last(), points.last());
+        for p in &points {
+            let d = kept
+                .windows(2)
+                .map(|w| to_segment(*p, w[0], w[1]))
+                .fold(f64::INFINITY, f64::min);
+            assert!(d <= 0.5 + 1e-9, "{p:?} is {d} px off");
+        }
+        let line: Vec<[f64; 2]> = (0..100).map(|i| [f64::from(i), 2.0]).collect();
+        assert_eq!(simplified(&line, 0.5), vec![[0.0, 2.0], [99.0, 2.0]]);
+    }
 }

@@ -1243,15 +1243,13 @@ fn close_up(rc: &Recomputed, q: Quantity, w: V3, f: Option<&AngleFinding>) -> St
             )
         })
         .collect();
-    s.push_str("<path fill=\"#555\" d=\"");
+    // In units of one cell, so each dot is a few digits.
+    let _ = write!(
+        s,
+        "<path fill=\"#555\" transform=\"scale({CLOSE_UP_DOT_PX})\" d=\""
+    );
     for (cx, cy) in cells {
-        let _ = write!(
-            s,
-            "M{:.1} {:.1}h{d}v{d}h-{d}z",
-            cx as f64 * CLOSE_UP_DOT_PX,
-            cy as f64 * CLOSE_UP_DOT_PX,
-            d = CLOSE_UP_DOT_PX
-        );
+        let _ = write!(s, "M{cx} {cy}h1v1h-1z");
     }
     s.push_str("\"/>");
     // The ramp line(s) through the witness: z rises toward the front for the approach ramp,

@@ -312,7 +312,7 @@ fn checked_lab(bytes: Vec<u8>) -> Result<Vec<u8>, String> {
 /// is announced by its length, logged, and not read.
 fn read_records(dir: &std::path::Path) -> Vec<OutgoingRecord> {
     let mut out = Vec::new();
-    // The report (about 200 kB, half a minute of radio) goes only with a run started with a lab
+    // The report (about 150 kB, half a minute of radio) goes only with a run started with a lab
     // file: the operator asked for the lab's report. Every run's report stays on the robot.
     let report = dir.join(crate::report::LAB_FILE).exists();
     let files = [RecordFile::ResultJson, RecordFile::ResultSig]

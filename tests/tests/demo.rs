@@ -24,6 +24,9 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 
+#[path = "../../handheld/tests/common/browser.rs"]
+mod browser;
+
 use hil_sim::demo::{self, DemoOptions, DemoReport};
 use hil_sim::lockstep::Faults;
 use passangle_tests::scratch;
@@ -223,7 +226,40 @@ fn lockstep_runs_are_byte_identical() {
         assert!(x == y, "{name} differs between two runs");
     }
     check_signed(a);
+    check_report(a, &root);
     let _ = std::fs::remove_dir_all(&root);
+}
+
+/// The robot's own lab report of a demo run: every section filled from the run, signed, and
+/// rendered by a real browser.
+fn check_report(files: &[(String, Vec<u8>)], root: &Path) {
+    let html = files
+        .iter()
+        .find(|f| f.0 == "report.html")
+        .map(|f| String::from_utf8(f.1.clone()).unwrap())
+        .expect("the robot's report.html in the run");
+    for section in [
+        "Lab, customer and vehicle",
+        "Method and profile",
+        "Results",
+        "Standards",
+        "Side view",
+        "Witnesses",
+        "Tyre fits",
+        "Floor flatness",
+        "Provenance",
+    ] {
+        assert!(
+            html.contains(&format!("<h2>{section}</h2>")),
+            "no {section} section"
+        );
+    }
+    assert!(html.contains("Written by the robot when the run closed and signed"));
+    assert!(html.contains("every signed file verifies"));
+    assert!(!html.contains("not available"), "a section without data");
+    let path = root.join("demo-report.html");
+    std::fs::write(&path, &html).unwrap();
+    browser::screenshot(&path, root);
 }
 
 /// The simulated robot signs its run like a real one: every whole file has a sidecar that
@@ -245,6 +281,7 @@ fn check_signed(files: &[(String, Vec<u8>)]) {
         "result.json",
         "cloud.ply",
         "side_view.svg",
+        "report.html",
     ] {
         let sidecar = Sidecar::parse(file(&format!("{name}.sig"))).unwrap();
         assert_eq!(
