@@ -456,7 +456,8 @@ impl Pipeline {
         Ok(())
     }
 
-    /// Track a depth frame (visual odometry runs now) and keep its points for the cloud.
+    /// Keep a depth frame's points for the cloud (where the lidar does not see) and, when the
+    /// fusion uses visual odometry, track it.
     pub fn push_depth_frame(&mut self, frame: DepthImage) -> Result<(), PipelineError> {
         if !self.config.visual.enabled {
             return Ok(());
@@ -489,6 +490,11 @@ impl Pipeline {
                 Pose::from_increment(scale_twist(&r.rate, frame.stamp_s - a))
             });
         self.last_depth_s = Some(frame.stamp_s);
+        // Visual odometry only when the fusion uses it: its steps are read by nothing else.
+        if !self.config.fusion.use_visual {
+            self.drain(false);
+            return Ok(());
+        }
         if let Some(step) = self.visual.push(frame, prior) {
             self.stats.visual_steps += 1;
             self.visual_steps.push(step);
