@@ -20,8 +20,8 @@
 //! scenario with the run's vehicle, world and seed, the robot starting 1 m ahead of the vehicle's
 //! front and driving to 1 m behind its rear; the simulated VLP-16 packets decoded by
 //! `vlp16::FrameAssembler`; wheel odometry at 100 Hz with the template's wheel errors; the
-//! pipeline with its default settings: laser + wheel, the D435's points where the lidar never
-//! sees from the pass (the camera at a quarter of its resolution, see [`CAMERA_SCALE`]); the built
+//! pipeline with its default settings: laser + wheel, the D435's points where the lidar does not
+//! see (the camera at a quarter of its resolution, see [`CAMERA_SCALE`]); the built
 //! cloud moved into the vehicle frame by the true start pose (on the hall's floor) with the
 //! estimated trajectory as the scan's path; `angles::compute_angles` with its default
 //! settings; `hil_sim::truth::true_angles` (49 CFR zone, flexible parts included). Nothing is
@@ -766,10 +766,10 @@ fn print_header(args: &Args, shown: &str) {
     } else {
         let sources = match args.camera {
             Camera::None => "lidar + wheel odometry",
-            Camera::Cloud => "lidar + wheel odometry, D435 points where the lidar never sees",
+            Camera::Cloud => "lidar + wheel odometry, D435 points where the lidar does not see",
             Camera::Fused => "lidar + wheel + D435 visual odometry",
             Camera::Both => {
-                "lidar + wheel + D435 visual odometry, D435 points where the lidar never sees"
+                "lidar + wheel + D435 visual odometry, D435 points where the lidar does not see"
             }
         };
         println!(

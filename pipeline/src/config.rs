@@ -434,10 +434,10 @@ pub struct VisualOdometryConfig {
     /// Largest point-to-plane residual accepted, metres.
     #[serde(skip)]
     pub max_residual_m: f64,
-    /// Add the depth camera's points to the output cloud where the lidar never sees them: from
-    /// no position of the pass within its range and +-15 degree view (a high bumper ahead). On
-    /// by default: the lidar alone cannot see a bumper edge higher than about 0.39 m from a 1 m
-    /// start (decision records 037 and 040).
+    /// Add the depth camera's points to the output cloud where the lidar does not see them:
+    /// nearer than `features.min-range-m` or outside its +-15 degree view (above its top beam: a
+    /// high bumper ahead, the underside right above the robot). On by default: the lidar alone
+    /// cannot see a bumper edge higher than about 0.39 m from a 1 m start (decision record 037).
     pub add_to_cloud: bool,
 }
 

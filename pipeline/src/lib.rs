@@ -175,10 +175,7 @@ pub struct PipelineStats {
     pub depth_frames: usize,
     /// Depth frames with a visual odometry step.
     pub visual_steps: usize,
-    /// Depth points placed on the trajectory where the lidar did not see them from the frame's
-    /// own pose (`visual.add-to-cloud`).
-    pub depth_points_placed: usize,
-    /// Of those, the ones added to the output cloud: no pose of the pass let the lidar see them.
+    /// Depth points added to the output cloud (`visual.add-to-cloud`).
     pub depth_points: usize,
     /// Wheel odometry messages received.
     pub wheel_messages: usize,
@@ -332,9 +329,6 @@ pub struct Pipeline {
     visual_steps: Vec<VisualStep>,
     last_depth_s: Option<f64>,
     depth_points: VecDeque<(f64, Vec<V3>)>,
-    /// The depth camera's points placed on the trajectory (world frame), for the cloud once the
-    /// whole pass is known ([`Self::finish`]).
-    camera_points: Vec<V3>,
     robot_from_camera: Pose,
     fusion: Fusion,
     previous: Option<PreviousFrame>,
@@ -387,7 +381,6 @@ impl Pipeline {
             visual_steps: Vec::new(),
             last_depth_s: None,
             depth_points: VecDeque::new(),
-            camera_points: Vec::new(),
             robot_from_camera,
             fusion: Fusion::new(config.fusion.clone()),
             previous: None,
@@ -514,7 +507,6 @@ impl Pipeline {
     pub fn finish(mut self) -> BuiltCloud {
         self.drain(true);
         self.flush_depth_points(f64::INFINITY);
-        self.add_camera_points();
         let mut raw = self.cloud.points();
         if let Some(ground) = &self.ground_cloud {
             raw.extend(ground.points());
@@ -1069,28 +1061,9 @@ impl Pipeline {
             let Some(pose) = pose_on_trajectory(&self.trajectory, stamp_s) else {
                 continue;
             };
-            self.stats.depth_points_placed += points.len();
-            self.camera_points
-                .extend(points.into_iter().map(|p| pose.apply(p)));
-        }
-    }
-
-    /// Adds the camera's points that no position of the pass let the lidar see
-    /// ([`outside_lidar_view`] from every lidar pose of the trajectory): where the lidar saw a
-    /// place from anywhere, its returns are there, and the camera's (noisier with depth, with
-    /// stereo bands at outlines) would only blur them; what the lidar never sees, a high bumper
-    /// ahead or the underside right above the robot, comes from the camera alone.
-    fn add_camera_points(&mut self) {
-        let min_range_m = self.config.features.min_range_m;
-        let lidar_from_world: Vec<Pose> = self
-            .trajectory
-            .iter()
-            .map(|t| t.world_from_robot.compose(&self.robot_from_lidar).inverse())
-            .collect();
-        for p in std::mem::take(&mut self.camera_points) {
-            if never_in_lidar_view(p, &lidar_from_world, min_range_m) {
-                self.stats.depth_points += 1;
-                self.cloud.add(p);
+            self.stats.depth_points += points.len();
+            for p in points {
+                self.cloud.add(pose.apply(p));
             }
         }
     }
@@ -1102,24 +1075,14 @@ pub const LIDAR_HALF_FOV_RAD: f64 = 15.0 * std::f64::consts::PI / 180.0;
 
 /// Whether a point (lidar frame) lies where the lidar does not see from where it is: nearer than
 /// `min_range_m`, or more than [`LIDAR_HALF_FOV_RAD`] above or below its horizontal plane. The
-/// depth camera's points join the cloud only where this holds from every pose of the pass
-/// (`visual.add-to-cloud`, [`never_in_lidar_view`]). Where the lidar does see, its returns are
-/// the better measurement at the ranges that matter (the camera's noise grows with the square of
-/// the depth, 1.5 cm at 1.8 m), and the camera's stereo bands at the tyres' outlines would widen
-/// the tyres' silhouettes. Above its top beam the lidar sees nothing: a high bumper that stays
-/// more than 15 degrees up from every position of the pass.
+/// depth camera's points join the cloud there only (`visual.add-to-cloud`). Where the lidar does
+/// see, its returns are the better measurement at the ranges that matter (the camera's noise
+/// grows with the square of the depth, 1.5 cm at 1.8 m), and the camera's stereo bands at the
+/// tyres' outlines would widen the tyres' silhouettes. Above its top beam the lidar sees nothing:
+/// a high bumper 1 m ahead, the underside right above the robot.
 fn outside_lidar_view(p: V3, min_range_m: f64) -> bool {
     let horizontal = p[0].hypot(p[1]);
     p.norm() < min_range_m || p[2].abs() > horizontal * LIDAR_HALF_FOV_RAD.tan()
-}
-
-/// Whether no lidar pose of `lidar_from_world` (a pass's trajectory) had the world point `p`
-/// in view ([`outside_lidar_view`]). A geometric test: a part that hid the place from a pose
-/// does not count, since the lidar's returns there are judged by the pass as a whole.
-fn never_in_lidar_view(p: V3, lidar_from_world: &[Pose], min_range_m: f64) -> bool {
-    lidar_from_world
-        .iter()
-        .all(|l| outside_lidar_view(l.apply(p), min_range_m))
 }
 
 /// Whether the run's start is kept for a slip replay: the window is set and the long-baseline

@@ -290,15 +290,10 @@ fn slip_replay_adds_every_depth_frame_once() {
     let without = run_with_depth(off, 45);
     let with = run_with_depth(on, 45);
     assert_eq!(with.stats.slip_replays, 1, "{:?}", with.stats);
-    // The depth points the first pass had already placed are placed again by the second pass,
-    // once: as many as without the replay (the count does not depend on the poses; the ones the
-    // cloud keeps, out of the lidar's view from the whole pass, do).
-    assert!(without.stats.depth_points_placed > 0, "{:?}", without.stats);
-    assert_eq!(
-        with.stats.depth_points_placed,
-        without.stats.depth_points_placed
-    );
-    assert!(with.stats.depth_points <= with.stats.depth_points_placed);
+    // The depth points the first pass had already put in the cloud are put in again by the
+    // second pass, once: as many as without the replay (the count does not depend on the poses).
+    assert!(without.stats.depth_points > 0, "{:?}", without.stats);
+    assert_eq!(with.stats.depth_points, without.stats.depth_points);
     assert_eq!(with.stats.depth_frames, 45);
 }
 
@@ -513,37 +508,4 @@ fn the_cameras_points_join_the_cloud_only_where_the_lidar_does_not_see() {
     assert!(outside_lidar_view(V3::new(0.2, 0.1, 0.0), min_range_m));
     // The underside right above the robot.
     assert!(outside_lidar_view(V3::new(0.1, 0.2, 0.3), min_range_m));
-}
-
-#[test]
-fn the_cameras_points_join_the_cloud_only_where_no_pose_of_the_pass_lets_the_lidar_see() {
-    let min_range_m = 0.4;
-    // A pass along world x from 0 to 2 m, the lidar 0.12 m up, level.
-    let lidar_from_world: Vec<Pose> = (0..=20)
-        .map(|i| Pose::from_xyz_rpy([0.1 * f64::from(i), 0.0, 0.12], [0.0; 3]).inverse())
-        .collect();
-    // Underside 0.3 m up at x = 1 m: right above the robot at x = 1 m, but 8.5 degrees up from
-    // the start, so the lidar has it in view then.
-    assert!(outside_lidar_view(
-        lidar_from_world[10].apply(V3::new(1.0, 0.0, 0.3)),
-        min_range_m
-    ));
-    assert!(!never_in_lidar_view(
-        V3::new(1.0, 0.0, 0.3),
-        &lidar_from_world,
-        min_range_m
-    ));
-    // A bumper edge 0.8 m up, 0.5 m beyond the pass's end: 34 degrees up from the end, more
-    // from everywhere else.
-    assert!(never_in_lidar_view(
-        V3::new(2.5, 0.0, 0.8),
-        &lidar_from_world,
-        min_range_m
-    ));
-    // A point on the floor ahead is in view from the start.
-    assert!(!never_in_lidar_view(
-        V3::new(1.5, 0.3, 0.0),
-        &lidar_from_world,
-        min_range_m
-    ));
 }
