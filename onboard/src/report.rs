@@ -1,5 +1,6 @@
-//! `passangle report RUN_DIR [--lab lab.toml]`: one self-contained HTML file (inline CSS and SVG,
-//! no script, nothing fetched) that prints cleanly to PDF: the lab report of a recorded run.
+//! The lab report of a recorded run: one self-contained HTML file (inline CSS and SVG, no script,
+//! nothing fetched) that prints cleanly to PDF. The robot writes it, signed, when a run closes
+//! ([`write_on_robot`]); `passangle report RUN_DIR` writes it from a copy of the run.
 //!
 //! The results are the run's recorded (and, with a device key, signed) `result.json`; a quantity
 //! it did not measure shows its reason, never a number. The witnesses, tyre fits, side view and
@@ -1440,6 +1441,29 @@ mod tests {
         let e = format!("{:#}", LabFile::parse("decide = [\"eu\"]\n").unwrap_err());
         assert!(e.contains("`eu`"), "{e}");
         assert!(LabFile::parse("").unwrap().decide.is_empty());
+    }
+
+    proptest::proptest! {
+        /// The lab file comes over the radio: any text parses or is refused, never panics.
+        #[test]
+        fn any_lab_text_parses_or_is_refused(text in "\\PC{0,400}") {
+            let _ = LabFile::parse(&text);
+        }
+
+        /// Lines of lab-file shape with arbitrary keys and values.
+        #[test]
+        fn lab_shaped_text_parses_or_is_refused(
+            lines in proptest::collection::vec(
+                ("\\[?[a-z-]{1,12}\\]?", "[ =\"a-z0-9\\[\\],.-]{0,20}"),
+                0..12,
+            )
+        ) {
+            let mut text = String::new();
+            for (k, v) in &lines {
+                let _ = writeln!(text, "{k}{v}");
+            }
+            let _ = LabFile::parse(&text);
+        }
     }
 
     #[test]

@@ -1531,6 +1531,8 @@ impl Service {
                             closed_unix_s: self.wall_of(now) / 1_000_000,
                         };
                         if self.worker.as_ref().is_some_and(|w| w.run_id == run_id) {
+                            // One job is held at a time: an earlier one goes now.
+                            self.release_finish();
                             self.finish_after_save = Some(job);
                         } else {
                             self.io_waiting.push_back(job);
@@ -1565,6 +1567,9 @@ impl Service {
         if let Some(r) = &mut self.recorder {
             r.flush();
         }
+        // A closing job still held for an earlier run's files goes now, as this run's worker
+        // replaces that run's: its report may miss them, its record is not lost.
+        self.release_finish();
         let input = ProcessInput {
             run_dir,
             run_id,
