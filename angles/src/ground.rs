@@ -124,16 +124,12 @@ pub(crate) fn local_noise_sigma(
     threshold_m: f64,
     keep: impl Fn(V3) -> bool,
 ) -> Option<f64> {
-    let mut cells: std::collections::HashMap<(i64, i64), Vec<f64>> =
-        std::collections::HashMap::new();
+    let mut cells: passangle_geom::VoxelMap<Vec<f64>> = passangle_geom::VoxelMap::default();
     for &p in points.iter().filter(|&&p| keep(p)) {
         let h = plane.height(p);
         if h.abs() < threshold_m {
-            let key = (
-                (p[0] / LOCAL_CELL_M).floor() as i64,
-                (p[1] / LOCAL_CELL_M).floor() as i64,
-            );
-            cells.entry(key).or_default().push(h);
+            let [x, y, _] = passangle_geom::voxel_of(p, LOCAL_CELL_M);
+            cells.entry([x, y, 0]).or_default().push(h);
         }
     }
     let mut deviations = Vec::new();

@@ -1103,14 +1103,19 @@ pub fn classify_all(profiles: &[ProfileResult], thresholds: &[Thresholds]) -> Ve
         .collect()
 }
 
+/// `value ± U`, degrees to 2 decimals, metres to 3.
+fn with_u(unit: Unit, value: f64, u: f64) -> String {
+    match unit {
+        Unit::Degree => format!("{value:.2} ± {u:.2}"),
+        Unit::Metre => format!("{value:.3} ± {u:.3}"),
+    }
+}
+
 /// A quantity as `value ± U` (degrees to 2 decimals, metres to 3), or `not measured [n]` with
 /// the reason's footnote number.
 fn cell(kind: QuantityKind, m: &Measure, footnotes: &mut Vec<String>) -> String {
     match m {
-        Measure::Value { value, u, .. } => match kind.unit() {
-            Unit::Degree => format!("{value:.2} ± {u:.2}"),
-            Unit::Metre => format!("{value:.3} ± {u:.3}"),
-        },
+        Measure::Value { value, u, .. } => with_u(kind.unit(), *value, *u),
         Measure::NotMeasured(why) => {
             let n = footnotes.iter().position(|f| f == why).unwrap_or_else(|| {
                 footnotes.push(why.clone());
@@ -1159,14 +1164,11 @@ pub fn decision_lines(c: &Classification) -> Vec<String> {
             .parts
             .iter()
             .map(|(k, m, dec)| {
-                let v = match (m, k.unit()) {
-                    (Measure::Value { value, u, .. }, Unit::Degree) => {
-                        format!("{value:.2} ± {u:.2} deg")
+                let v = match m {
+                    Measure::Value { value, u, .. } => {
+                        format!("{} {}", with_u(k.unit(), *value, *u), k.unit().symbol())
                     }
-                    (Measure::Value { value, u, .. }, Unit::Metre) => {
-                        format!("{value:.3} ± {u:.3} m")
-                    }
-                    (Measure::NotMeasured(why), _) => format!("not measured ({why})"),
+                    Measure::NotMeasured(why) => format!("not measured ({why})"),
                 };
                 if d.parts.len() > 1 {
                     format!("{}: {v} {}", k.label(), dec.label())

@@ -484,9 +484,7 @@ fn read_lab(path: &Path) -> anyhow::Result<Vec<u8>> {
             bytes.len()
         );
     }
-    let text = std::str::from_utf8(&bytes)
-        .with_context(|| format!("{}: lab file is not UTF-8", path.display()))?;
-    onboard::report::LabFile::parse(text)
+    onboard::report::LabFile::parse_bytes(&bytes)
         .with_context(|| format!("{}: lab file", path.display()))?;
     Ok(bytes)
 }

@@ -6,7 +6,9 @@ use protocol::bounded::Text;
 use protocol::mcu::{
     DriveMode, EscStatus, FromFirmware, Interlocks, McuConfig, Status, ToFirmware,
 };
-use protocol::radio::{MeasurementResult, RefuseReason, ResultWarnings, StartMeasurement, Zone};
+use protocol::radio::{
+    LabRef, MeasurementResult, RefuseReason, ResultWarnings, StartMeasurement, Zone,
+};
 use protocol::{Deframer, Flags, frame::MAX_FRAME_LEN};
 
 use super::handheld::{HandheldConfig, HandheldEvent, HandheldRadio};
@@ -26,7 +28,7 @@ fn params() -> StartMeasurement {
         speed_mps: 0.2,
         distance_m: 6.0,
         zone: Zone::Tyre,
-        lab: protocol::radio::LabRef::NONE,
+        lab: LabRef::NONE,
     }
 }
 
@@ -1072,53 +1074,51 @@ fn a_lab_file_arrives_whole_over_a_lossy_radio_with_its_start() {
     }
 }
 
+impl Pair {
+    /// Sends a start naming `lab` and returns the lab file its request carries.
+    fn start_naming(&mut self, lab: LabRef) -> Option<Result<Vec<u8>, String>> {
+        self.hh
+            .start(&StartMeasurement { lab, ..params() })
+            .unwrap();
+        let (_, req) = self.run(1_000_000);
+        start_lab(&req)
+    }
+}
+
 #[test]
 fn a_start_naming_a_lab_file_that_did_not_arrive_whole_says_so() {
     let mut p = Pair::connected(3);
-    p.hh.start(&StartMeasurement {
-        lab: protocol::radio::LabRef {
+    let e = p
+        .start_naming(LabRef {
             upload: 9,
             len: 500,
-        },
-        ..params()
-    })
-    .unwrap();
-    let (_, req) = p.run(1_000_000);
-    let e = start_lab(&req).unwrap().unwrap_err();
+        })
+        .unwrap()
+        .unwrap_err();
     assert!(e.contains("none of its 3 chunks"), "{e}");
 
     // The chunks of another length, or of another upload, are not the file the start names.
     let (lab_ref, _) = p.hh.send_lab(10, &[b'x'; 1000]).unwrap();
     p.run(2_000_000);
-    p.hh.start(&StartMeasurement {
-        lab: protocol::radio::LabRef {
+    let e = p
+        .start_naming(LabRef {
             len: 999,
             ..lab_ref
-        },
-        ..params()
-    })
-    .unwrap();
-    let (_, req) = p.run(1_000_000);
-    let e = start_lab(&req).unwrap().unwrap_err();
+        })
+        .unwrap()
+        .unwrap_err();
     assert!(e.contains("1000 bytes arrived, the start names 999"), "{e}");
 
     p.hh.send_lab(11, &[b'x'; 400]).unwrap();
     p.run(2_000_000);
-    p.hh.start(&StartMeasurement {
-        lab: protocol::radio::LabRef {
-            upload: 12,
-            len: 400,
-        },
-        ..params()
-    })
-    .unwrap();
-    let (_, req) = p.run(1_000_000);
-    assert!(start_lab(&req).unwrap().is_err());
+    let other = p.start_naming(LabRef {
+        upload: 12,
+        len: 400,
+    });
+    assert!(other.unwrap().is_err());
 
     // A file longer than the protocol allows is refused by the sender.
     assert!(p.hh.send_lab(13, &[0; 4097]).is_err());
     // No lab file: the start carries none.
-    p.hh.start(&params()).unwrap();
-    let (_, req) = p.run(1_000_000);
-    assert_eq!(start_lab(&req), None);
+    assert_eq!(p.start_naming(LabRef::NONE), None);
 }

@@ -116,6 +116,14 @@ impl LabFile {
         Ok(lab)
     }
 
+    /// Parses a lab file's bytes (UTF-8), as they come from a file or over the radio.
+    ///
+    /// # Errors
+    /// Bytes that are not UTF-8; what [`Self::parse`] refuses.
+    pub fn parse_bytes(bytes: &[u8]) -> anyhow::Result<Self> {
+        Self::parse(std::str::from_utf8(bytes).context("not UTF-8")?)
+    }
+
     /// The threshold sets of `decide`.
     ///
     /// # Errors
@@ -259,13 +267,11 @@ pub const LAB_FILE: &str = "lab.toml";
 pub const REPORT_FILE: &str = "report.html";
 
 /// Who writes the report.
-#[derive(Debug, Clone, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Writer {
-    /// The robot, when the run closes; signed by its device key when it has one (the key's id).
-    Robot {
-        /// The id of the device key that signs the report (`None`: the robot does not sign).
-        signed_by: Option<String>,
-    },
+    /// The robot, when the run closes; signed by its device key when it has one (the key the
+    /// run's signatures are checked against, [`Report::checked_with`]).
+    Robot,
     /// `passangle report` on a copy of the run directory: not signed.
     Handheld,
 }
@@ -353,7 +359,7 @@ pub fn gather(inputs: &Inputs<'_>) -> anyhow::Result<Report> {
         id: report_id(&result_bytes, &run_name),
         run_name,
         written_utc: utc(inputs.written_unix_s),
-        writer: inputs.writer.clone(),
+        writer: inputs.writer,
         lab,
         lab_path,
         incomplete: recording.incomplete,
@@ -397,9 +403,7 @@ pub fn write_on_robot(
         out: &out,
         trusted: &trusted,
         written_unix_s,
-        writer: Writer::Robot {
-            signed_by: trusted.first().map(|k| k.id()),
-        },
+        writer: Writer::Robot,
     })?;
     signed::write_signed(&out, render(&report).as_bytes(), signer)?;
     Ok(report.id)
@@ -1340,7 +1344,7 @@ fn provenance_section(h: &mut String, r: &Report) {
             )
         ),
         who = match r.writer {
-            Writer::Robot { .. } => "the robot's, which wrote this report",
+            Writer::Robot => "the robot's, which wrote this report",
             Writer::Handheld => {
                 "the handheld that wrote this report; the robot's own version is in its log"
             }
@@ -1387,22 +1391,22 @@ fn provenance_section(h: &mut String, r: &Report) {
             esc(&f.signature)
         );
     }
-    let written = match &r.writer {
-        Writer::Robot {
-            signed_by: Some(id),
-        } => format!(
+    let written = match (r.writer, r.checked_with.first()) {
+        (Writer::Robot, Some(id)) => format!(
             "Written by the robot when the run closed and signed by its device key <span \
              class=\"hash\">{}</span> ({REPORT_FILE}.sig beside this file; check it with \
              <code>passangle verify</code>).",
             esc(id)
         ),
-        Writer::Robot { signed_by: None } => "Written by the robot when the run closed. This \
+        (Writer::Robot, None) => "Written by the robot when the run closed. This \
              robot has no device key: nothing of the run is signed."
             .to_owned(),
-        Writer::Handheld => "Written by <code>passangle report</code>. This file is not signed \
+        (Writer::Handheld, _) => {
+            "Written by <code>passangle report</code>. This file is not signed \
              by the robot; its result.json, cloud.ply and the other signed files are, and their \
              hashes above tie this report to them."
-            .to_owned(),
+                .to_owned()
+        }
     };
     let _ = write!(
         h,

@@ -297,11 +297,10 @@ struct Ready {
     records: Vec<OutgoingRecord>,
 }
 
-/// A lab file sent with a start, if it is one: UTF-8 TOML that [`LabFile::parse`] takes; the
+/// A lab file sent with a start, if it is one ([`LabFile::parse_bytes`]); the
 /// error names what is wrong, for the refusal.
 fn checked_lab(bytes: Vec<u8>) -> Result<Vec<u8>, String> {
-    let text = std::str::from_utf8(&bytes).map_err(|e| format!("lab file: not UTF-8: {e}"))?;
-    LabFile::parse(text).map_err(|e| format!("lab file: {e:#}"))?;
+    LabFile::parse_bytes(&bytes).map_err(|e| format!("lab file: {e:#}"))?;
     Ok(bytes)
 }
 

@@ -483,22 +483,21 @@ impl Pipeline {
                 .collect();
             self.depth_points.push_back((frame.stamp_s, points));
         }
-        let prior = self
-            .last_depth_s
-            .and_then(|a| self.wheel_rate(a, frame.stamp_s).map(|r| (a, r)))
-            .map_or(Pose::IDENTITY, |(a, r)| {
-                Pose::from_increment(scale_twist(&r.rate, frame.stamp_s - a))
-            });
-        self.last_depth_s = Some(frame.stamp_s);
+        let stamp_s = frame.stamp_s;
         // Visual odometry only when the fusion uses it: its steps are read by nothing else.
-        if !self.config.fusion.use_visual {
-            self.drain(false);
-            return Ok(());
+        if self.config.fusion.use_visual {
+            let prior = self
+                .last_depth_s
+                .and_then(|a| self.wheel_rate(a, stamp_s).map(|r| (a, r)))
+                .map_or(Pose::IDENTITY, |(a, r)| {
+                    Pose::from_increment(scale_twist(&r.rate, stamp_s - a))
+                });
+            if let Some(step) = self.visual.push(frame, prior) {
+                self.stats.visual_steps += 1;
+                self.visual_steps.push(step);
+            }
         }
-        if let Some(step) = self.visual.push(frame, prior) {
-            self.stats.visual_steps += 1;
-            self.visual_steps.push(step);
-        }
+        self.last_depth_s = Some(stamp_s);
         self.drain(false);
         Ok(())
     }
