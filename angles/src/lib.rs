@@ -710,11 +710,6 @@ fn settle_frame(
         let seed_low = config.seed_low_m.max(5.0 * band_noise);
         let (seeds, clusters) = tyres::find_seeds(&in_frame, seed_low, config.seed_high_m);
         let mut round_warnings = Vec::new();
-        if clusters > 4 {
-            round_warnings.push(format!(
-                "{clusters} compact clusters near the ground; the 4 largest were taken as tyres"
-            ));
-        }
         let mut fits = fit_tyres(
             &in_frame,
             &seeds,
@@ -723,6 +718,12 @@ fn settle_frame(
             noise,
             &mut round_warnings,
         )?;
+        if clusters > fits.len() {
+            round_warnings.push(format!(
+                "{clusters} compact clusters near the ground; {} taken as tyres",
+                fits.len()
+            ));
+        }
         if round == 3 {
             warnings.extend(round_warnings);
             // Move the origin to mid-wheelbase on the centreline.
@@ -934,7 +935,7 @@ fn fit_tyres(
     noise: f64,
     warnings: &mut Vec<String>,
 ) -> Result<Vec<(TyrePosition, TyreFit)>, AnglesError> {
-    let seeds: Vec<&Seed> = seeds.iter().take(4).collect();
+    let seeds: Vec<&Seed> = seeds.iter().take(tyres::CANDIDATE_SEEDS).collect();
     if seeds.len() < 2 {
         return Err(AnglesError::Tyres(format!(
             "{} footprint cluster(s) between {:.3} m and {:.3} m above the ground; need a front and a rear tyre",
@@ -943,10 +944,13 @@ fn fit_tyres(
             config.seed_high_m
         )));
     }
-    let centre_y = seeds.iter().map(|s| s.y).sum::<f64>() / seeds.len() as f64;
-    let mut fits = Vec::new();
+    // Which side of the vehicle a footprint is on: about the four largest, as a vehicle's
+    // footprints are the largest clusters in most scans.
+    let largest = &seeds[..seeds.len().min(4)];
+    let centre_y = largest.iter().map(|s| s.y).sum::<f64>() / largest.len() as f64;
+    let mut fitted = Vec::new();
     let mut unfitted = Vec::new();
-    for s in &seeds {
+    for (i, s) in seeds.iter().enumerate() {
         let params = TyreParams {
             h_lo: seed_low,
             h_hi: config.seed_high_m,
@@ -955,13 +959,24 @@ fn fit_tyres(
             inward_sign: if s.y < centre_y { 1.0 } else { -1.0 },
             seed: config.seed,
         };
-        if let Some(f) = tyres::fit_tyre(in_frame, s, params) {
-            fits.push(f);
-        } else {
-            unfitted.push(format!("x {:.2} m, y {:.2} m", s.x, s.y));
+        match tyres::fit_tyre(in_frame, s, params) {
+            Some(f) => fitted.push((f, s.count)),
+            None if i < 4 => unfitted.push(format!("x {:.2} m, y {:.2} m", s.x, s.y)),
+            None => {}
+        }
+    }
+    let candidates: Vec<(f64, f64, usize)> = fitted
+        .iter()
+        .map(|(f, count)| (f.centre_x, f.centre_y, *count))
+        .collect();
+    let mut fits: Vec<TyreFit> = match tyres::vehicle_set(&candidates) {
+        Some(set) => set.into_iter().map(|i| fitted[i].0.clone()).collect(),
+        None => fitted.into_iter().take(4).map(|(f, _)| f).collect(),
+    };
+    if fits.len() < 4 {
+        for u in &unfitted {
             warnings.push(format!(
-                "footprint at x {:.2} m, y {:.2} m: no consistent tyre circle, ignored",
-                s.x, s.y
+                "footprint at {u}: no consistent tyre circle, ignored"
             ));
         }
     }
@@ -972,7 +987,7 @@ fn fit_tyres(
             (fits[i].centre_x - fits[i - 1].centre_x)
                 .total_cmp(&(fits[j].centre_x - fits[j - 1].centre_x))
         })
-        .filter(|&i| fits[i].centre_x - fits[i - 1].centre_x > 0.8)
+        .filter(|&i| fits[i].centre_x - fits[i - 1].centre_x > tyres::MIN_WHEELBASE_M)
         .ok_or_else(|| {
             let fitted: Vec<String> = fits
                 .iter()
@@ -1047,22 +1062,28 @@ fn is_tyre_point(p: V3, t: &TyreFit, tol: f64) -> bool {
         && (p[0] - t.centre_x).hypot(p[2] - t.loaded_radius_m) < t.free_radius_m + tol
 }
 
-/// Direction from the rear axle midpoint to the front one, in cloud coordinates.
+/// Direction from the rear axle to the front one, in cloud coordinates: the mean of the
+/// rear-to-front vectors of the sides with both tyres fitted, `None` without such a side.
+///
+/// Why per side, not from the axles' midpoints: with three tyres one axle's midpoint is a single
+/// tyre's centre, half a track off the centreline, and the heading turns by atan(track / 2 /
+/// wheelbase), 15 degrees on a city car (simulated, tuning cloud hall-a/1 with `passangle angles`'
+/// defaults: a rear footprint without a circle; the frame then turned round after round and lost a
+/// second tyre).
 fn axle_heading(frame: &VehicleFrame, fits: &[(TyrePosition, TyreFit)]) -> Option<V3> {
-    let mid = |front: bool| {
-        let sel: Vec<&TyreFit> = fits
-            .iter()
-            .filter(|(p, _)| p.is_front() == front)
-            .map(|(_, f)| f)
-            .collect();
-        let n = sel.len() as f64;
-        (n > 0.0).then(|| {
-            let x = sel.iter().map(|f| f.centre_x).sum::<f64>() / n;
-            let y = sel.iter().map(|f| f.centre_y).sum::<f64>() / n;
-            frame.cloud_from_vehicle(V3::new(x, y, 0.0))
-        })
+    let at = |p: TyrePosition| {
+        fits.iter()
+            .find(|(q, _)| *q == p)
+            .map(|(_, f)| frame.cloud_from_vehicle(V3::new(f.centre_x, f.centre_y, 0.0)))
     };
-    unit(mid(true)? - mid(false)?)
+    let sides: Vec<V3> = [
+        (TyrePosition::FrontLeft, TyrePosition::RearLeft),
+        (TyrePosition::FrontRight, TyrePosition::RearRight),
+    ]
+    .into_iter()
+    .filter_map(|(f, r)| Some(at(f)? - at(r)?))
+    .collect();
+    unit(sides.iter().fold(V3::zeros(), |a, v| a + v))
 }
 
 /// Largest left-right difference of one axle's static loaded radii that counts as agreement
@@ -1795,6 +1816,27 @@ mod tests {
             silhouette_points: 60,
             covariance: [[1e-6, 0.0, 0.0], [0.0, 1e-6, 0.0], [0.0, 0.0, 1e-6]],
         }
+    }
+
+    #[test]
+    fn three_tyres_give_the_heading_along_the_side_with_both() {
+        use TyrePosition::{FrontLeft, FrontRight, RearRight};
+        let frame = VehicleFrame::from_up_forward(V3::zeros(), V3::z(), V3::x()).expect("a frame");
+        let at = |x: f64, y: f64| TyreFit {
+            centre_y: y,
+            ..tyre(x, 0.276, 0.289)
+        };
+        // A city car's front tyres and its rear right: the axles' midpoints would turn the
+        // heading by atan(0.715 / 2.4), 16.6 degrees.
+        let fits = vec![
+            (FrontLeft, at(1.2, 0.715)),
+            (FrontRight, at(1.2, -0.715)),
+            (RearRight, at(-1.2, -0.715)),
+        ];
+        let h = axle_heading(&frame, &fits).expect("a heading");
+        assert!((h - V3::x()).norm() < 1e-12, "{h:?}");
+        // Diagonal tyres only: no side to take a heading from.
+        assert!(axle_heading(&frame, &[fits[0].clone(), fits[2].clone()]).is_none());
     }
 
     #[test]

@@ -2,7 +2,8 @@
 //!
 //! 1. Seeds: points a few centimetres above the ground (between `seed_low_m` and `seed_high_m`) are
 //!    almost only tyre: cluster them on a 5 cm grid; keep compact clusters (a vehicle body part that
-//!    low is wide, a tyre's footprint is not). The four largest are the tyres.
+//!    low is wide, a tyre's footprint is not). The eight largest are fitted, and the tyres are the
+//!    four (or three) of them at a rectangle's corners ([`vehicle_set`]).
 //! 2. Side-view circle per tyre: points in the tyre's lateral slab, projected onto the x-z plane,
 //!    cut into 1 cm horizontal slices; each slice splits into runs at gaps wider than `tyre_gap_m`
 //!    (or 4 x the slice's median step in sparse clouds), and the ends of every run are silhouette
@@ -290,6 +291,100 @@ pub(crate) fn fit_tyre(points: &[V3], seed: &Seed, params: TyreParams) -> Option
         silhouette_points: used.len(),
         covariance,
     })
+}
+
+/// How many footprint clusters, largest first, are fitted as tyre candidates ([`vehicle_set`]
+/// picks the tyres among them): a hall's floor, another vehicle's tyres and low underside parts
+/// on the centreline leave clusters of their own, sometimes larger than a tyre's.
+pub(crate) const CANDIDATE_SEEDS: usize = 8;
+
+/// Narrowest and widest distance between the left and right footprints of one axle (metres): from
+/// a city car's 1.2 m track less a tyre's width to a wide truck's 2.1 m plus its width.
+const AXLE_WIDTH_M: (f64, f64) = (0.9, 2.5);
+
+/// How far (metres) the two axles of a chosen set may depart from a rectangle: the difference of
+/// their left-to-right vectors, and the wheelbase's component along the axles. A vehicle's tyres
+/// stand at the corners of a rectangle up to the front and rear tracks' difference (a few
+/// centimetres) and each footprint centre's error (up to half a tyre's width when half the
+/// footprint is hidden).
+const RECTANGLE_TOL_M: f64 = 0.25;
+
+/// Front and rear axles at least this far apart along x (metres).
+pub(crate) const MIN_WHEELBASE_M: f64 = 0.8;
+
+/// Which of the fitted candidates (`(x, y, seed points)` each) are the vehicle's tyres, by the
+/// vehicle's model: four, or three, at the corners of a rectangle whose sides run along and across
+/// the frame's x, with the most footprint points among such sets; `None` without one (the caller
+/// then takes the largest, as the seeds came). The most points, not the most corners: the robot
+/// drives under the vehicle it measures, so its footprints are the nearest and the densest; a
+/// parked neighbour's four (simulated hall A, 1.3 m beside the city car) are a rectangle too.
+///
+/// Why a model and not the four largest clusters: in a hall the largest low clusters include the
+/// floor's and other objects' (simulated city car, tuning cloud hall-a/1, `passangle angles` with
+/// defaults: a cluster 1.37 m to the side displaced a front tyre), and a low underside part on the
+/// centreline is compact and can be larger than a footprint a low body half hides.
+pub(crate) fn vehicle_set(candidates: &[(f64, f64, usize)]) -> Option<Vec<usize>> {
+    let n = candidates.len();
+    let pos = |i: usize| [candidates[i].0, candidates[i].1];
+    // An axle's (right, left) corners, if two candidates can be one.
+    let axle = |a: usize, b: usize| {
+        let (pa, pb) = (pos(a), pos(b));
+        let (dx, dy) = (pb[0] - pa[0], pb[1] - pa[1]);
+        // Across the frame's x, at most 20 degrees off: the frame follows the robot's path (then
+        // the previous round's axles), and the robot drives under the vehicle along it.
+        let across = (AXLE_WIDTH_M.0..=AXLE_WIDTH_M.1).contains(&dy.abs())
+            && dx.abs() <= (20f64).to_radians().tan() * dy.abs();
+        across.then_some(if dy > 0.0 { (pa, pb) } else { (pb, pa) })
+    };
+    let count = |set: &[usize]| set.iter().map(|&i| candidates[i].2).sum::<usize>();
+    let mut best: Option<Vec<usize>> = None;
+    let mut consider = |set: Vec<usize>| {
+        if best.as_ref().is_none_or(|b| count(&set) > count(b)) {
+            best = Some(set);
+        }
+    };
+    for a in 0..n {
+        for b in a + 1..n {
+            let Some((right, left)) = axle(a, b) else {
+                continue;
+            };
+            let across = [left[0] - right[0], left[1] - right[1]];
+            for c in (0..n).filter(|&c| c != a && c != b) {
+                // Three corners: `c` as the other axle's right or left, the fourth where the
+                // rectangle puts it.
+                let p = pos(c);
+                let as_right = [p[0] + across[0], p[1] + across[1]];
+                let as_left = [p[0] - across[0], p[1] - across[1]];
+                if rectangle((right, left), (p, as_right)) || rectangle((right, left), (as_left, p))
+                {
+                    consider(vec![a, b, c]);
+                }
+                for d in (c + 1..n).filter(|&d| d != a && d != b) {
+                    if axle(c, d).is_some_and(|q| rectangle((right, left), q)) {
+                        consider(vec![a, b, c, d]);
+                    }
+                }
+            }
+        }
+    }
+    best.map(|mut set| {
+        set.sort_unstable();
+        set
+    })
+}
+
+/// Whether two axles' `(right, left)` corners stand at a rectangle's corners within
+/// [`RECTANGLE_TOL_M`], at least [`MIN_WHEELBASE_M`] apart along x.
+fn rectangle(p: ([f64; 2], [f64; 2]), q: ([f64; 2], [f64; 2])) -> bool {
+    let vector = |(r, l): ([f64; 2], [f64; 2])| [l[0] - r[0], l[1] - r[1]];
+    let mid = |(r, l): ([f64; 2], [f64; 2])| [0.5 * (l[0] + r[0]), 0.5 * (l[1] + r[1])];
+    let (u, v) = (vector(p), vector(q));
+    let (m, k) = (mid(p), mid(q));
+    let base = [m[0] - k[0], m[1] - k[1]];
+    let width = u[0].hypot(u[1]);
+    base[0].abs() >= MIN_WHEELBASE_M
+        && (u[0] - v[0]).hypot(u[1] - v[1]) <= RECTANGLE_TOL_M
+        && (base[0] * u[0] + base[1] * u[1]).abs() / width <= RECTANGLE_TOL_M
 }
 
 fn circle_residual(p: [f64; 2], c: Circle) -> f64 {
@@ -727,6 +822,32 @@ pub(super) mod tests {
             );
             assert!((f.free_radius_m - 0.289).abs() < 0.02, "seed {seed}: {f:?}");
         }
+    }
+
+    #[test]
+    fn the_tyres_are_the_corners_of_a_rectangle_not_the_largest_clusters() {
+        // A city car's footprints (2.4 m wheelbase, 1.43 m track, 2 degrees yawed), a low part on
+        // the centreline larger than a rear footprint, and a cluster beside the car.
+        let (s, c) = (2f64.to_radians().sin(), 2f64.to_radians().cos());
+        let corner = |x: f64, y: f64, n: usize| (c * x - s * y, s * x + c * y, n);
+        let mut candidates = vec![
+            (0.1, 0.02, 900),
+            corner(1.2, 0.715, 800),
+            corner(1.2, -0.715, 760),
+            (1.0, -1.95, 700),
+            corner(-1.2, 0.715, 500),
+            corner(-1.2, -0.715, 450),
+        ];
+        assert_eq!(vehicle_set(&candidates), Some(vec![1, 2, 4, 5]));
+        // Three corners still make a vehicle; the fourth is where the rectangle puts it.
+        candidates.remove(5);
+        assert_eq!(vehicle_set(&candidates), Some(vec![1, 2, 4]));
+        // Two corners on one side and junk: no rectangle.
+        let no_axle = [(1.2, 0.7, 800), (-1.2, 0.7, 800), (0.0, 0.0, 900)];
+        assert_eq!(vehicle_set(&no_axle), None);
+        // An axle and a cluster on the centreline of the other: not a corner.
+        let mid = [(1.2, 0.7, 800), (1.2, -0.7, 800), (-1.2, 0.0, 900)];
+        assert_eq!(vehicle_set(&mid), None);
     }
 
     #[test]
