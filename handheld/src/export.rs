@@ -57,7 +57,8 @@ pub struct ExportArgs {
     /// trajectory (`run` -> `base_link_fused` on `/tf`).
     #[arg(long)]
     pub rebuild: bool,
-    /// Pipeline config for `--rebuild` (TOML, as for `passangle replay`); defaults when absent.
+    /// Pipeline config for `--rebuild` (TOML, as for `passangle replay`). Absent: the settings
+    /// the run was made with (its `config.toml`), or the defaults for a run without one.
     #[arg(long, requires = "rebuild")]
     pub pipeline_config: Option<PathBuf>,
 }
@@ -75,7 +76,15 @@ pub fn run(args: &ExportArgs, out: &mut impl Write) -> anyhow::Result<()> {
                 PipelineConfig::from_toml(&text)
                     .with_context(|| format!("{}: pipeline config", path.display()))?
             }
-            None => PipelineConfig::default(),
+            None => {
+                ProcessConfig::of_run(&args.run_dir)
+                    .map_err(anyhow::Error::msg)
+                    .context(
+                        "the run's config.toml (pass --pipeline-config to rebuild without it)",
+                    )?
+                    .unwrap_or_default()
+                    .pipeline
+            }
         })
     } else {
         None

@@ -3,8 +3,8 @@
 //!
 //! Reads the run directory of `onboard::recorder` (`lidar.pcap`, `odometry.csv`,
 //! `depth/index.csv` + `depth/NNNNNN.z16`) through `onboard::process::build_run`, the same
-//! `RunBuilder` the service feeds during a live run, so a replay with the run's config gives the
-//! service's cloud. Stamps: the host wall clock of each stream (odometry at its MCU stamp mapped
+//! `RunBuilder` the service feeds during a live run, with the settings the run was made with (its
+//! `config.toml`) unless `--pipeline-config` gives others, so a replay gives the service's cloud. Stamps: the host wall clock of each stream (odometry at its MCU stamp mapped
 //! onto the host clock), as seconds since the first complete lidar frame. A lidar frame is stamped
 //! with the receive time of its first packet, which is up to one packet (1.3 ms) after its first
 //! firing: an offset of 0.4 mm at 0.3 m/s, left uncorrected.
@@ -29,17 +29,19 @@ use pipeline::{BuiltCloud, PipelineConfig};
 pub struct ReplayArgs {
     /// The run directory (holds meta.json, lidar.pcap, odometry.csv, depth/).
     pub run_dir: PathBuf,
-    /// Pipeline config (TOML, the keys of the onboard config's `[pipeline]` section); defaults
-    /// when absent.
+    /// Pipeline config (TOML, the keys of the onboard config's `[processing.pipeline]`
+    /// section). Absent: the settings the run was made with (its `config.toml`), or the
+    /// pipeline's defaults for a run without one.
     #[arg(long)]
     pub pipeline_config: Option<PathBuf>,
     /// Where to write the cloud (binary PLY).
     #[arg(long)]
     pub out: Option<PathBuf>,
     /// Direction of the vehicle's front in the built cloud: `+x` (the robot drove toward the
-    /// front) or `-x`.
-    #[arg(long, default_value = "-x", allow_hyphen_values = true)]
-    pub front: String,
+    /// front) or `-x`. Absent: as the run's `config.toml` says (`processing.enter-at-front`),
+    /// else `-x`.
+    #[arg(long, allow_hyphen_values = true)]
+    pub front: Option<String>,
     /// Print the run's result as one JSON object instead of text.
     #[arg(long)]
     pub json: bool,
@@ -47,23 +49,36 @@ pub struct ReplayArgs {
 
 /// Run the command.
 pub fn run(args: &ReplayArgs, out: &mut impl Write) -> anyhow::Result<()> {
-    let pipeline = match &args.pipeline_config {
-        Some(path) => {
-            let text = std::fs::read_to_string(path)
-                .with_context(|| format!("reading {}", path.display()))?;
-            PipelineConfig::from_toml(&text)
-                .with_context(|| format!("{}: pipeline config", path.display()))?
-        }
-        None => PipelineConfig::default(),
-    };
     let recording = Recording::open(&args.run_dir)?;
     let mut notes = Vec::new();
     if recording.incomplete {
         notes.push("the run is marked INCOMPLETE; replaying what was recorded".to_owned());
     }
-    let config = ProcessConfig {
-        pipeline,
-        ..ProcessConfig::default()
+    let (mut config, source) = match ProcessConfig::of_run(&args.run_dir)
+        .map_err(anyhow::Error::msg)
+        .context("the run's config.toml (pass --pipeline-config to replay without it)")?
+    {
+        Some(recorded) => (recorded, "the run's config.toml"),
+        None => (
+            ProcessConfig::default(),
+            "the defaults (the run has no config.toml)",
+        ),
+    };
+    match &args.pipeline_config {
+        Some(path) => {
+            let text = std::fs::read_to_string(path)
+                .with_context(|| format!("reading {}", path.display()))?;
+            config.pipeline = PipelineConfig::from_toml(&text)
+                .with_context(|| format!("{}: pipeline config", path.display()))?;
+            notes.push(format!("pipeline settings: {}", path.display()));
+        }
+        None => notes.push(format!("pipeline settings: {source}")),
+    }
+    let front_is_positive_x = match args.front.as_deref() {
+        None => !config.enter_at_front,
+        Some("+x") => true,
+        Some("-x") => false,
+        Some(other) => bail!("--front {other}: expected +x or -x"),
     };
     let (built, counts) = build_run(&args.run_dir, &config).map_err(anyhow::Error::msg)?;
     if counts.lidar_cut_short {
@@ -103,6 +118,7 @@ pub fn run(args: &ReplayArgs, out: &mut impl Write) -> anyhow::Result<()> {
     let scan = Scan {
         lidar_path: built.lidar_path(config.pipeline.mounts.lidar_xyz_m.into()),
         x_sigma_per_m: built.x_sigma_per_m(&config.pipeline.fusion),
+        front_is_positive_x,
     };
     report(&built, &path, args, scan, &notes, out)
 }
@@ -113,6 +129,8 @@ struct Scan {
     lidar_path: Vec<pipeline::geom::V3>,
     /// The trajectory's stated error along x per metre.
     x_sigma_per_m: f64,
+    /// Where the vehicle's front lies in the cloud.
+    front_is_positive_x: bool,
 }
 
 fn report(
@@ -129,11 +147,7 @@ fn report(
         (t[0] * t[0] + t[1] * t[1] + t[2] * t[2]).sqrt()
     });
     let config = AnglesConfig {
-        front_is_positive_x: match args.front.as_str() {
-            "+x" => true,
-            "-x" => false,
-            other => bail!("--front {other}: expected +x or -x"),
-        },
+        front_is_positive_x: scan.front_is_positive_x,
         // The lidar's path: what the scan did not cover is not measured.
         scan_path_in_cloud: scan.lidar_path,
         trajectory_x_sigma_per_m: scan.x_sigma_per_m,

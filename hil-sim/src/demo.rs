@@ -338,10 +338,9 @@ pub(crate) fn robot_in_the_loop(fw_uart: MemPipe, pacing: Pacing) -> Result<Fil,
 /// (visual odometry runs) but neither fused nor added to the cloud: the demo's camera is a
 /// quarter-resolution stand-in, and its mount differs from the pipeline's default
 /// (`mounts.camera-*`). The output voxel (5 mm) and the bilateral filter (off) are the
-/// pipeline's defaults. Both switches are the pipeline's defaults too (decision record 011: the
-/// camera's points in the cloud moved the angles away from the truth more often than towards
-/// it); they stay spelled out here so the demo keeps measuring laser + wheel if the defaults
-/// change.
+/// pipeline's defaults. Fusing visual odometry is off by default too; the camera's points in the
+/// cloud are on by default (decision record 037) and off here. The run's `config.toml` keeps
+/// these overrides, and `passangle replay` starts from it.
 const DEMO_PIPELINE: &str = "[processing.pipeline.fusion]\nuse-visual = false\n[processing.pipeline.visual]\nadd-to-cloud = false\n";
 
 /// Everything both modes set up the same way: the scenario, its truth, the robot's config and

@@ -174,6 +174,30 @@ impl Default for ProcessConfig {
     }
 }
 
+impl ProcessConfig {
+    /// The `[processing]` settings a run was made with: the `config.toml` the recorder keeps in
+    /// every run directory (the service's whole configuration), or `None` if the run has none.
+    /// An offline rebuild (`passangle replay`, `export --rebuild`) starts from these, so that
+    /// it reproduces the run: the pipeline's defaults can differ from what the robot ran (the
+    /// demo's robot keeps the D435's points out of its cloud, its camera mounted elsewhere than
+    /// the default mount says).
+    ///
+    /// # Errors
+    /// The file exists but cannot be read or is not a valid onboard configuration (named, with
+    /// where).
+    pub fn of_run(dir: &Path) -> Result<Option<Self>, String> {
+        let path = dir.join("config.toml");
+        let text = match fs::read_to_string(&path) {
+            Ok(text) => text,
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+            Err(e) => return Err(format!("reading {}: {e}", path.display())),
+        };
+        crate::config::OnboardConfig::parse(&text, &path)
+            .map(|c| Some(c.processing))
+            .map_err(|e| e.to_string())
+    }
+}
+
 /// The profiles as `result.json` records them.
 pub fn profile_records(profiles: &[ProfileResult]) -> Vec<ProfileRecord> {
     profiles
@@ -885,6 +909,28 @@ fn read_depth(dir: &Path, builder: &mut RunBuilder) -> Result<(), String> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_run_is_rebuilt_with_the_settings_it_was_made_with() {
+        let dir = std::env::temp_dir().join(format!("passangle-of-run-{}", std::process::id()));
+        fs::create_dir_all(&dir).unwrap();
+        assert_eq!(ProcessConfig::of_run(&dir), Ok(None));
+        let config = "[radio]\nport = \"sim\"\n[mcu]\nport = \"sim\"\n[processing]\n\
+                      enter-at-front = false\n[processing.pipeline.visual]\nadd-to-cloud = false\n";
+        fs::write(dir.join("config.toml"), config).unwrap();
+        let recorded = ProcessConfig::of_run(&dir).unwrap().unwrap();
+        assert!(!recorded.enter_at_front);
+        assert!(!recorded.pipeline.visual.add_to_cloud);
+        assert!(PipelineConfig::default().visual.add_to_cloud);
+        fs::write(
+            dir.join("config.toml"),
+            "[processing]\nenter-at-front = 3\n",
+        )
+        .unwrap();
+        let e = ProcessConfig::of_run(&dir).unwrap_err();
+        assert!(e.contains("config.toml"), "{e}");
+        fs::remove_dir_all(&dir).unwrap();
+    }
 
     #[test]
     fn profile_records_keep_values_with_u_and_reasons_without_numbers() {

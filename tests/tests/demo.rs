@@ -29,6 +29,7 @@ mod browser;
 
 use hil_sim::demo::{self, DemoOptions, DemoReport};
 use hil_sim::lockstep::Faults;
+use onboard::process::{ProcessConfig, build_run};
 use passangle_tests::scratch;
 
 /// Every angle within this of the truth. The paper's Table 1 reads about 1 degree; the
@@ -155,6 +156,17 @@ fn run(vehicle: &str) {
         );
     }
     check_golden(vehicle, &golden_line(vehicle, &report));
+    // `passangle replay`'s rebuild: the recording with the run's own config.toml gives the
+    // service's cloud (the demo's pipeline settings differ from the defaults).
+    let config = ProcessConfig::of_run(&report.run_dir)
+        .unwrap()
+        .expect("the run keeps its config.toml");
+    let (built, _) = build_run(&report.run_dir, &config).unwrap();
+    assert_eq!(
+        built.points_in_world.len(),
+        report.cloud_points as usize,
+        "{vehicle}: the recording rebuilt with the run's config.toml"
+    );
     let _ = std::fs::remove_dir_all(&root);
 }
 
