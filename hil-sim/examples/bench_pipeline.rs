@@ -5,7 +5,7 @@
 //! Run: `cargo run --release -p hil-sim --example bench_pipeline -- [SEEDS] [--ablation | --peer]
 //! [--no-depth] [--only NAME] [--duration-s S] [--no-refine] [--eigen-min E] [--export DIR]
 //! [--save-clouds DIR] [--config FILE] [--wheel-noise]`
-//! (defaults: 10 seeds, laser + wheel and the full configuration; `--config FILE` starts every
+//! (defaults: 10 seeds, laser + wheel, the pipeline's defaults and the full configuration; `--config FILE` starts every
 //! variant from the pipeline settings in FILE, a TOML table like the service's `[pipeline]`). `--ablation` adds wheel only,
 //! laser only, laser + visual, without ground removal and without outlier removal, on the first
 //! seed of every scenario. `--peer` runs exactly the two configurations of the KISS-ICP
@@ -67,7 +67,7 @@ struct Variant {
 /// Which configurations a seed runs.
 #[derive(Clone, Copy, PartialEq)]
 enum Mode {
-    /// Laser + wheel and laser + visual + wheel.
+    /// Laser + wheel, the pipeline's defaults (the camera's points added) and laser + visual + wheel.
     Default,
     /// All of the Figure 14 ablation.
     Ablation,
@@ -78,8 +78,11 @@ enum Mode {
 /// The configurations of `mode`. Without `depth`, the two "no ..." rows of the ablation leave
 /// their stage out of laser + wheel instead of the full configuration (and say so in the name).
 fn variants(mode: Mode, depth: bool, base: &PipelineConfig) -> Vec<Variant> {
-    // "laser+visual+wheel": the camera fused and its points in the cloud (both off in the
-    // pipeline's defaults), as the ablation table measures it.
+    // "defaults": the pipeline as the robot runs it, laser + wheel with the camera's points where
+    // the lidar is blind (decision record 037), its odometry not fused.
+    let defaults = base.clone();
+    // "laser+visual+wheel": the camera fused and its points in the cloud (the fusion is off in
+    // the pipeline's defaults), as the ablation table measures it.
     let mut full = base.clone();
     full.fusion.use_visual = true;
     full.visual.add_to_cloud = true;
@@ -109,6 +112,7 @@ fn variants(mode: Mode, depth: bool, base: &PipelineConfig) -> Vec<Variant> {
     match mode {
         Mode::Default => vec![
             v("laser+wheel", laser_wheel, false),
+            v("defaults", defaults, true),
             v("laser+visual+wheel", full, true),
         ],
         Mode::Peer => vec![
