@@ -711,6 +711,7 @@ fn settle_frame(
         let (seeds, clusters) = tyres::find_seeds(&in_frame, seed_low, config.seed_high_m);
         let mut round_warnings = Vec::new();
         let mut fits = fit_tyres(
+            &frame,
             &in_frame,
             &seeds,
             config,
@@ -928,6 +929,7 @@ fn frame_on(plane: Plane, points: &[V3], forward: V3) -> Option<VehicleFrame> {
 
 /// Fit every seed, label front/rear and left/right.
 fn fit_tyres(
+    frame: &VehicleFrame,
     in_frame: &[V3],
     seeds: &[Seed],
     config: &AnglesConfig,
@@ -969,7 +971,7 @@ fn fit_tyres(
         .iter()
         .map(|(f, count)| (f.centre_x, f.centre_y, *count))
         .collect();
-    let mut fits: Vec<TyreFit> = match tyres::vehicle_set(&candidates) {
+    let mut fits: Vec<TyreFit> = match tyres::vehicle_set(&candidates, &path_xy(frame, config)) {
         Some(set) => set.into_iter().map(|i| fitted[i].0.clone()).collect(),
         None => fitted.into_iter().take(4).map(|(f, _)| f).collect(),
     };
@@ -1039,6 +1041,18 @@ fn fit_tyres(
     Ok(out)
 }
 
+/// The scan path's positions in `frame`, `(x, y)`.
+fn path_xy(frame: &VehicleFrame, config: &AnglesConfig) -> Vec<[f64; 2]> {
+    config
+        .scan_path_in_cloud
+        .iter()
+        .map(|&p| {
+            let v = frame.vehicle_from_cloud(p);
+            [v[0], v[1]]
+        })
+        .collect()
+}
+
 fn in_footprint(p: V3, t: &TyreFit) -> bool {
     let (lo, hi) = (
         t.inner_y.min(t.outer_y) - 0.03,
@@ -1067,7 +1081,7 @@ fn is_tyre_point(p: V3, t: &TyreFit, tol: f64) -> bool {
 ///
 /// Why per side, not from the axles' midpoints: with three tyres one axle's midpoint is a single
 /// tyre's centre, half a track off the centreline, and the heading turns by atan(track / 2 /
-/// wheelbase), 15 degrees on a city car (simulated, tuning cloud hall-a/1 with `passangle angles`'
+/// wheelbase), 16 degrees on a city car (simulated, tuning cloud hall-a/1 with `passangle angles`'
 /// defaults: a rear footprint without a circle; the frame then turned round after round and lost a
 /// second tyre).
 fn axle_heading(frame: &VehicleFrame, fits: &[(TyrePosition, TyreFit)]) -> Option<V3> {

@@ -323,7 +323,10 @@ pub(crate) const MIN_WHEELBASE_M: f64 = 0.8;
 /// floor's and other objects' (simulated city car, tuning cloud hall-a/1, `passangle angles` with
 /// defaults: a cluster 1.37 m to the side displaced a front tyre), and a low underside part on the
 /// centreline is compact and can be larger than a footprint a low body half hides.
-pub(crate) fn vehicle_set(candidates: &[(f64, f64, usize)]) -> Option<Vec<usize>> {
+pub(crate) fn vehicle_set(
+    candidates: &[(f64, f64, usize)],
+    path: &[[f64; 2]],
+) -> Option<Vec<usize>> {
     let n = candidates.len();
     let pos = |i: usize| [candidates[i].0, candidates[i].1];
     // An axle's (right, left) corners, if two candidates can be one.
@@ -355,12 +358,14 @@ pub(crate) fn vehicle_set(candidates: &[(f64, f64, usize)]) -> Option<Vec<usize>
                 let p = pos(c);
                 let as_right = [p[0] + across[0], p[1] + across[1]];
                 let as_left = [p[0] - across[0], p[1] - across[1]];
-                if rectangle((right, left), (p, as_right)) || rectangle((right, left), (as_left, p))
+                let corners = |q| rectangle((right, left), q) && straddled(path, q);
+                if straddled(path, (right, left))
+                    && (corners((p, as_right)) || corners((as_left, p)))
                 {
                     consider(vec![a, b, c]);
                 }
                 for d in (c + 1..n).filter(|&d| d != a && d != b) {
-                    if axle(c, d).is_some_and(|q| rectangle((right, left), q)) {
+                    if straddled(path, (right, left)) && axle(c, d).is_some_and(corners) {
                         consider(vec![a, b, c, d]);
                     }
                 }
@@ -371,6 +376,24 @@ pub(crate) fn vehicle_set(candidates: &[(f64, f64, usize)]) -> Option<Vec<usize>
         set.sort_unstable();
         set
     })
+}
+
+/// How far along x (metres) the scan path must come to an axle for [`straddled`] to check it.
+const PATH_NEAR_AXLE_M: f64 = 0.5;
+
+/// Whether the scan path (the sensor's positions, `(x, y)` in the frame) passes between an
+/// axle's `(right, left)` corners where it comes nearest to the axle along x: the robot drives
+/// under the vehicle it measures, so that vehicle's every axle straddles its path. True without a
+/// path, or where the path does not come within [`PATH_NEAR_AXLE_M`] of the axle.
+///
+/// Why: beside the measured vehicle a parked neighbour's tyres (simulated halls, 3.2 m to the
+/// side) pair with its own into axles 0.9-2.5 m wide, and such mixed sets are rectangles too.
+fn straddled(path: &[[f64; 2]], (right, left): ([f64; 2], [f64; 2])) -> bool {
+    let x = 0.5 * (right[0] + left[0]);
+    path.iter()
+        .min_by(|a, b| (a[0] - x).abs().total_cmp(&(b[0] - x).abs()))
+        .filter(|p| (p[0] - x).abs() <= PATH_NEAR_AXLE_M)
+        .is_none_or(|p| p[1] > right[1].min(left[1]) && p[1] < right[1].max(left[1]))
 }
 
 /// Whether two axles' `(right, left)` corners stand at a rectangle's corners within
@@ -838,16 +861,44 @@ pub(super) mod tests {
             corner(-1.2, 0.715, 500),
             corner(-1.2, -0.715, 450),
         ];
-        assert_eq!(vehicle_set(&candidates), Some(vec![1, 2, 4, 5]));
+        assert_eq!(vehicle_set(&candidates, &[]), Some(vec![1, 2, 4, 5]));
         // Three corners still make a vehicle; the fourth is where the rectangle puts it.
         candidates.remove(5);
-        assert_eq!(vehicle_set(&candidates), Some(vec![1, 2, 4]));
+        assert_eq!(vehicle_set(&candidates, &[]), Some(vec![1, 2, 4]));
         // Two corners on one side and junk: no rectangle.
         let no_axle = [(1.2, 0.7, 800), (-1.2, 0.7, 800), (0.0, 0.0, 900)];
-        assert_eq!(vehicle_set(&no_axle), None);
+        assert_eq!(vehicle_set(&no_axle, &[]), None);
         // An axle and a cluster on the centreline of the other: not a corner.
         let mid = [(1.2, 0.7, 800), (1.2, -0.7, 800), (-1.2, 0.0, 900)];
-        assert_eq!(vehicle_set(&mid), None);
+        assert_eq!(vehicle_set(&mid, &[]), None);
+    }
+
+    #[test]
+    fn the_tyres_straddle_the_robots_path() {
+        // The measured car's footprints, its left ones half hidden, and a neighbour parked 3.2 m
+        // to the right with denser footprints: its four are a rectangle, and its left tyres
+        // pair with the car's right ones into axles 1.7 m wide.
+        let candidates = [
+            (1.2, 0.715, 300),
+            (1.2, -0.715, 800),
+            (-1.2, 0.715, 300),
+            (-1.2, -0.715, 800),
+            (1.5, -2.4, 2000),
+            (1.5, -4.0, 2000),
+            (-1.1, -2.4, 2000),
+            (-1.1, -4.0, 2000),
+        ];
+        assert_eq!(vehicle_set(&candidates, &[]), Some(vec![4, 5, 6, 7]));
+        let path: Vec<[f64; 2]> = (0..=60)
+            .map(|i| [-3.0 + 0.1 * f64::from(i), 0.05])
+            .collect();
+        assert_eq!(vehicle_set(&candidates, &path), Some(vec![0, 1, 2, 3]));
+        // A path that stops short of an axle does not judge it.
+        let short: Vec<[f64; 2]> = path.iter().copied().filter(|p| p[0] > 0.0).collect();
+        assert_eq!(
+            vehicle_set(&candidates[..4], &short),
+            Some(vec![0, 1, 2, 3])
+        );
     }
 
     #[test]
