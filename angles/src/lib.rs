@@ -959,6 +959,7 @@ fn fit_tyres(
             gap_m: config.tyre_gap_m,
             noise_m: noise,
             inward_sign: if s.y < centre_y { 1.0 } else { -1.0 },
+            range_accuracy_m: config.range_accuracy_m,
             seed: config.seed,
         };
         match tyres::fit_tyre(in_frame, s, params) {

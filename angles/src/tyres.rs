@@ -7,7 +7,8 @@
 //! 2. Side-view circle per tyre: points in the tyre's lateral slab, projected onto the x-z plane,
 //!    cut into 1 cm horizontal slices; each slice splits into runs at gaps wider than `tyre_gap_m`
 //!    (or 4 x the slice's median step in sparse clouds), and the ends of every run are silhouette
-//!    candidates ([`slice_edges`]). A seeded RANSAC keeps the circle through three candidates that
+//!    candidates ([`slice_edges`]): with the scanner's range accuracy stated, where the run's
+//!    density falls to half ([`band_edge`]), else its outermost point. A seeded RANSAC keeps the circle through three candidates that
 //!    stands on the ground (lowest point within 2 cm above to 15 % of the radius below it), lies
 //!    over the footprint and is no wider than it at the footprint's top, and explains the most
 //!    slices on both sides at once ([`ground_constrained_ransac`]: tall walls beside the tyre,
@@ -16,13 +17,9 @@
 //!    sigma. Candidates lower than 30 % of the centre height are not used:
 //!    a loaded tyre is flattened and bulges near the road. Rim edges, body faces, sills and mud
 //!    flaps beside the tyre are candidates too, but no ground-standing circle explains them.
-//!    Known bias: the tread's front and back are seen nearly head-on, so the range noise runs
-//!    along x there and a slice's outermost point is the largest of many noisy samples: with the
-//!    simulated 1.5 cm lidar noise (clipped at 3 cm) it lies 2.5-3 cm outside the outline, the
-//!    tread radius comes out 1.5-3 cm large and the centre height up to 2.4 cm low, by a different
-//!    amount per tyre and seed. Fitting the centres of the tread's noisy band instead recovers the
-//!    tyres to about 2 mm but moves the approach and departure by 0.1-0.8 degree: the body's ends
-//!    carry biases of their own that these tyres offset (decision record 014, not adopted).
+//!    Why the half density: the tread's front and back are seen nearly head-on, so the range
+//!    noise runs along x there and a slice's outermost point is the largest of many noisy
+//!    samples, 2-3 cm outside the outline with the simulated VLP-16 (decision records 014, 041).
 //! 3. The static loaded radius is the centre's height above the ground; the fitted radius is the
 //!    free tread radius. The lateral faces are the 1 % / 99 % quantiles of y of the points in the disc.
 
@@ -220,6 +217,9 @@ pub(crate) struct TyreParams {
     pub noise_m: f64,
     /// Which side the vehicle centreline lies on: +1 if the centreline has larger y than this tyre.
     pub inward_sign: f64,
+    /// The scanner's stated range accuracy (metres), if known: the run ends are then the edges
+    /// of the tread's noisy band ([`band_edge`]), not its outermost returns.
+    pub range_accuracy_m: Option<f64>,
     /// RANSAC seed.
     pub seed: u64,
 }
@@ -246,7 +246,12 @@ pub(crate) fn fit_tyre(points: &[V3], seed: &Seed, params: TyreParams) -> Option
     let h = params.h_hi;
     let r0 = ((seed.half_chord_m.powi(2) + h * h) / (2.0 * h)).clamp(0.15, 1.0);
     let centre_x = 0.5 * (seed.x_min + seed.x_max);
-    let edges = slice_edges(&cand, 2.0 * r0 + 0.3, params.gap_m);
+    let edges = slice_edges(
+        &cand,
+        2.0 * r0 + 0.3,
+        params.gap_m,
+        params.range_accuracy_m.is_some(),
+    );
     let footprint = Footprint {
         centre_x,
         top: seed
@@ -432,7 +437,12 @@ const SLICE_M: f64 = 0.01;
 /// centre then returns a point of that boundary, which pulls the fit down (on the sedan demo's
 /// cloud the fitted centre heights were 2 cm low and one rear tyre failed outright). A slice's
 /// run ends lie on the circle wherever the slice reaches the tyre's sides.
-pub(crate) fn slice_edges(cand: &[[f64; 2]], z_max: f64, gap_m: f64) -> Vec<[f64; 2]> {
+pub(crate) fn slice_edges(
+    cand: &[[f64; 2]],
+    z_max: f64,
+    gap_m: f64,
+    band_edges: bool,
+) -> Vec<[f64; 2]> {
     let mut keyed: Vec<(i64, [f64; 2])> = cand
         .iter()
         .filter(|p| p[1] < z_max)
@@ -446,12 +456,60 @@ pub(crate) fn slice_edges(cand: &[[f64; 2]], z_max: f64, gap_m: f64) -> Vec<[f64
         let gap = gap_m.max(4.0 * median(&mut steps).unwrap_or(0.0));
         for run in xs.chunk_by(|a, b| b[0] - a[0] <= gap) {
             if let [first, .., last] = run {
-                out.push(*first);
-                out.push(*last);
+                if band_edges {
+                    let xs = || run.iter().map(|p| p[0]);
+                    out.push([band_edge(xs(), first[0], 1.0), first[1]]);
+                    out.push([band_edge(xs().rev(), last[0], -1.0), last[1]]);
+                } else {
+                    out.push(*first);
+                    out.push(*last);
+                }
             }
         }
     }
     out
+}
+
+/// Bin width (metres) of [`band_edge`]'s density profile: the pipeline's output voxel.
+const BAND_BIN_M: f64 = 0.005;
+/// Bins of [`band_edge`]'s profile inward from a run's extreme: 4 cm, past the VLP-16's 3 cm
+/// stated accuracy, so the profile reaches the tread band's inner side.
+const BAND_BINS: usize = 8;
+/// Fewest points [`band_edge`] needs within its bins; sparser runs keep their extreme.
+const BAND_MIN_POINTS: usize = 20;
+
+/// Where a run's end lies, from its points `xs` ordered from the extreme `extreme` inward
+/// (`inward` = +1: toward larger x): the position at which the run's density, in
+/// [`BAND_BIN_M`] bins, first reaches half its largest value within [`BAND_BINS`] bins of the
+/// extreme (linearly interpolated between bin centres); never beyond the extreme.
+///
+/// Why: the tread's front and back are seen nearly head-on, so the range noise runs along x
+/// there, and the outermost of the hundreds of returns a slice holds near the outline lies 2-3 cm
+/// outside it (record 014). Fitted to the extremes, the tyres came out 1-8 cm large (tuning set,
+/// true-pose clouds), which moved near witnesses' angles by up to a degree. The run's density is
+/// that of a step (returns inside the outline, none outside) blurred by the noise, whose half
+/// height is the step's edge whatever the noise. This is approximate: where the tread's own band
+/// (its returns seen head-on, centred on the outline) outweighs the sidewall's even spread, the
+/// half height of that band's peak lies about 1.2 noise sigma outside the outline; still nearer
+/// than the extreme, at 2-3 sigma.
+fn band_edge(xs: impl Iterator<Item = f64>, extreme: f64, inward: f64) -> f64 {
+    let mut counts = [0usize; BAND_BINS];
+    for x in xs {
+        let k = ((x - extreme) * inward / BAND_BIN_M).floor();
+        if k >= BAND_BINS as f64 {
+            break;
+        }
+        counts[k.max(0.0) as usize] += 1;
+    }
+    let peak = counts.iter().copied().max().unwrap_or(0);
+    if counts.iter().sum::<usize>() < BAND_MIN_POINTS {
+        return extreme;
+    }
+    let k = counts.iter().position(|&c| 2 * c >= peak).unwrap_or(0);
+    // Between the centres of bin k and of its outer neighbour (none beyond the extreme).
+    let outer = if k == 0 { 0 } else { counts[k - 1] };
+    let frac = (0.5 * peak as f64 - outer as f64) / ((counts[k] - outer) as f64).max(1.0);
+    extreme + inward * BAND_BIN_M * (k as f64 - 0.5 + frac.clamp(0.0, 1.0)).max(0.0)
 }
 
 /// Distance within which a silhouette point supports a circle (metres).
@@ -760,6 +818,7 @@ pub(super) mod tests {
             gap_m: 0.025,
             noise_m,
             inward_sign: -1.0,
+            range_accuracy_m: None,
             seed,
         };
         fit_tyre(points, &seeds[0], params).expect("a tyre fit")
@@ -899,6 +958,31 @@ pub(super) mod tests {
             vehicle_set(&candidates[..4], &short),
             Some(vec![0, 1, 2, 3])
         );
+    }
+
+    #[test]
+    fn a_runs_end_is_the_half_height_of_its_noisy_band_not_its_outermost_return() {
+        // A slice's run with its end at x = 0: 1,500 returns spread evenly inside, each moved
+        // along x by the VLP-16's simulated range noise (sigma 1.5 cm, clipped at 3 cm).
+        let mut rng = ChaCha8Rng::seed_from_u64(11);
+        let mut xs: Vec<f64> = (0..1500)
+            .map(|i| -0.3 + 0.0002 * f64::from(i) + (0.015 * gauss(&mut rng)).clamp(-0.03, 0.03))
+            .collect();
+        xs.sort_by(f64::total_cmp);
+        let extreme = *xs.last().expect("points");
+        let edge = band_edge(xs.iter().rev().copied(), extreme, -1.0);
+        assert!(extreme > 0.02, "{extreme}");
+        assert!(edge.abs() < 0.005, "edge {edge}, extreme {extreme}");
+        // The same from the other end, mirrored.
+        let mirrored: Vec<f64> = xs.iter().rev().map(|x| -x).collect();
+        let other = band_edge(mirrored.iter().copied(), mirrored[0], 1.0);
+        assert!((other + edge).abs() < 1e-12, "{other} {edge}");
+        // Noiseless and uniform: the extreme is the edge.
+        let even: Vec<f64> = (0..100).map(|i| 0.001 * f64::from(i)).collect();
+        assert!((band_edge(even.iter().rev().copied(), 0.099, -1.0) - 0.099).abs() < 1e-15);
+        // Too few returns to profile: the extreme.
+        let few = [0.05, 0.04, 0.0, -0.01];
+        assert!((band_edge(few.iter().copied(), 0.05, -1.0) - 0.05).abs() < 1e-15);
     }
 
     #[test]
