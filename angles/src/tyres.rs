@@ -8,14 +8,14 @@
 //!    cut into 1 cm horizontal slices; each slice splits into runs at gaps wider than `tyre_gap_m`
 //!    (or 4 x the slice's median step in sparse clouds), and the ends of every run are silhouette
 //!    candidates ([`slice_edges`]): with the scanner's range accuracy stated, where the run's
-//!    density falls to half ([`band_edge`]), else its outermost point. A seeded RANSAC keeps the circle through three candidates that
-//!    stands on the ground (lowest point within 2 cm above to 15 % of the radius below it), lies
-//!    over the footprint and is no wider than it at the footprint's top, and explains the most
-//!    slices on both sides at once ([`ground_constrained_ransac`]: tall walls beside the tyre,
-//!    which the depth camera sees, and the wheel arch above a tyre seen only below the sills must
-//!    not win); then geometric least squares on its inliers, trimmed at 3
-//!    sigma. Candidates lower than 30 % of the centre height are not used:
-//!    a loaded tyre is flattened and bulges near the road. Rim edges, body faces, sills and mud
+//!    density falls to half ([`band_edge`]), else its outermost point. A seeded RANSAC keeps
+//!    the circle through three candidates that stands on the ground (lowest point within 2 cm
+//!    above to 15 % of the radius below it), lies over the footprint and is no wider than it at
+//!    the footprint's top, and explains the most slices on both sides at once
+//!    ([`ground_constrained_ransac`]: tall walls beside the tyre, which the depth camera sees,
+//!    and the wheel arch above a tyre seen only below the sills must not win); then geometric
+//!    least squares on its inliers, trimmed at 3 sigma. Candidates lower than 30 % of the centre
+//!    height are not used: a loaded tyre is flattened and bulges near the road. Rim edges, body faces, sills and mud
 //!    flaps beside the tyre are candidates too, but no ground-standing circle explains them.
 //!    Why the half density: the tread's front and back are seen nearly head-on, so the range
 //!    noise runs along x there and a slice's outermost point is the largest of many noisy
@@ -540,10 +540,10 @@ const FOOTPRINT_CHORD_MARGIN_M: f64 = 0.05;
 /// at most 2 cm below it, a deflection of at most 15 % of the radius) and whose chord at the
 /// footprint's top reaches at most [`FOOTPRINT_CHORD_MARGIN_M`] beyond the footprint's points
 /// there. The hypothesis with the most [`support`] (slices with an edge within
-/// [`inlier_tolerance`] on both sides) wins (ties: the smaller sum of residuals). Two of the three points of
-/// every sample are edges of the tyre's lower flanks, at most [`LOW_FLANK_M`] above the
-/// footprint's top: every sensor under the car sees them, and walls and arches rarely reach that
-/// low.
+/// [`inlier_tolerance`] on both sides) wins (ties: the smaller sum of residuals). Two of the
+/// three points of every sample are edges of the tyre's lower flanks, at most [`LOW_FLANK_M`]
+/// above the footprint's top: every sensor under the car sees them, and walls and arches rarely
+/// reach that low.
 ///
 /// Why the chord, the support per slice and the sampling: a sensor that sees higher than the
 /// lidar (the D435 pitched up, its points in the cloud) sees the wheel arch's vertical walls fore
@@ -555,8 +555,8 @@ const FOOTPRINT_CHORD_MARGIN_M: f64 = 0.05;
 /// approach was not found. Near the ground that circle is 40 cm wider than the footprint, which
 /// the lidar sees from close by under every tyre. Smaller circles through one wall pass the chord
 /// test; counting each slice once, and only where both sides lie on the circle, keeps them below
-/// the tyre, and with most edges on
-/// walls, samples of three edges from anywhere rarely fell on the tyre alone (one of the three
+/// the tyre, and with most edges on walls, samples of three edges from anywhere rarely fell on
+/// the tyre alone (one of the three
 /// from the flanks still lost the tyre on one RANSAC seed in 20;
 /// `tall_walls_beside_the_tyre_do_not_make_a_larger_circle`, 200 seeds, fails without any one of
 /// the three).

@@ -4,8 +4,9 @@
 //! Reads the run directory of `onboard::recorder` (`lidar.pcap`, `odometry.csv`,
 //! `depth/index.csv` + `depth/NNNNNN.z16`) through `onboard::process::build_run`, the same
 //! `RunBuilder` the service feeds during a live run, with the settings the run was made with (its
-//! `config.toml`) unless `--pipeline-config` gives others, so a replay gives the service's cloud. Stamps: the host wall clock of each stream (odometry at its MCU stamp mapped
-//! onto the host clock), as seconds since the first complete lidar frame. A lidar frame is stamped
+//! `config.toml`) unless `--pipeline-config` gives others, so a replay gives the service's cloud.
+//! Stamps: the host wall clock of each stream (odometry at its MCU stamp mapped onto the host
+//! clock), as seconds since the first complete lidar frame. A lidar frame is stamped
 //! with the receive time of its first packet, which is up to one packet (1.3 ms) after its first
 //! firing: an offset of 0.4 mm at 0.3 m/s, left uncorrected.
 //!

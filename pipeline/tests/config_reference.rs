@@ -76,9 +76,9 @@ fn reference() -> String {
          depth camera's band, which sensors it uses, and its wheels' stated errors. The method's \
          own parameters (thresholds, voxels, iteration counts) are not settable: the software \
          version fixes them, and each is documented where `pipeline/src/config.rs` defines it \
-         (decision record 036). `passangle replay RUN_DIR --pipeline-config FILE` takes the same \
-         tables (without the `processing.pipeline.` prefix) to rebuild a recorded run with other \
-         settings.\n",
+         (decision record 036). `passangle replay RUN_DIR` rebuilds a recorded run with the \
+         settings in its own `config.toml`; `--pipeline-config FILE` takes the same tables \
+         (without the `processing.pipeline.` prefix) to rebuild it with others.\n",
     );
     let top = &docs["PipelineConfig"];
     let sections = defaults.as_table().expect("a table");
