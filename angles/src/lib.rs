@@ -959,7 +959,7 @@ fn fit_tyres(
             gap_m: config.tyre_gap_m,
             noise_m: noise,
             inward_sign: if s.y < centre_y { 1.0 } else { -1.0 },
-            range_accuracy_m: config.range_accuracy_m,
+            band_edges: config.range_accuracy_m.is_some(),
             seed: config.seed,
         };
         match tyres::fit_tyre(in_frame, s, params) {
@@ -977,11 +977,8 @@ fn fit_tyres(
         None => fitted.into_iter().take(4).map(|(f, _)| f).collect(),
     };
     if fits.len() < 4 {
-        for u in &unfitted {
-            warnings.push(format!(
-                "footprint at {u}: no consistent tyre circle, ignored"
-            ));
-        }
+        let ignored = |u: &String| format!("footprint at {u}: no consistent tyre circle, ignored");
+        warnings.extend(unfitted.iter().map(ignored));
     }
     fits.sort_by(|a, b| a.centre_x.total_cmp(&b.centre_x));
     // Split front/rear at the largest gap in x.
@@ -1007,9 +1004,10 @@ fn fit_tyres(
                 format!("; footprints without a circle at {}", unfitted.join(", "))
             };
             AnglesError::Tyres(format!(
-                "{} tyre circle(s) fitted, but no front and rear axle more than 0.8 m apart \
+                "{} tyre circle(s) fitted, but no front and rear axle more than {} m apart \
                  (circles at {}{unfitted})",
                 fits.len(),
+                tyres::MIN_WHEELBASE_M,
                 fitted.join(", ")
             ))
         })?;

@@ -217,9 +217,9 @@ pub(crate) struct TyreParams {
     pub noise_m: f64,
     /// Which side the vehicle centreline lies on: +1 if the centreline has larger y than this tyre.
     pub inward_sign: f64,
-    /// The scanner's stated range accuracy (metres), if known: the run ends are then the edges
-    /// of the tread's noisy band ([`band_edge`]), not its outermost returns.
-    pub range_accuracy_m: Option<f64>,
+    /// Whether the scanner's range accuracy is stated: the run ends are then where the runs'
+    /// density falls to half ([`band_edge`]), not their outermost returns.
+    pub band_edges: bool,
     /// RANSAC seed.
     pub seed: u64,
 }
@@ -246,12 +246,7 @@ pub(crate) fn fit_tyre(points: &[V3], seed: &Seed, params: TyreParams) -> Option
     let h = params.h_hi;
     let r0 = ((seed.half_chord_m.powi(2) + h * h) / (2.0 * h)).clamp(0.15, 1.0);
     let centre_x = 0.5 * (seed.x_min + seed.x_max);
-    let edges = slice_edges(
-        &cand,
-        2.0 * r0 + 0.3,
-        params.gap_m,
-        params.range_accuracy_m.is_some(),
-    );
+    let edges = slice_edges(&cand, 2.0 * r0 + 0.3, params.gap_m, params.band_edges);
     let footprint = Footprint {
         centre_x,
         top: seed
@@ -353,7 +348,7 @@ pub(crate) fn vehicle_set(
     };
     for a in 0..n {
         for b in a + 1..n {
-            let Some((right, left)) = axle(a, b) else {
+            let Some((right, left)) = axle(a, b).filter(|&p| straddled(path, p)) else {
                 continue;
             };
             let across = [left[0] - right[0], left[1] - right[1]];
@@ -364,13 +359,11 @@ pub(crate) fn vehicle_set(
                 let as_right = [p[0] + across[0], p[1] + across[1]];
                 let as_left = [p[0] - across[0], p[1] - across[1]];
                 let corners = |q| rectangle((right, left), q) && straddled(path, q);
-                if straddled(path, (right, left))
-                    && (corners((p, as_right)) || corners((as_left, p)))
-                {
+                if corners((p, as_right)) || corners((as_left, p)) {
                     consider(vec![a, b, c]);
                 }
                 for d in (c + 1..n).filter(|&d| d != a && d != b) {
-                    if straddled(path, (right, left)) && axle(c, d).is_some_and(corners) {
+                    if axle(c, d).is_some_and(corners) {
                         consider(vec![a, b, c, d]);
                     }
                 }
@@ -485,7 +478,7 @@ const BAND_MIN_POINTS: usize = 20;
 ///
 /// Why: the tread's front and back are seen nearly head-on, so the range noise runs along x
 /// there, and the outermost of the hundreds of returns a slice holds near the outline lies 2-3 cm
-/// outside it (record 014). Fitted to the extremes, the tyres came out 1-8 cm large (tuning set,
+/// outside it (record 014). Fitted to the extremes, the tyres came out up to 8 cm large (tuning set,
 /// true-pose clouds), which moved near witnesses' angles by up to a degree. The run's density is
 /// that of a step (returns inside the outline, none outside) blurred by the noise, whose half
 /// height is the step's edge whatever the noise. This is approximate: where the tread's own band
@@ -818,7 +811,7 @@ pub(super) mod tests {
             gap_m: 0.025,
             noise_m,
             inward_sign: -1.0,
-            range_accuracy_m: None,
+            band_edges: false,
             seed,
         };
         fit_tyre(points, &seeds[0], params).expect("a tyre fit")

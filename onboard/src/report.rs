@@ -324,12 +324,12 @@ pub fn gather(inputs: &Inputs<'_>) -> anyhow::Result<Report> {
         }
     };
     let config = std::fs::read(dir.join("config.toml")).ok();
-    let enter_at_front = config
-        .as_deref()
-        .and_then(|c| std::str::from_utf8(c).ok())
-        .and_then(|c| c.parse::<toml::Table>().ok())
-        .and_then(|t| t.get("processing")?.get("enter-at-front")?.as_bool())
-        .unwrap_or(crate::process::ProcessConfig::default().enter_at_front);
+    // The run's own settings; a run without a readable config.toml is taken as the defaults.
+    let enter_at_front = crate::process::ProcessConfig::of_run(dir)
+        .ok()
+        .flatten()
+        .unwrap_or_default()
+        .enter_at_front;
     let recomputed = recompute(dir, &recording.meta, enter_at_front);
     let trusted = inputs.trusted;
     let files = list_files(dir, inputs.out, trusted)?;
