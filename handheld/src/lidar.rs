@@ -5,6 +5,12 @@
 //! (metres in the VLP-16 manual's sensor frame, microseconds since the frame's first firing).
 //! `--json` prints the summary (or the frame's summary) as JSON. Angles are degrees here, at the
 //! user boundary; the library works in radians.
+//!
+//! `--calibrate` estimates each laser's range offset from a capture taken with the sensor
+//! standing still where it sees walls (`vlp16::calibration`), prints them per laser with their
+//! standard errors and the line for the onboard config (`[processing]
+//! lidar-range-offsets-m`), and exits non-zero when the capture cannot calibrate. The capture is
+//! decoded without offsets, so the result replaces any offsets configured before.
 
 use std::fmt::Write as _;
 use std::io::Write;
@@ -16,6 +22,8 @@ use vlp16::source::{PACKET_BUF_LEN, PacketKind, PacketSource, PcapSource, Ports}
 use vlp16::{DecodeStats, DecoderConfig, Frame, FrameAssembler};
 
 /// Arguments of `passangle lidar`.
+// Independent command-line switches, each a bool by nature.
+#[allow(clippy::struct_excessive_bools)]
 #[derive(Debug, clap::Args)]
 pub struct LidarArgs {
     /// Capture file (pcap or pcapng; Ethernet, Linux cooked or raw IP).
@@ -29,6 +37,10 @@ pub struct LidarArgs {
     /// Machine-readable JSON output.
     #[arg(long, conflicts_with = "csv")]
     pub json: bool,
+    /// Estimate the lasers' range offsets from this capture (the sensor standing still where it
+    /// sees walls; see docs/operation.md, "Calibrating the lidar's range").
+    #[arg(long, conflicts_with = "frame")]
+    pub calibrate: bool,
     /// Do not add the lasers' vertical offsets (manual Table 9-1) to z.
     #[arg(long)]
     pub no_vertical_offset: bool,
@@ -63,6 +75,169 @@ impl LidarArgs {
             .context("--min-range/--max-range/--cut-angle")?;
         Ok(config)
     }
+}
+
+/// Most points pooled for a calibration (about 100 MB; a 2 s capture has 0.6 million).
+const MAX_CALIBRATION_POINTS: usize = 3_000_000;
+
+/// `--calibrate`: pool the capture's points (up to [`MAX_CALIBRATION_POINTS`]), estimate the
+/// range offsets, print them.
+fn calibrate(
+    args: &LidarArgs,
+    source: &mut PcapSource,
+    assembler: &mut FrameAssembler,
+    out: &mut impl Write,
+) -> anyhow::Result<()> {
+    let (points, frames, capped) = pooled_points(source, assembler)?;
+    let config = *assembler.config();
+    let cal = vlp16::calibration::estimate_range_offsets(&points, &config)
+        .with_context(|| format!("{}: range calibration", args.file.display()))?;
+    // Rounded to 0.1 mm: the standard errors are tenths of a millimetre at best.
+    let offsets: Vec<f64> = cal
+        .offsets_m
+        .iter()
+        .map(|o| (o * 1e4).round() / 1e4)
+        .collect();
+    if args.json {
+        let lasers: Vec<_> = (0..16)
+            .map(|l| {
+                json!({
+                    "laser": l,
+                    "elevation_deg": vlp16::decoder::ELEVATION_DEG[l],
+                    "offset_m": offsets[l],
+                    "standard_error_m": cal.standard_error_m[l],
+                    "returns_on_planes": cal.returns[l],
+                })
+            })
+            .collect();
+        let planes: Vec<_> = cal
+            .planes
+            .iter()
+            .map(|p| {
+                json!({"normal": p.normal, "distance_m": p.distance_m, "returns": p.returns,
+                       "residual_sigma_m": p.residual_sigma_m})
+            })
+            .collect();
+        let doc = json!({
+            "file": args.file.display().to_string(),
+            "frames": frames,
+            "points": points.len(),
+            "capped": capped,
+            "lasers": lasers,
+            "planes": planes,
+            "residual_sigma_m": cal.residual_sigma_m,
+            "uncalibrated": cal.uncalibrated(),
+            "config_line": config_line(&offsets),
+        });
+        writeln!(out, "{}", serde_json::to_string_pretty(&doc)?)?;
+        return Ok(());
+    }
+    let mut text = format!(
+        "{}: {frames} frames, {} points{}\n",
+        args.file.display(),
+        points.len(),
+        if capped {
+            " (stopped at the point cap)"
+        } else {
+            ""
+        }
+    );
+    text.push_str(&calibration_text(&cal, &offsets)?);
+    out.write_all(text.as_bytes())?;
+    Ok(())
+}
+
+/// The complete frames' points of a capture, up to [`MAX_CALIBRATION_POINTS`]: the points, the
+/// frames and whether the cap stopped the reading.
+fn pooled_points(
+    source: &mut PcapSource,
+    assembler: &mut FrameAssembler,
+) -> anyhow::Result<(Vec<vlp16::Point>, usize, bool)> {
+    let mut buf = [0u8; PACKET_BUF_LEN];
+    let mut points = Vec::new();
+    let mut frames = 0usize;
+    loop {
+        let more = feed(source, assembler, &mut buf)?;
+        while let Some(frame) = assembler.pop_frame() {
+            if !frame.is_complete() {
+                continue;
+            }
+            if points.len() + frame.points.len() > MAX_CALIBRATION_POINTS {
+                return Ok((points, frames, true));
+            }
+            frames += 1;
+            points.extend(frame.points);
+        }
+        if !more {
+            return Ok((points, frames, false));
+        }
+    }
+}
+
+/// The calibration as text: the planes, each laser's offset, what was not calibrated, and the
+/// config line.
+fn calibration_text(
+    cal: &vlp16::calibration::RangeCalibration,
+    offsets: &[f64],
+) -> anyhow::Result<String> {
+    let mut text = String::new();
+    writeln!(
+        text,
+        "planes: {} (residual sigma {:.1} mm)",
+        cal.planes.len(),
+        1e3 * cal.residual_sigma_m
+    )?;
+    for p in &cal.planes {
+        writeln!(
+            text,
+            "  {:5.2} m away, normal ({:+.2}, {:+.2}, {:+.2}), {} returns, sigma {:.1} mm",
+            p.distance_m,
+            p.normal[0],
+            p.normal[1],
+            p.normal[2],
+            p.returns,
+            1e3 * p.residual_sigma_m
+        )?;
+    }
+    writeln!(text, "laser  elevation  offset mm  std. error mm  returns")?;
+    for (l, offset) in offsets.iter().enumerate() {
+        let se = cal.standard_error_m[l].map_or_else(
+            || "not calibrated".to_owned(),
+            |s| format!("{:.1}", 1e3 * s),
+        );
+        writeln!(
+            text,
+            "{l:>5}  {:>9.0}  {:>9.1}  {se:>13}  {:>7}",
+            vlp16::decoder::ELEVATION_DEG[l],
+            1e3 * offset,
+            cal.returns[l]
+        )?;
+    }
+    let missing = cal.uncalibrated();
+    if !missing.is_empty() {
+        writeln!(
+            text,
+            "not calibrated (too few returns on walls; offset 0 kept): lasers {missing:?}. \
+             Lasers that look down see only the floor from the robot's height: calibrate the \
+             sensor raised (on a tripod) to reach them."
+        )?;
+    }
+    writeln!(
+        text,
+        "The standard errors count the range noise only; a wall's unevenness adds to them."
+    )?;
+    writeln!(
+        text,
+        "For the onboard config:\n[processing]\n{}",
+        config_line(offsets)
+    )?;
+    Ok(text)
+}
+
+/// The onboard config's line for the offsets.
+fn config_line(offsets: &[f64]) -> String {
+    let list: Vec<String> = offsets.iter().map(|o| format!("{o:.4}")).collect();
+    format!("lidar-range-offsets-m = [{}]", list.join(", "))
 }
 
 /// Per-frame figures kept for the summary (not the points).
@@ -106,6 +281,9 @@ fn run_inner(args: &LidarArgs, out: &mut impl Write) -> anyhow::Result<()> {
     };
     let mut source = PcapSource::open_with_ports(&args.file, ports)?;
     let mut assembler = FrameAssembler::new(config)?;
+    if args.calibrate {
+        return calibrate(args, &mut source, &mut assembler, out);
+    }
     if let Some(index) = args.frame {
         let frame = find_frame(&mut source, &mut assembler, index)?.with_context(|| {
             format!(
@@ -505,6 +683,7 @@ mod tests {
             frame: None,
             csv: false,
             json: false,
+            calibrate: false,
             no_vertical_offset: false,
             min_range: 0.1,
             max_range: 131.0,

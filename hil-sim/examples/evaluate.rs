@@ -151,6 +151,83 @@ fn scenario_of(
     Ok(Scenario::from_parts(template_path, file, vehicle)?)
 }
 
+/// The decoder settings a range calibration gives for the run's sensor (see `--calibrate`), and
+/// a line on how its offsets compare with the simulated biases.
+fn calibrated_decoder(
+    template_path: &Path,
+    template: &Scenario,
+    entry: &Entry,
+) -> anyhow::Result<(vlp16::DecoderConfig, String)> {
+    let hall = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("scenarios/worlds/hall-a.toml");
+    let room = Entry {
+        world: Some(hall),
+        ..entry.clone()
+    };
+    let mut file = scenario_of(template_path, template, &room)?.file;
+    // Parked: the slowest speed the scenario accepts (2 mm over the recording), no vibration.
+    file.robot.speed_mps = 0.001;
+    file.duration_s = Some(2.0);
+    file.vibration.pitch_sigma_deg = 0.0;
+    file.vibration.roll_sigma_deg = 0.0;
+    let vehicle = Vehicle::load(&entry.vehicle)?;
+    let scenario = Scenario::from_parts(template_path, file, vehicle)?;
+    let scene = scenario.scene();
+    let config = vlp16::DecoderConfig::default();
+    let points: Vec<vlp16::Point> = scenario
+        .decoded_vlp16_frames(&scene, &config)
+        .into_iter()
+        .flat_map(|f| f.points)
+        .collect();
+    let cal = vlp16::calibration::estimate_range_offsets(&points, &config)
+        .context("range calibration")?;
+    let motion = scenario.motion();
+    let truth = hil_sim::vlp16::Vlp16Sim::new(
+        &scene,
+        &motion,
+        scenario.lidar_config(),
+        scenario.lidar_seed(),
+    )
+    .range_bias_m();
+    let errors: Vec<String> = (0..16)
+        .map(|l| match cal.standard_error_m[l] {
+            Some(se) => format!(
+                "{l}: {:+.1}+-{:.1}",
+                1e3 * (cal.offsets_m[l] - truth[l]),
+                1e3 * se
+            ),
+            None => format!("{l}: -"),
+        })
+        .collect();
+    let rms_bias = (truth.iter().map(|b| b * b).sum::<f64>() / 16.0).sqrt();
+    let line = format!(
+        "range calibration: planes {}, residual sigma {:.1} mm, simulated biases RMS {:.1} mm; offset - bias per laser, mm: {}",
+        cal.planes
+            .iter()
+            .map(|p| format!(
+                "[n {:+.2} {:+.2} {:+.2} d {:.2} m, {} returns, sigma {:.1} mm]",
+                p.normal[0],
+                p.normal[1],
+                p.normal[2],
+                p.distance_m,
+                p.returns,
+                1e3 * p.residual_sigma_m
+            ))
+            .collect::<Vec<_>>()
+            .join(" "),
+        1e3 * cal.residual_sigma_m,
+        1e3 * rms_bias,
+        errors.join(", ")
+    );
+    let offsets = std::array::from_fn(|l| cal.offsets_m[l] as f32);
+    Ok((
+        vlp16::DecoderConfig {
+            range_offsets_m: offsets,
+            ..config
+        },
+        line,
+    ))
+}
+
 /// CPU time of this thread, seconds (`/proc/thread-self/schedstat`).
 fn thread_cpu_s() -> f64 {
     std::fs::read_to_string("/proc/thread-self/schedstat")
@@ -225,6 +302,7 @@ fn run_pipeline(
 fn oracle_cloud(
     scenario: &Scenario,
     scene: &hil_sim::world::Scene,
+    range_offsets_m: &[f32; 16],
 ) -> (Vec<[f64; 3]>, Vec<[f64; 3]>, usize) {
     use hil_sim::vlp16::{ELEVATION_DEG, VERTICAL_OFFSET_MM, Vlp16Sim};
     let motion = scenario.motion();
@@ -245,7 +323,7 @@ fn oracle_cloud(
             let laser = f.channel % 16;
             let (sin_w, cos_w) = ELEVATION_DEG[laser].to_radians().sin_cos();
             let (sin_a, cos_a) = sim.azimuth_at(f.time_s).sin_cos();
-            let r = f64::from(f.distance_raw) * 0.002;
+            let r = f64::from(f.distance_raw) * 0.002 - f64::from(range_offsets_m[laser]);
             let p = hil_sim::geometry::Vec3::new(
                 r * cos_w * sin_a,
                 r * cos_w * cos_a,
@@ -295,43 +373,21 @@ fn run(
     .map(f64::to_degrees);
     let scene = scenario.scene();
     let mut detail = Vec::new();
+    let decoder = if args.calibrate && args.from_clouds.is_none() {
+        let (config, line) = calibrated_decoder(template_path, template, entry)?;
+        detail.push(line);
+        config
+    } else {
+        vlp16::DecoderConfig::default()
+    };
     let (cloud, path, frames, cpu_s, x_sigma_per_m) = if let Some(dir) = &args.from_clouds {
         let (cloud, path, x_sigma_per_m) = load_cloud(dir, entry, args)?;
         (cloud, path, 0, 0.0, x_sigma_per_m)
     } else if oracle {
-        let (cloud, path, packets) = oracle_cloud(&scenario, &scene);
+        let (cloud, path, packets) = oracle_cloud(&scenario, &scene, &decoder.range_offsets_m);
         (cloud, path, packets, 0.0, 0.0)
     } else {
-        let lidar = scenario.decoded_lidar_frames(&scene);
-        let wheel = scenario.wheel_odometry(0.2);
-        // Every third frame of the 30 Hz stream, as the service records it (`camera.record-every`).
-        let depth = if args.camera == Camera::None {
-            Vec::new()
-        } else {
-            scenario.depth_images(&scene, CAMERA_SCALE, 3)
-        };
-        let cpu0 = thread_cpu_s();
-        let built = run_pipeline(&scenario, &lidar, &depth, &wheel, args.camera)?;
-        let cpu_s = thread_cpu_s() - cpu0;
-        let Some(first) = built.trajectory.first() else {
-            bail!("the pipeline built no trajectory");
-        };
-        let motion = scenario.motion();
-        let t0 = pose_of(&motion.pose_at(first.stamp_s).to_isometry());
-        let cloud: Vec<[f64; 3]> = built
-            .points_in_world
-            .iter()
-            .map(|&p| t0.apply(p).into())
-            .collect();
-        let lidar_mount = pose_of(&scenario.file.lidar.robot_from_lidar());
-        let path = built
-            .lidar_path(lidar_mount.translation)
-            .into_iter()
-            .map(|p| t0.apply(p).into())
-            .collect();
-        detail.push(trajectory_errors(&built, &t0, &motion));
-        let x_sigma_per_m = built.x_sigma_per_m(&PipelineConfig::default().fusion);
-        (cloud, path, lidar.len(), cpu_s, x_sigma_per_m)
+        pipeline_cloud(&scenario, &scene, &decoder, args.camera, &mut detail)?
     };
     if let Some(dir) = &args.save_clouds {
         save_cloud(dir, entry, args, (&cloud, &path, x_sigma_per_m))?;
@@ -382,6 +438,61 @@ fn run(
         frames,
         detail,
     })
+}
+
+/// The pipeline's cloud and path of a run (vehicle frame: the estimated trajectory placed at the
+/// true first pose), its frames, CPU seconds and stated x error per metre; the trajectory's and
+/// the wheel scale's detail lines go to `detail`.
+#[allow(clippy::type_complexity)]
+fn pipeline_cloud(
+    scenario: &Scenario,
+    scene: &hil_sim::world::Scene,
+    decoder: &vlp16::DecoderConfig,
+    camera: Camera,
+    detail: &mut Vec<String>,
+) -> anyhow::Result<(Vec<[f64; 3]>, Vec<[f64; 3]>, usize, f64, f64)> {
+    let lidar = scenario.decoded_lidar_frames_with(scene, decoder);
+    let wheel = scenario.wheel_odometry(0.2);
+    // Every third frame of the 30 Hz stream, as the service records it (`camera.record-every`).
+    let depth = if camera == Camera::None {
+        Vec::new()
+    } else {
+        scenario.depth_images(scene, CAMERA_SCALE, 3)
+    };
+    let cpu0 = thread_cpu_s();
+    let built = run_pipeline(scenario, &lidar, &depth, &wheel, camera)?;
+    let cpu_s = thread_cpu_s() - cpu0;
+    let Some(first) = built.trajectory.first() else {
+        bail!("the pipeline built no trajectory");
+    };
+    let motion = scenario.motion();
+    let t0 = pose_of(&motion.pose_at(first.stamp_s).to_isometry());
+    let cloud: Vec<[f64; 3]> = built
+        .points_in_world
+        .iter()
+        .map(|&p| t0.apply(p).into())
+        .collect();
+    let lidar_mount = pose_of(&scenario.file.lidar.robot_from_lidar());
+    let path = built
+        .lidar_path(lidar_mount.translation)
+        .into_iter()
+        .map(|p| t0.apply(p).into())
+        .collect();
+    detail.push(trajectory_errors(&built, &t0, &motion));
+    let (scale_error, _) = hil_sim::wheel_odometry::constant_errors(
+        &scenario.file.wheel_odometry,
+        scenario.wheel_seed(),
+    );
+    let (measured, se) = built.stats.wheel_scale_estimate;
+    detail.push(format!(
+        "wheel scale: simulated error {:+.2} % (laser / wheel {:.4}), measured {measured:.4} +- {se:.4} from {} long baselines, applied {:.4}",
+        100.0 * scale_error,
+        1.0 / (1.0 + scale_error),
+        built.stats.scale_measurements,
+        built.stats.wheel_scale
+    ));
+    let x_sigma_per_m = built.x_sigma_per_m(&PipelineConfig::default().fusion);
+    Ok((cloud, path, lidar.len(), cpu_s, x_sigma_per_m))
 }
 
 /// The file stem of a run's saved cloud.
@@ -755,6 +866,12 @@ struct Args {
     /// product's default), its odometry in the fusion, or both.
     #[arg(long, value_enum, default_value = "cloud")]
     camera: Camera,
+    /// Calibrate the simulated VLP-16's per-laser range offsets before each run, as a lab does
+    /// with `passangle calibrate-lidar`: a 2 s recording with the robot parked in hall A, with
+    /// the run's sensor seed (so its range biases), its offsets estimated by
+    /// `vlp16::calibration` and applied by the decoder (and by the oracle's placement).
+    #[arg(long)]
+    calibrate: bool,
 }
 
 /// What the tables measure.

@@ -244,28 +244,46 @@ pub fn derive_seed(seed: u64, tag: u64) -> u64 {
 
 impl Scenario {
     /// The run's lidar frames as the onboard pipeline takes them: the simulated VLP-16 packets
-    /// decoded by `vlp16::FrameAssembler`, complete frames only, stamped in simulation
-    /// time (the sensor clock minus the scenario's clock offset). For benches and diagnostics
-    /// that feed `pipeline` directly.
+    /// decoded by `vlp16::FrameAssembler` with its default settings, complete frames only,
+    /// stamped in simulation time (the sensor clock minus the scenario's clock offset). For
+    /// benches and diagnostics that feed `pipeline` directly.
     pub fn decoded_lidar_frames(&self, scene: &Scene) -> Vec<pipeline::LidarFrame> {
-        use vlp16::{DecoderConfig, FrameAssembler};
+        self.decoded_lidar_frames_with(scene, &vlp16::DecoderConfig::default())
+    }
+
+    /// [`Self::decoded_lidar_frames`] with the decoder's settings given (a range calibration).
+    pub fn decoded_lidar_frames_with(
+        &self,
+        scene: &Scene,
+        config: &vlp16::DecoderConfig,
+    ) -> Vec<pipeline::LidarFrame> {
+        let offset_s = self.file.lidar.clock_offset_us as f64 * 1e-6;
+        self.decoded_vlp16_frames(scene, config)
+            .iter()
+            .map(|f| onboard::frames::lidar_frame(f, f.start_sensor_us * 1e-6 - offset_s))
+            .collect()
+    }
+
+    /// The run's complete VLP-16 frames as `vlp16::FrameAssembler` decodes the simulated packets
+    /// with `config` (sensor frame, sensor clock); none when `config` is invalid.
+    pub fn decoded_vlp16_frames(
+        &self,
+        scene: &Scene,
+        config: &vlp16::DecoderConfig,
+    ) -> Vec<vlp16::Frame> {
+        use vlp16::FrameAssembler;
 
         use crate::vlp16::{Datagram, Vlp16Sim};
         let motion = self.motion();
         let sim = Vlp16Sim::new(scene, &motion, self.lidar_config(), self.lidar_seed());
-        // The default decoder configuration is valid; an error here would leave no frames.
-        let Ok(mut assembler) = FrameAssembler::new(DecoderConfig::default()) else {
+        let Ok(mut assembler) = FrameAssembler::new(*config) else {
             return Vec::new();
         };
-        let offset_s = self.file.lidar.clock_offset_us as f64 * 1e-6;
         let mut frames = Vec::new();
-        let take = |a: &mut FrameAssembler, frames: &mut Vec<pipeline::LidarFrame>| {
+        let take = |a: &mut FrameAssembler, frames: &mut Vec<vlp16::Frame>| {
             while let Some(f) = a.pop_frame() {
                 if f.is_complete() {
-                    frames.push(onboard::frames::lidar_frame(
-                        &f,
-                        f.start_sensor_us * 1e-6 - offset_s,
-                    ));
+                    frames.push(f);
                 }
             }
         };

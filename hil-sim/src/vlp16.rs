@@ -309,6 +309,11 @@ impl<'a, T: Trajectory> Vlp16Sim<'a, T> {
         (duration_s / PACKET_S).ceil().max(0.0) as u64
     }
 
+    /// Each laser's fixed range bias, metres (the truth a range calibration estimates).
+    pub fn range_bias_m(&self) -> [f64; 16] {
+        self.range_bias_m
+    }
+
     /// Sensor azimuth at simulation time `t_s`, radians in `[0, 2 pi)`.
     pub fn azimuth_at(&self, t_s: f64) -> f64 {
         (self.start_azimuth_rad + self.omega_rad_per_s * t_s).rem_euclid(std::f64::consts::TAU)

@@ -546,6 +546,18 @@ impl OnboardConfig {
         if self.processing.min_cloud_points == 0 {
             bad("processing.min-cloud-points", "must be above 0".into());
         }
+        for (laser, &offset) in self.processing.lidar_range_offsets_m.iter().enumerate() {
+            if offset.is_nan() || offset.abs() > vlp16::MAX_RANGE_OFFSET_M {
+                bad(
+                    "processing.lidar-range-offsets-m",
+                    format!(
+                        "laser {laser}: {offset} m is not within +-{} m (a larger offset is a \
+                         sensor to repair, not to calibrate)",
+                        vlp16::MAX_RANGE_OFFSET_M
+                    ),
+                );
+            }
+        }
         problems
     }
 
@@ -800,6 +812,34 @@ mod tests {
         );
         let e = with("standards = [\"sae\"]").unwrap_err().to_string();
         assert!(e.contains("`sae`"), "{e}");
+    }
+
+    #[test]
+    fn lidar_range_offsets_are_read_and_checked() {
+        let with = |line: &str| {
+            OnboardConfig::parse(
+                &format!("{MINIMAL}[processing]\n{line}\n"),
+                Path::new("c.toml"),
+            )
+        };
+        let offsets: Vec<String> = (0..16)
+            .map(|l| format!("{:.3}", 0.001 * f64::from(l)))
+            .collect();
+        let c = with(&format!("lidar-range-offsets-m = [{}]", offsets.join(", "))).unwrap();
+        assert!((c.processing.lidar_range_offsets_m[15] - 0.015).abs() < 1e-7);
+        let mut bad = offsets.clone();
+        bad[5] = "0.25".into();
+        let e = with(&format!("lidar-range-offsets-m = [{}]", bad.join(", ")))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("processing.lidar-range-offsets-m") && e.contains("laser 5"),
+            "{e}"
+        );
+        let e = with("lidar-range-offsets-m = [0.0, 0.0]")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("lidar-range-offsets-m"), "{e}");
     }
 
     #[test]

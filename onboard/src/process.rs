@@ -151,6 +151,12 @@ pub struct ProcessConfig {
     /// for all six).
     #[serde(deserialize_with = "standards_from_ids")]
     pub standards: Vec<Standard>,
+    /// Each VLP-16 laser's range offset, metres, by laser id (the firing order: -15, 1, -13, 3,
+    /// ... 15 degrees), taken off its every return when the run's frames are decoded for the
+    /// cloud (the recording keeps the raw packets). From `passangle lidar CAPTURE --calibrate`
+    /// (docs/operation.md, "Calibrating the lidar's range"); zero (the default): the factory's
+    /// calibration as it is. Each within +-0.1 m.
+    pub lidar_range_offsets_m: [f32; 16],
 }
 
 /// `standards`: ids as `passangle angles --standard` takes them (`all` allowed).
@@ -170,6 +176,7 @@ impl Default for ProcessConfig {
             live: true,
             pipeline: PipelineConfig::default(),
             standards: Standard::ALL.to_vec(),
+            lidar_range_offsets_m: [0.0; 16],
         }
     }
 }
@@ -467,7 +474,11 @@ impl RunBuilder {
             pipeline: Pipeline::new(config.pipeline.clone())
                 .map_err(|e| format!("pipeline config: {e}"))?,
             min_cloud_points: config.min_cloud_points,
-            assembler: FrameAssembler::new(DecoderConfig::default()).map_err(|e| e.to_string())?,
+            assembler: FrameAssembler::new(DecoderConfig {
+                range_offsets_m: config.lidar_range_offsets_m,
+                ..DecoderConfig::default()
+            })
+            .map_err(|e| format!("processing.lidar-range-offsets-m: {e}"))?,
             t0_ns: None,
             waiting: Vec::new(),
             held: std::collections::BinaryHeap::new(),

@@ -226,6 +226,14 @@ impl Fusion {
         }
     }
 
+    /// The long-baseline wheel scale estimate whether or not it is applied: the least-squares
+    /// factor and its standard error with overlapping measurements counted once (infinite with
+    /// fewer than two measurements).
+    pub fn wheel_scale_estimate(&self) -> (f64, f64) {
+        let fit = least_squares_slope(&self.scale_measurements);
+        (fit.value, fit.overlap_standard_error())
+    }
+
     /// Long-baseline measurements kept for the wheel scale.
     pub fn scale_measurements(&self) -> usize {
         self.scale_measurements.len()

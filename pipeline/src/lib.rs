@@ -185,6 +185,9 @@ pub struct PipelineStats {
     pub scale_measurements: usize,
     /// The wheel scale factor fusion applied in the last frame (1: no significant slip).
     pub wheel_scale: f64,
+    /// The long-baseline wheel scale estimate in the last frame, applied or not, and its
+    /// standard error (NaN and infinite without measurements).
+    pub wheel_scale_estimate: (f64, f64),
     /// Long-baseline yaw measurements fusion kept (`fusion.wheel-yaw-bias`).
     pub yaw_measurements: usize,
     /// The wheel yaw-rate bias fusion took off in the last frame, rad/s (0: none significant).
@@ -786,6 +789,7 @@ impl Pipeline {
         target: Arc<FeatureTarget>,
     ) {
         self.stats.wheel_scale = self.fusion.wheel_scale();
+        self.stats.wheel_scale_estimate = self.fusion.wheel_scale_estimate();
         self.stats.wheel_yaw_bias_radps = self.fusion.wheel_yaw_bias_radps();
         if let Some(wheel) = wheel_pose_at(&self.wheel, stamp_s) {
             let at = ScanAt {

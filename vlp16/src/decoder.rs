@@ -96,6 +96,10 @@ pub struct DecoderConfig {
     pub cut_azimuth_rad: f32,
     /// Firing azimuth interpolation.
     pub azimuth_interpolation: AzimuthInterpolation,
+    /// Each laser id's range offset, metres, subtracted from its every return: a user
+    /// calibration of the per-laser range biases left after the factory's (estimated by
+    /// [`crate::calibration`]). Zero by default. The range limits apply to the raw range.
+    pub range_offsets_m: [f32; LASERS],
 }
 
 impl Default for DecoderConfig {
@@ -106,6 +110,7 @@ impl Default for DecoderConfig {
             vertical_offset: true,
             cut_azimuth_rad: 0.0,
             azimuth_interpolation: AzimuthInterpolation::PerBlock,
+            range_offsets_m: [0.0; LASERS],
         }
     }
 }
@@ -124,7 +129,21 @@ pub enum ConfigError {
     /// `cut_azimuth_rad` must lie in `[0, 2 pi)`.
     #[error("lidar.cut_azimuth_rad = {0} must lie in [0, 2 pi)")]
     CutAzimuth(f32),
+    /// A range offset must be finite and at most [`MAX_RANGE_OFFSET_M`] in magnitude.
+    #[error(
+        "lidar.range_offsets_m[{laser}] = {offset_m} must be finite and within +-{MAX_RANGE_OFFSET_M} m"
+    )]
+    RangeOffset {
+        /// The laser id.
+        laser: usize,
+        /// The configured offset.
+        offset_m: f32,
+    },
 }
+
+/// Largest accepted range offset, metres: three times the data sheet's +-3 cm accuracy. A
+/// larger one is a unit to repair, not to calibrate.
+pub const MAX_RANGE_OFFSET_M: f32 = 0.1;
 
 impl DecoderConfig {
     /// Checks every field.
@@ -138,6 +157,11 @@ impl DecoderConfig {
         }
         if !(0.0..core::f32::consts::TAU).contains(&self.cut_azimuth_rad) {
             return Err(ConfigError::CutAzimuth(self.cut_azimuth_rad));
+        }
+        for (laser, &offset_m) in self.range_offsets_m.iter().enumerate() {
+            if offset_m.is_nan() || offset_m.abs() > MAX_RANGE_OFFSET_M {
+                return Err(ConfigError::RangeOffset { laser, offset_m });
+            }
         }
         Ok(())
     }
@@ -757,7 +781,13 @@ impl FrameAssembler {
             self.stats.out_of_range += 1;
             return;
         }
-        let r = f32::from(record.distance_raw) * DISTANCE_RESOLUTION_M;
+        let r = f32::from(record.distance_raw) * DISTANCE_RESOLUTION_M
+            - self.config.range_offsets_m[laser];
+        if r <= 0.0 {
+            // Only a positive offset larger than the raw range gets here (below `min_range_m`).
+            self.stats.out_of_range += 1;
+            return;
+        }
         let xy = r * self.lasers.cos_w[laser];
         self.current.points.push(Point {
             x_m: xy * firings.sin_a[laser],

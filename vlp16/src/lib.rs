@@ -9,6 +9,7 @@
 //!   ([`source::PcapSource`]).
 //! - [`pcap`]: the checked pcap/pcapng reader, classic-pcap writer and UDP unwrapping.
 
+pub mod calibration;
 pub mod decoder;
 pub mod packet;
 pub mod pcap;
@@ -17,7 +18,7 @@ pub mod source;
 
 pub use decoder::{
     AzimuthInterpolation, ConfigError, DecodeError, DecodeStats, DecoderConfig, Frame,
-    FrameAssembler, Point, RANGE_ACCURACY_M, ReturnKind,
+    FrameAssembler, MAX_RANGE_OFFSET_M, Point, RANGE_ACCURACY_M, ReturnKind,
 };
 
 pub use packet::{

@@ -208,6 +208,49 @@ fn a_late_packet_does_not_cut_a_frame() {
 }
 
 #[test]
+fn range_offsets_move_each_lasers_returns_along_its_ray() {
+    let offsets: [f32; 16] = std::array::from_fn(|l| 0.001 * l as f32 - 0.005);
+    let plain = FrameAssembler::new(DecoderConfig::default()).unwrap();
+    let calibrated = FrameAssembler::new(DecoderConfig {
+        range_offsets_m: offsets,
+        ..DecoderConfig::default()
+    })
+    .unwrap();
+    let decode = |mut asm: FrameAssembler| {
+        asm.push_data(&packet(0, 20, 2_500, 0).to_bytes(), 0)
+            .unwrap();
+        finish(asm).0.remove(0).points
+    };
+    let (a, b) = (decode(plain), decode(calibrated));
+    assert_eq!(a.len(), b.len());
+    for (p, q) in a.iter().zip(&b) {
+        let l = usize::from(p.laser_id);
+        let z0 = VERTICAL_OFFSET_MM[l] * 1e-3;
+        let r = |p: &vlp16::Point| (p.x_m.powi(2) + p.y_m.powi(2) + (p.z_m - z0).powi(2)).sqrt();
+        assert!((r(p) - 5.0).abs() < 1e-5, "{}", r(p));
+        assert!(
+            (r(p) - r(q) - offsets[l]).abs() < 1e-5,
+            "laser {l}: {} {}",
+            r(p),
+            r(q)
+        );
+        // Along the same ray.
+        assert!((p.azimuth_rad - q.azimuth_rad).abs() < 1e-7);
+        assert!(((p.z_m - z0) / r(p) - (q.z_m - z0) / r(q)).abs() < 1e-6);
+    }
+    for bad in [f32::NAN, 0.2, -0.11] {
+        let mut o = [0.0; 16];
+        o[3] = bad;
+        let e = FrameAssembler::new(DecoderConfig {
+            range_offsets_m: o,
+            ..DecoderConfig::default()
+        })
+        .unwrap_err();
+        assert!(e.to_string().contains("range_offsets_m[3]"), "{e}");
+    }
+}
+
+#[test]
 fn range_limits_drop_and_count() {
     let config = DecoderConfig {
         min_range_m: 1.0,

@@ -1,0 +1,113 @@
+//! `passangle lidar CAPTURE --calibrate` on simulated captures: a 2 s recording with the robot
+//! parked in test hall A (`hil-sim/scenarios/field/lidar-calibration-hall-a.toml`, per-laser
+//! range biases of 1 cm RMS) gives offsets near the simulated biases and the line for the
+//! onboard config; the same recording in the empty world (no wall) fails and says why.
+
+#![allow(clippy::unwrap_used, missing_docs)]
+
+mod common;
+
+use std::net::{Ipv4Addr, SocketAddrV4};
+use std::path::{Path, PathBuf};
+
+use common::{passangle, temp_root};
+use hil_sim::scenario::Scenario;
+use hil_sim::vlp16::{Datagram, Vlp16Sim};
+use serde_json::Value;
+
+fn scenario(empty_world: bool) -> Scenario {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../hil-sim/scenarios/field/lidar-calibration-hall-a.toml");
+    let mut s = Scenario::load(&path).unwrap();
+    if empty_world {
+        let mut file = s.file.clone();
+        file.world = None;
+        file.hall = None;
+        let vehicle = s.vehicle.clone();
+        s = Scenario::from_parts(&path, file, vehicle).unwrap();
+    }
+    s
+}
+
+/// The scenario's packets as a pcap, as `passangle-sim lidar --pcap` writes them.
+fn write_pcap(s: &Scenario, dir: &Path) -> PathBuf {
+    let path = dir.join("capture.pcap");
+    let scene = s.scene();
+    let motion = s.motion();
+    let sim = Vlp16Sim::new(&scene, &motion, s.lidar_config(), s.lidar_seed());
+    let file = std::io::BufWriter::new(std::fs::File::create(&path).unwrap());
+    let mut w = vlp16::pcap::PcapWriter::new(file).unwrap();
+    let sensor = Ipv4Addr::new(192, 168, 1, 201);
+    for d in sim.datagrams(s.duration_s) {
+        let (send_s, payload, port) = match &d {
+            Datagram::Data { send_s, payload } => (*send_s, &payload[..], 2368),
+            Datagram::Position { send_s, payload } => (*send_s, &payload[..], 8308),
+        };
+        let stamp_ns = 1_767_225_600_000_000_000 + (send_s * 1e9).round() as u64;
+        w.write_udp(
+            stamp_ns,
+            SocketAddrV4::new(sensor, port),
+            SocketAddrV4::new(Ipv4Addr::BROADCAST, port),
+            payload,
+        )
+        .unwrap();
+    }
+    drop(w);
+    path
+}
+
+#[test]
+fn a_parked_capture_in_a_hall_calibrates_the_lasers_that_see_walls() {
+    let s = scenario(false);
+    let dir = temp_root("lidar-calibration");
+    let pcap = write_pcap(&s, &dir);
+    let truth = {
+        let scene = s.scene();
+        let motion = s.motion();
+        Vlp16Sim::new(&scene, &motion, s.lidar_config(), s.lidar_seed()).range_bias_m()
+    };
+    let (code, text) = passangle(
+        &["lidar", pcap.to_str().unwrap(), "--calibrate", "--json"],
+        None,
+    );
+    assert_eq!(code, 0, "{text}");
+    let doc: Value = serde_json::from_str(&text).unwrap();
+    let lasers = doc["lasers"].as_array().unwrap();
+    assert_eq!(lasers.len(), 16);
+    for (l, entry) in lasers.iter().enumerate() {
+        let offset = entry["offset_m"].as_f64().unwrap();
+        if entry["standard_error_m"].is_null() {
+            assert!(offset == 0.0, "laser {l}: uncalibrated but offset {offset}");
+            continue;
+        }
+        // Within a few millimetres of a bias of up to 3 cm (see hil-sim's range_calibration).
+        assert!(
+            (offset - truth[l]).abs() < 0.01,
+            "laser {l}: {offset} vs {}",
+            truth[l]
+        );
+    }
+    let line = doc["config_line"].as_str().unwrap();
+    assert!(line.starts_with("lidar-range-offsets-m = ["), "{line}");
+    // The text form names the lasers it could not calibrate and how to reach them.
+    let (code, text) = passangle(&["lidar", pcap.to_str().unwrap(), "--calibrate"], None);
+    assert_eq!(code, 0, "{text}");
+    assert!(text.contains("not calibrated"), "{text}");
+    assert!(
+        text.contains("[processing]\nlidar-range-offsets-m = ["),
+        "{text}"
+    );
+}
+
+#[test]
+fn a_capture_without_walls_fails_and_says_why() {
+    let s = scenario(true);
+    let dir = temp_root("lidar-calibration-empty");
+    let pcap = write_pcap(&s, &dir);
+    let (code, text) = passangle(&["lidar", pcap.to_str().unwrap(), "--calibrate"], None);
+    assert_ne!(code, 0, "{text}");
+    assert!(
+        text.contains("walls"),
+        "the error names what the capture lacks: {text}"
+    );
+}
