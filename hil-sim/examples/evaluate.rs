@@ -45,6 +45,7 @@ use hil_sim::scenario::Scenario;
 use hil_sim::trajectory::Trajectory;
 use hil_sim::truth::{TruthOptions, true_angles};
 use hil_sim::vehicle::Vehicle;
+use hil_sim::vlp16::Vlp16Config;
 use pipeline::geom::{Pose, rpy_of};
 use pipeline::{BuiltCloud, DepthImage, LidarFrame, Pipeline, PipelineConfig, WheelOdometry};
 use serde::Deserialize;
@@ -154,23 +155,25 @@ fn scenario_of(
 /// The decoder settings a range calibration gives for the run's sensor (see `--calibrate`), and
 /// a line on how its offsets compare with the simulated biases.
 fn calibrated_decoder(
-    template_path: &Path,
     template: &Scenario,
     entry: &Entry,
 ) -> anyhow::Result<(vlp16::DecoderConfig, String)> {
-    let hall = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("scenarios/worlds/hall-a.toml");
-    let room = Entry {
-        world: Some(hall),
-        ..entry.clone()
+    // The calibration recording with the run's sensor (the template's VLP-16 and the run's
+    // seed, so its range biases) and vehicle, on the tripod of the shipped scenario.
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("scenarios/field/lidar-calibration-tripod-hall-a.toml");
+    let recording = Scenario::load(&path)?;
+    let mut file = recording.file.clone();
+    file.lidar = Vlp16Config {
+        mount_xyz_m: file.lidar.mount_xyz_m,
+        mount_rpy_deg: file.lidar.mount_rpy_deg,
+        ..template.file.lidar.clone()
     };
-    let mut file = scenario_of(template_path, template, &room)?.file;
-    // Parked: the slowest speed the scenario accepts (2 mm over the recording), no vibration.
-    file.robot.speed_mps = 0.001;
-    file.duration_s = Some(2.0);
-    file.vibration.pitch_sigma_deg = 0.0;
-    file.vibration.roll_sigma_deg = 0.0;
+    file.seed = entry.seed;
+    file.vehicle.clone_from(&entry.vehicle);
     let vehicle = Vehicle::load(&entry.vehicle)?;
-    let scenario = Scenario::from_parts(template_path, file, vehicle)?;
+    file.robot.start_x_m = vehicle.front_x_m() + 1.0;
+    let scenario = Scenario::from_parts(&path, file, vehicle)?;
     let scene = scenario.scene();
     let config = vlp16::DecoderConfig::default();
     let points: Vec<vlp16::Point> = scenario
@@ -374,7 +377,7 @@ fn run(
     let scene = scenario.scene();
     let mut detail = Vec::new();
     let decoder = if args.calibrate && args.from_clouds.is_none() {
-        let (config, line) = calibrated_decoder(template_path, template, entry)?;
+        let (config, line) = calibrated_decoder(template, entry)?;
         detail.push(line);
         config
     } else {
@@ -866,9 +869,10 @@ struct Args {
     /// product's default), its odometry in the fusion, or both.
     #[arg(long, value_enum, default_value = "cloud")]
     camera: Camera,
-    /// Calibrate the simulated VLP-16's per-laser range offsets before each run, as a lab does
-    /// with `passangle calibrate-lidar`: a 2 s recording with the robot parked in hall A, with
-    /// the run's sensor seed (so its range biases), its offsets estimated by
+    /// Calibrate the simulated VLP-16's per-laser range offsets before each run, as the
+    /// operator's manual describes (`passangle lidar --calibrate`): a 2 s recording with the
+    /// sensor raised to 1.5 m in hall A (`scenarios/field/lidar-calibration-tripod-hall-a.toml`)
+    /// with the run's sensor seed (so its range biases), its offsets estimated by
     /// `vlp16::calibration` and applied by the decoder (and by the oracle's placement).
     #[arg(long)]
     calibrate: bool,
