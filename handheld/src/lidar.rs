@@ -38,7 +38,7 @@ pub struct LidarArgs {
     #[arg(long, conflicts_with = "csv")]
     pub json: bool,
     /// Estimate the lasers' range offsets from this capture (the sensor standing still where it
-    /// sees walls; see docs/operation.md, "Calibrating the lidar's range").
+    /// sees walls; see docs/operator/run.md, "Calibrating the lidar's range").
     #[arg(long, conflicts_with = "frame")]
     pub calibrate: bool,
     /// Do not add the lasers' vertical offsets (manual Table 9-1) to z.

@@ -1,7 +1,8 @@
 //! `passangle lidar CAPTURE --calibrate` on simulated captures: a 2 s recording with the robot
 //! parked in test hall A (`hil-sim/scenarios/field/lidar-calibration-hall-a.toml`, per-laser
 //! range biases of 1 cm RMS) gives offsets near the simulated biases and the line for the
-//! onboard config; the same recording in the empty world (no wall) fails and says why.
+//! onboard config; the same recording in the empty world (no wall), or with the robot driving,
+//! fails and says why.
 
 #![allow(clippy::unwrap_used, missing_docs)]
 
@@ -15,18 +16,17 @@ use hil_sim::scenario::Scenario;
 use hil_sim::vlp16::{Datagram, Vlp16Sim};
 use serde_json::Value;
 
-fn scenario(empty_world: bool) -> Scenario {
+fn scenario(empty_world: bool, speed_mps: f64) -> Scenario {
     let path = Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("../hil-sim/scenarios/field/lidar-calibration-hall-a.toml");
-    let mut s = Scenario::load(&path).unwrap();
+    let s = Scenario::load(&path).unwrap();
+    let mut file = s.file.clone();
     if empty_world {
-        let mut file = s.file.clone();
         file.world = None;
         file.hall = None;
-        let vehicle = s.vehicle.clone();
-        s = Scenario::from_parts(&path, file, vehicle).unwrap();
     }
-    s
+    file.robot.speed_mps = speed_mps;
+    Scenario::from_parts(&path, file, s.vehicle.clone()).unwrap()
 }
 
 /// The scenario's packets as a pcap, as `passangle-sim lidar --pcap` writes them.
@@ -58,7 +58,7 @@ fn write_pcap(s: &Scenario, dir: &Path) -> PathBuf {
 
 #[test]
 fn a_parked_capture_in_a_hall_calibrates_the_lasers_that_see_walls() {
-    let s = scenario(false);
+    let s = scenario(false, 0.001);
     let dir = temp_root("lidar-calibration");
     let pcap = write_pcap(&s, &dir);
     let truth = {
@@ -101,7 +101,7 @@ fn a_parked_capture_in_a_hall_calibrates_the_lasers_that_see_walls() {
 
 #[test]
 fn a_capture_without_walls_fails_and_says_why() {
-    let s = scenario(true);
+    let s = scenario(true, 0.001);
     let dir = temp_root("lidar-calibration-empty");
     let pcap = write_pcap(&s, &dir);
     let (code, text) = passangle(&["lidar", pcap.to_str().unwrap(), "--calibrate"], None);
@@ -109,5 +109,19 @@ fn a_capture_without_walls_fails_and_says_why() {
     assert!(
         text.contains("walls"),
         "the error names what the capture lacks: {text}"
+    );
+}
+
+#[test]
+fn a_capture_while_driving_is_refused() {
+    // The robot drives off at 0.3 m/s: the walls smear by decimetres over the capture.
+    let s = scenario(false, 0.3);
+    let dir = temp_root("lidar-calibration-moving");
+    let pcap = write_pcap(&s, &dir);
+    let (code, text) = passangle(&["lidar", pcap.to_str().unwrap(), "--calibrate"], None);
+    assert_ne!(code, 0, "{text}");
+    assert!(
+        text.contains("range calibration") && text.contains("stand still"),
+        "{text}"
     );
 }

@@ -154,7 +154,7 @@ pub struct ProcessConfig {
     /// Each VLP-16 laser's range offset, metres, by laser id (the firing order: -15, 1, -13, 3,
     /// ... 15 degrees), taken off its every return when the run's frames are decoded for the
     /// cloud (the recording keeps the raw packets). From `passangle lidar CAPTURE --calibrate`
-    /// (docs/operation.md, "Calibrating the lidar's range"); zero (the default): the factory's
+    /// (docs/operator/run.md, "Calibrating the lidar's range"); zero (the default): the factory's
     /// calibration as it is. Each within +-0.1 m.
     pub lidar_range_offsets_m: [f32; 16],
 }

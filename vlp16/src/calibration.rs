@@ -33,8 +33,10 @@
 //!    with the current offsets; returns within 4 robust sigma (of the median absolute
 //!    deviation) kept; the biases solved. [`ROUNDS`] rounds.
 //! 4. Standard errors: the residual sigma times the square root of the normal matrix's inverse
-//!    diagonal. They assume independent returns; a wall's unevenness is shared by a laser's
-//!    returns on it and is not in them (approximate: flat walls assumed).
+//!    diagonal. A residual sigma above the data sheet's range accuracy (3 cm) is refused: the
+//!    sensor moved, or the walls are not flat. The standard errors assume independent returns;
+//!    a wall's unevenness is shared by a laser's returns on it and is not in them
+//!    (approximate: flat walls assumed).
 //!
 //! The recording must be static (the robot parked, the sensor still): frames are pooled in the
 //! sensor frame without deskewing.
@@ -45,7 +47,7 @@ use passangle_geom::{M3, V3 as GeomV3, centroid_covariance, solve_spd, symmetric
 type V3 = [f64; 3];
 use thiserror::Error;
 
-use super::decoder::{DecoderConfig, Point, VERTICAL_OFFSET_MM};
+use super::decoder::{DecoderConfig, Point, RANGE_ACCURACY_M, VERTICAL_OFFSET_MM};
 use super::packet::LASERS;
 
 /// Nearest return used, metres: the robot's own body and the vehicle's nearest parts are not
@@ -193,8 +195,20 @@ pub enum CalibrationError {
         MIN_AZIMUTH_SPAN_RAD.to_degrees()
     )]
     NoPlanes,
+    /// The planes' returns scatter more than the data sheet's range accuracy: the sensor moved
+    /// during the capture, or the walls are not flat.
+    #[error(
+        "the walls' returns scatter by {sigma_mm:.0} mm, more than the VLP-16's {:.0} mm range accuracy: the sensor must stand still during the capture, facing flat walls",
+        RANGE_ACCURACY_M * 1e3
+    )]
+    NotStill {
+        /// The residual sigma, millimetres.
+        sigma_mm: f64,
+    },
     /// The normal system is singular: no laser sees a plane over a usable span.
-    #[error("no laser sees a plane well enough to separate its bias from the plane's distance")]
+    #[error(
+        "no laser sees a flat wall well enough to separate its bias from the wall's distance: the sensor must stand still during the capture, facing walls over a wide arc"
+    )]
     Unresolved,
 }
 
@@ -264,7 +278,13 @@ pub fn estimate_range_offsets(
         result = Some(solved);
         members = reselect(&returns, &members, &offsets, vo);
     }
-    result.ok_or(CalibrationError::Unresolved)
+    let result = result.ok_or(CalibrationError::Unresolved)?;
+    if result.residual_sigma_m > RANGE_ACCURACY_M {
+        return Err(CalibrationError::NotStill {
+            sigma_mm: result.residual_sigma_m * 1e3,
+        });
+    }
+    Ok(result)
 }
 
 /// Each plane refitted to its returns under `offsets`, then its returns chosen afresh from all:
@@ -792,6 +812,16 @@ mod tests {
                 again.offsets_m[l]
             );
         }
+    }
+
+    #[test]
+    fn a_scatter_beyond_the_data_sheet_is_refused() {
+        // 3.5 cm RMS along the rays (uniform, up to 6 cm): more than the data sheet allows, as
+        // a moving sensor's smeared walls are.
+        let points = room([4.0, 5.0, 3.5, 6.0], [0.0; LASERS], 0.035);
+        let err = estimate_range_offsets(&points, &DecoderConfig::default()).unwrap_err();
+        assert!(matches!(err, CalibrationError::NotStill { .. }), "{err}");
+        assert!(err.to_string().contains("stand still"), "{err}");
     }
 
     #[test]
