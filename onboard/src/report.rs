@@ -189,6 +189,9 @@ pub struct Report {
     pub result: Option<ResultRecord>,
     /// The service's `processing.enter-at-front` (from the run's `config.toml`).
     pub enter_at_front: bool,
+    /// The lidar's per-laser range offsets the run was built with
+    /// (`processing.lidar-range-offsets-m`; zeros: none).
+    pub lidar_range_offsets_m: [f32; 16],
     /// The recomputation, or why there is none.
     pub recomputed: Result<Recomputed, String>,
     /// SHA-256 of `config.toml` (`None`: not in the run).
@@ -325,11 +328,11 @@ pub fn gather(inputs: &Inputs<'_>) -> anyhow::Result<Report> {
     };
     let config = std::fs::read(dir.join("config.toml")).ok();
     // The run's own settings; a run without a readable config.toml is taken as the defaults.
-    let enter_at_front = crate::process::ProcessConfig::of_run(dir)
+    let processing = crate::process::ProcessConfig::of_run(dir)
         .ok()
         .flatten()
-        .unwrap_or_default()
-        .enter_at_front;
+        .unwrap_or_default();
+    let enter_at_front = processing.enter_at_front;
     let recomputed = recompute(dir, &recording.meta, enter_at_front);
     let trusted = inputs.trusted;
     let files = list_files(dir, inputs.out, trusted)?;
@@ -366,6 +369,7 @@ pub fn gather(inputs: &Inputs<'_>) -> anyhow::Result<Report> {
         result: recording.result,
         meta: recording.meta,
         enter_at_front,
+        lidar_range_offsets_m: processing.lidar_range_offsets_m,
         recomputed,
         config_sha256: config.map(|c| sha256_hex(&c)),
         robot_id,
@@ -730,7 +734,7 @@ fn method_section(h: &mut String, r: &Report) {
          49 CFR 523.2). Ground clearance: the lowest body point between the axles in the \
          band.</td></tr>\n\
          <tr><th>Run parameters</th><td>speed {speed:.2} m/s, distance {dist:.2} m; the robot \
-         enters under the vehicle's {end}</td></tr>\n\
+         enters under the vehicle's {end}; {lidar}</td></tr>\n\
          </table>\n</section>\n",
         speed = r.meta.speed_mps,
         dist = r.meta.distance_m,
@@ -739,7 +743,23 @@ fn method_section(h: &mut String, r: &Report) {
         } else {
             "rear bumper"
         },
+        lidar = lidar_calibration_text(&r.lidar_range_offsets_m),
     );
+}
+
+/// The lidar's range calibration as the report states it.
+fn lidar_calibration_text(offsets_m: &[f32; 16]) -> String {
+    let set: Vec<f32> = offsets_m.iter().copied().filter(|o| *o != 0.0).collect();
+    if set.is_empty() {
+        return "lidar ranges as the sensor reports them (no range calibration applied)".to_owned();
+    }
+    let largest = set.iter().fold(0.0_f32, |m, o| m.max(o.abs()));
+    format!(
+        "lidar range calibration applied: offsets on {} of 16 lasers, largest {:.1} mm \
+         (processing.lidar-range-offsets-m in config.toml)",
+        set.len(),
+        largest * 1e3
+    )
 }
 
 /// A recorded value: the number with U, or "not measured: reason".
@@ -1417,6 +1437,16 @@ fn provenance_section(h: &mut String, r: &Report) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_lidar_calibration_is_stated() {
+        assert!(lidar_calibration_text(&[0.0; 16]).contains("no range calibration"));
+        let mut o = [0.0; 16];
+        o[3] = -0.0159;
+        o[8] = 0.004;
+        let t = lidar_calibration_text(&o);
+        assert!(t.contains("2 of 16 lasers, largest 15.9 mm"), "{t}");
+    }
 
     #[test]
     fn dates_and_escapes() {
