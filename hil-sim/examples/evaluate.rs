@@ -376,6 +376,7 @@ fn run(
     .map(f64::to_degrees);
     let scene = scenario.scene();
     let mut detail = Vec::new();
+    // With `--from-clouds` the calibration is in the saved clouds (`-calibrated` names).
     let decoder = if args.calibrate && args.from_clouds.is_none() {
         let (config, line) = calibrated_decoder(template, entry)?;
         detail.push(line);
@@ -501,7 +502,7 @@ fn pipeline_cloud(
 /// The file stem of a run's saved cloud.
 fn cloud_stem(entry: &Entry, args: &Args) -> String {
     format!(
-        "{}-{}-{}{}",
+        "{}-{}-{}{}{}",
         entry.vehicle_name(),
         entry.world_name(),
         entry.seed,
@@ -509,7 +510,8 @@ fn cloud_stem(entry: &Entry, args: &Args) -> String {
             "-oracle"
         } else {
             args.camera.suffix()
-        }
+        },
+        if args.calibrate { "-calibrated" } else { "" }
     )
 }
 
@@ -856,8 +858,8 @@ struct Args {
     detail: bool,
     /// Write each run's cloud (vehicle frame) as `DIR/VEHICLE-WORLD-SEED[SUFFIX].ply` (suffix
     /// `-oracle`, or `-no-camera`, `-camera-fused`, `-camera-both` for a `--camera` other than
-    /// the default) and its scan path as `.path.xyz` beside it, for `passangle angles` and a
-    /// look by eye.
+    /// the default; then `-calibrated` with `--calibrate`) and its scan path as `.path.xyz`
+    /// beside it, for `passangle angles` and a look by eye.
     #[arg(long, value_name = "DIR")]
     save_clouds: Option<PathBuf>,
     /// Read each run's cloud, path and trajectory error from DIR, as `--save-clouds` wrote them,
