@@ -57,8 +57,9 @@ pub struct ExportArgs {
     /// trajectory (`run` -> `base_link_fused` on `/tf`).
     #[arg(long)]
     pub rebuild: bool,
-    /// Pipeline config for `--rebuild` (TOML, as for `passangle replay`). Absent: the settings
-    /// the run was made with (its `config.toml`), or the defaults for a run without one.
+    /// Pipeline config for `--rebuild` (TOML, as for `passangle replay`). The run's other
+    /// processing settings (its lidar range offsets) stay. Absent: the settings the run was made
+    /// with (its `config.toml`), or the defaults for a run without one.
     #[arg(long, requires = "rebuild")]
     pub pipeline_config: Option<PathBuf>,
 }
@@ -69,23 +70,9 @@ pub type TopicCounts = BTreeMap<&'static str, u64>;
 /// Run the command: write the file, print the messages per topic.
 pub fn run(args: &ExportArgs, out: &mut impl Write) -> anyhow::Result<()> {
     let rebuild = if args.rebuild {
-        Some(match &args.pipeline_config {
-            Some(path) => {
-                let text = fs::read_to_string(path)
-                    .with_context(|| format!("reading {}", path.display()))?;
-                PipelineConfig::from_toml(&text)
-                    .with_context(|| format!("{}: pipeline config", path.display()))?
-            }
-            None => {
-                ProcessConfig::of_run(&args.run_dir)
-                    .map_err(anyhow::Error::msg)
-                    .context(
-                        "the run's config.toml (pass --pipeline-config to rebuild without it)",
-                    )?
-                    .unwrap_or_default()
-                    .pipeline
-            }
-        })
+        let (config, _) =
+            crate::replay::rebuild_config(&args.run_dir, args.pipeline_config.as_deref())?;
+        Some(config)
     } else {
         None
     };
@@ -101,11 +88,12 @@ pub fn run(args: &ExportArgs, out: &mut impl Write) -> anyhow::Result<()> {
 }
 
 /// Writes the run in `run_dir` to `out_path`; returns the messages per topic and notes on what
-/// was missing or assumed. `rebuild`: run the pipeline with this config for the fused trajectory.
+/// was missing or assumed. `rebuild`: run the pipeline with these settings for the fused
+/// trajectory.
 pub fn export(
     run_dir: &Path,
     out_path: &Path,
-    rebuild: Option<PipelineConfig>,
+    rebuild: Option<ProcessConfig>,
 ) -> anyhow::Result<(TopicCounts, Vec<String>)> {
     let recording = Recording::open(run_dir)?;
     let mut notes = Vec::new();
@@ -176,11 +164,7 @@ pub fn export(
     } else {
         notes.push("no result.json: /result left out".to_owned());
     }
-    if let Some(pipeline) = rebuild {
-        let config = ProcessConfig {
-            pipeline,
-            ..ProcessConfig::default()
-        };
+    if let Some(config) = rebuild {
         let (built, _) = build_run(run_dir, &config).map_err(anyhow::Error::msg)?;
         let t0 = t0_ns.context("--rebuild: no complete lidar frame")?;
         for t in &built.trajectory {

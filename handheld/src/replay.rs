@@ -48,6 +48,33 @@ pub struct ReplayArgs {
     pub json: bool,
 }
 
+/// The settings to rebuild a recorded run with (`replay`, `export --rebuild`): the run's own
+/// `[processing]` (its `config.toml`; the defaults for a run without one), its pipeline section
+/// replaced by `pipeline_config` when given; and where the pipeline's settings came from.
+pub fn rebuild_config(
+    run_dir: &Path,
+    pipeline_config: Option<&Path>,
+) -> anyhow::Result<(ProcessConfig, String)> {
+    let (mut config, source) = match ProcessConfig::of_run(run_dir)
+        .map_err(anyhow::Error::msg)
+        .context("the run's config.toml (pass --pipeline-config to rebuild without it)")?
+    {
+        Some(recorded) => (recorded, "the run's config.toml".to_owned()),
+        None => (
+            ProcessConfig::default(),
+            "the defaults (the run has no config.toml)".to_owned(),
+        ),
+    };
+    let Some(path) = pipeline_config else {
+        return Ok((config, source));
+    };
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    config.pipeline = PipelineConfig::from_toml(&text)
+        .with_context(|| format!("{}: pipeline config", path.display()))?;
+    Ok((config, path.display().to_string()))
+}
+
 /// Run the command.
 pub fn run(args: &ReplayArgs, out: &mut impl Write) -> anyhow::Result<()> {
     let recording = Recording::open(&args.run_dir)?;
@@ -55,26 +82,8 @@ pub fn run(args: &ReplayArgs, out: &mut impl Write) -> anyhow::Result<()> {
     if recording.incomplete {
         notes.push("the run is marked INCOMPLETE; replaying what was recorded".to_owned());
     }
-    let (mut config, source) = match ProcessConfig::of_run(&args.run_dir)
-        .map_err(anyhow::Error::msg)
-        .context("the run's config.toml (pass --pipeline-config to replay without it)")?
-    {
-        Some(recorded) => (recorded, "the run's config.toml"),
-        None => (
-            ProcessConfig::default(),
-            "the defaults (the run has no config.toml)",
-        ),
-    };
-    match &args.pipeline_config {
-        Some(path) => {
-            let text = std::fs::read_to_string(path)
-                .with_context(|| format!("reading {}", path.display()))?;
-            config.pipeline = PipelineConfig::from_toml(&text)
-                .with_context(|| format!("{}: pipeline config", path.display()))?;
-            notes.push(format!("pipeline settings: {}", path.display()));
-        }
-        None => notes.push(format!("pipeline settings: {source}")),
-    }
+    let (config, source) = rebuild_config(&args.run_dir, args.pipeline_config.as_deref())?;
+    notes.push(format!("pipeline settings: {source}"));
     let front_is_positive_x = match args.front.as_deref() {
         None => !config.enter_at_front,
         Some("+x") => true,

@@ -8,12 +8,11 @@
 
 mod common;
 
-use std::net::{Ipv4Addr, SocketAddrV4};
 use std::path::{Path, PathBuf};
 
 use common::{passangle, temp_root};
 use hil_sim::scenario::Scenario;
-use hil_sim::vlp16::{Datagram, Vlp16Sim};
+use hil_sim::vlp16::Vlp16Sim;
 use serde_json::Value;
 
 fn scenario(empty_world: bool, speed_mps: f64) -> Scenario {
@@ -37,20 +36,8 @@ fn write_pcap(s: &Scenario, dir: &Path) -> PathBuf {
     let sim = Vlp16Sim::new(&scene, &motion, s.lidar_config(), s.lidar_seed());
     let file = std::io::BufWriter::new(std::fs::File::create(&path).unwrap());
     let mut w = vlp16::pcap::PcapWriter::new(file).unwrap();
-    let sensor = Ipv4Addr::new(192, 168, 1, 201);
     for d in sim.datagrams(s.duration_s) {
-        let (send_s, payload, port) = match &d {
-            Datagram::Data { send_s, payload } => (*send_s, &payload[..], 2368),
-            Datagram::Position { send_s, payload } => (*send_s, &payload[..], 8308),
-        };
-        let stamp_ns = 1_767_225_600_000_000_000 + (send_s * 1e9).round() as u64;
-        w.write_udp(
-            stamp_ns,
-            SocketAddrV4::new(sensor, port),
-            SocketAddrV4::new(Ipv4Addr::BROADCAST, port),
-            payload,
-        )
-        .unwrap();
+        d.write_pcap(&mut w).unwrap();
     }
     drop(w);
     path
@@ -99,13 +86,19 @@ fn a_parked_capture_in_a_hall_calibrates_the_lasers_that_see_walls() {
     );
 }
 
-#[test]
-fn a_capture_without_walls_fails_and_says_why() {
-    let s = scenario(true, 0.001);
-    let dir = temp_root("lidar-calibration-empty");
-    let pcap = write_pcap(&s, &dir);
+/// `passangle lidar --calibrate` on the parked capture, in the empty world or with the robot
+/// driving at `speed_mps`: it must fail; its output.
+fn refused(empty_world: bool, speed_mps: f64, name: &str) -> String {
+    let s = scenario(empty_world, speed_mps);
+    let pcap = write_pcap(&s, &temp_root(name));
     let (code, text) = passangle(&["lidar", pcap.to_str().unwrap(), "--calibrate"], None);
     assert_ne!(code, 0, "{text}");
+    text
+}
+
+#[test]
+fn a_capture_without_walls_fails_and_says_why() {
+    let text = refused(true, 0.001, "lidar-calibration-empty");
     assert!(
         text.contains("walls"),
         "the error names what the capture lacks: {text}"
@@ -115,11 +108,7 @@ fn a_capture_without_walls_fails_and_says_why() {
 #[test]
 fn a_capture_while_driving_is_refused() {
     // The robot drives off at 0.3 m/s: the walls smear by decimetres over the capture.
-    let s = scenario(false, 0.3);
-    let dir = temp_root("lidar-calibration-moving");
-    let pcap = write_pcap(&s, &dir);
-    let (code, text) = passangle(&["lidar", pcap.to_str().unwrap(), "--calibrate"], None);
-    assert_ne!(code, 0, "{text}");
+    let text = refused(false, 0.3, "lidar-calibration-moving");
     assert!(
         text.contains("range calibration") && text.contains("stand still"),
         "{text}"

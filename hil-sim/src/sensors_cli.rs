@@ -4,7 +4,7 @@
 //! # Outputs
 //! - `lidar SCENARIO --pcap OUT.pcap`: classic pcap (Ethernet/IPv4/UDP, opens in Wireshark and
 //!   VeloView) with data packets from 192.168.1.201:2368 and position packets from
-//!   192.168.1.201:8308 to 255.255.255.255, stamped [`PCAP_EPOCH_S`] + simulation time. The sensor
+//!   192.168.1.201:8308 to 255.255.255.255, stamped [`hil_sim::vlp16::PCAP_EPOCH_S`] + simulation time. The sensor
 //!   clock (microseconds past the hour) is `lidar.clock_offset_us` + simulation time, so with the
 //!   default offset 0 it agrees with the pcap stamps' position in the hour. `--udp HOST:PORT` sends
 //!   the same datagrams (position packets to `--udp-position`, default port 8308 of the same host),
@@ -18,7 +18,7 @@
 use std::fmt::Write as _;
 use std::fs::{self, File};
 use std::io::{BufWriter, Write};
-use std::net::{Ipv4Addr, SocketAddr, SocketAddrV4, UdpSocket};
+use std::net::{SocketAddr, UdpSocket};
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
@@ -32,12 +32,9 @@ use hil_sim::trajectory::{
 };
 use hil_sim::truth::{TruthOptions, Zone, true_angles};
 use hil_sim::vehicle::Vehicle;
-use hil_sim::vlp16::{Datagram, Vlp16Sim};
+use hil_sim::vlp16::Vlp16Sim;
 use hil_sim::world::{Floor, OnFloor};
 use vlp16::pcap::PcapWriter;
-
-/// pcap time of simulation time 0: 2026-01-01T00:00:00Z, seconds since the UNIX epoch.
-pub const PCAP_EPOCH_S: u64 = 1_767_225_600;
 
 /// Ground-truth sampling step, seconds.
 const TRUTH_STEP_S: f64 = 0.005;
@@ -264,26 +261,18 @@ pub fn lidar(args: &LidarArgs) -> anyhow::Result<()> {
         .truth
         .clone()
         .or_else(|| args.pcap.as_ref().map(|p| p.with_extension("truth.csv")));
-    let sensor = Ipv4Addr::new(192, 168, 1, 201);
     let started = Instant::now();
     let (mut data, mut position) = (0u64, 0u64);
     for datagram in sim.datagrams(scenario.duration_s) {
-        let (send_s, payload, port): (f64, &[u8], u16) = match &datagram {
-            Datagram::Data { send_s, payload } => (*send_s, &payload[..], 2368),
-            Datagram::Position { send_s, payload } => (*send_s, &payload[..], 8308),
-        };
+        let send_s = datagram.send_s();
+        let (payload, port) = datagram.payload_and_port();
         if port == 2368 {
             data += 1;
         } else {
             position += 1;
         }
         if let Some(w) = pcap.as_mut() {
-            let stamp_ns = PCAP_EPOCH_S * 1_000_000_000 + (send_s * 1e9).round() as u64;
-            let (src, dst) = (
-                SocketAddrV4::new(sensor, port),
-                SocketAddrV4::new(Ipv4Addr::BROADCAST, port),
-            );
-            w.write_udp(stamp_ns, src, dst, payload)?;
+            datagram.write_pcap(w)?;
         }
         if let (Some(sock), Some(addr)) = (&udp, args.udp) {
             if args.realtime {

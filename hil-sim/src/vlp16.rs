@@ -247,6 +247,46 @@ pub enum Datagram {
     },
 }
 
+/// pcap time of simulation time 0: 2026-01-01T00:00:00Z, seconds since the UNIX epoch.
+pub const PCAP_EPOCH_S: u64 = 1_767_225_600;
+
+/// The simulated sensor's address (the VLP-16's factory default).
+pub const SENSOR_IP: std::net::Ipv4Addr = std::net::Ipv4Addr::new(192, 168, 1, 201);
+
+impl Datagram {
+    /// When it is sent, simulation time, seconds.
+    pub fn send_s(&self) -> f64 {
+        match self {
+            Self::Data { send_s, .. } | Self::Position { send_s, .. } => *send_s,
+        }
+    }
+
+    /// The payload and the UDP port it goes to (2368 data, 8308 position).
+    pub fn payload_and_port(&self) -> (&[u8], u16) {
+        match self {
+            Self::Data { payload, .. } => (&payload[..], 2368),
+            Self::Position { payload, .. } => (&payload[..], 8308),
+        }
+    }
+
+    /// Append it to a pcap as the sensor broadcasts it: from [`SENSOR_IP`] to 255.255.255.255
+    /// on its port, stamped [`PCAP_EPOCH_S`] + its send time.
+    pub fn write_pcap<W: std::io::Write>(
+        &self,
+        w: &mut vlp16::pcap::PcapWriter<W>,
+    ) -> std::io::Result<()> {
+        use std::net::{Ipv4Addr, SocketAddrV4};
+        let (payload, port) = self.payload_and_port();
+        let stamp_ns = PCAP_EPOCH_S * 1_000_000_000 + (self.send_s() * 1e9).round() as u64;
+        w.write_udp(
+            stamp_ns,
+            SocketAddrV4::new(SENSOR_IP, port),
+            SocketAddrV4::new(Ipv4Addr::BROADCAST, port),
+            payload,
+        )
+    }
+}
+
 /// The simulated sensor looking at `scene` from a robot moving along `trajectory`.
 pub struct Vlp16Sim<'a, T: Trajectory> {
     scene: &'a Scene,

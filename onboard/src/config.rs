@@ -546,17 +546,20 @@ impl OnboardConfig {
         if self.processing.min_cloud_points == 0 {
             bad("processing.min-cloud-points", "must be above 0".into());
         }
-        for (laser, &offset) in self.processing.lidar_range_offsets_m.iter().enumerate() {
-            if offset.is_nan() || offset.abs() > vlp16::MAX_RANGE_OFFSET_M {
-                bad(
-                    "processing.lidar-range-offsets-m",
-                    format!(
-                        "laser {laser}: {offset} m is not within +-{} m (a larger offset is a \
-                         sensor to repair, not to calibrate)",
-                        vlp16::MAX_RANGE_OFFSET_M
-                    ),
-                );
-            }
+        // The decoder's own check; named here by the config's key.
+        let decoder = vlp16::DecoderConfig {
+            range_offsets_m: self.processing.lidar_range_offsets_m,
+            ..vlp16::DecoderConfig::default()
+        };
+        if let Err(vlp16::ConfigError::RangeOffset { laser, offset_m }) = decoder.check() {
+            bad(
+                "processing.lidar-range-offsets-m",
+                format!(
+                    "laser {laser}: {offset_m} m is not within +-{} m (a larger offset is a \
+                     sensor to repair, not to calibrate)",
+                    vlp16::MAX_RANGE_OFFSET_M
+                ),
+            );
         }
         problems
     }

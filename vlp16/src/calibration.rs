@@ -45,14 +45,11 @@
 //! The recording must be static (the robot parked, the sensor still): frames are pooled in the
 //! sensor frame without deskewing.
 
-use passangle_geom::{M3, V3 as GeomV3, centroid_covariance, solve_spd, symmetric_eigen3};
+use passangle_geom::{V3, centroid_covariance, solve_spd, symmetric_eigen3};
 use thiserror::Error;
 
 use super::decoder::{DecoderConfig, Point, RANGE_ACCURACY_M, VERTICAL_OFFSET_MM};
 use super::packet::LASERS;
-
-/// A 3-vector, metres or unit.
-type V3 = [f64; 3];
 
 /// Nearest return used, metres: the robot's own body and the vehicle's nearest parts are not
 /// walls.
@@ -108,18 +105,10 @@ impl Return {
     /// vertical offset when `config` adds it.
     pub fn of_point(p: &Point, config: &DecoderConfig) -> Self {
         let laser = usize::from(p.laser_id) % LASERS;
-        let z0 = if config.vertical_offset {
-            f64::from(VERTICAL_OFFSET_MM[laser]) * 1e-3
-        } else {
-            0.0
-        };
-        let q = [f64::from(p.x_m), f64::from(p.y_m), f64::from(p.z_m) - z0];
-        let range_m = norm(q);
-        let ray = if range_m > 0.0 {
-            q.map(|v| v / range_m)
-        } else {
-            [0.0, 0.0, 1.0]
-        };
+        let q = V3::new(f64::from(p.x_m), f64::from(p.y_m), f64::from(p.z_m))
+            - origin(laser, config.vertical_offset);
+        let range_m = q.norm();
+        let ray = if range_m > 0.0 { q / range_m } else { V3::z() };
         Self {
             laser,
             ray,
@@ -129,18 +118,21 @@ impl Return {
     }
 
     fn origin(&self, vertical_offset: bool) -> V3 {
-        if vertical_offset {
-            [0.0, 0.0, f64::from(VERTICAL_OFFSET_MM[self.laser]) * 1e-3]
-        } else {
-            [0.0; 3]
-        }
+        origin(self.laser, vertical_offset)
     }
 
     /// The return's position with `offset_m` taken off its range.
     fn at(&self, offset_m: f64, vertical_offset: bool) -> V3 {
-        let o = self.origin(vertical_offset);
-        let r = self.range_m - offset_m;
-        [0, 1, 2].map(|k| o[k] + r * self.ray[k])
+        self.origin(vertical_offset) + self.ray * (self.range_m - offset_m)
+    }
+}
+
+/// A laser's origin in the sensor frame: its vertical offset when the decoder adds it.
+fn origin(laser: usize, vertical_offset: bool) -> V3 {
+    if vertical_offset {
+        V3::new(0.0, 0.0, f64::from(VERTICAL_OFFSET_MM[laser]) * 1e-3)
+    } else {
+        V3::zeros()
     }
 }
 
@@ -348,28 +340,21 @@ struct Plane {
 
 impl Plane {
     fn residual(&self, p: V3) -> f64 {
-        dot(self.normal, p) - self.distance
+        self.normal.dot(&p) - self.distance
     }
 }
 
 /// Total least squares plane through the points.
 fn fit_plane(points: impl Iterator<Item = V3> + Clone) -> Option<Plane> {
-    let (c, cov) = centroid_covariance(points.map(GeomV3::from))?;
-    let cov: M3 = cov;
+    let (c, cov) = centroid_covariance(points)?;
     let (values, vectors) = symmetric_eigen3(&cov)?;
     let k = (0..3)
         .min_by(|&a, &b| values[a].total_cmp(&values[b]))
         .unwrap_or(0);
-    let normal = [vectors[(0, k)], vectors[(1, k)], vectors[(2, k)]];
-    let c: V3 = [c[0], c[1], c[2]];
-    let len = norm(normal);
-    if len <= 0.0 {
-        return None;
-    }
-    let normal = normal.map(|v| v / len);
+    let normal = vectors.column(k).try_normalize(0.0)?;
     Some(Plane {
         normal,
-        distance: dot(normal, c),
+        distance: normal.dot(&c),
     })
 }
 
@@ -408,15 +393,12 @@ fn find_planes(returns: &[Return], vo: bool) -> Vec<(Vec<usize>, bool)> {
                 lo + rng.below(hi - lo + 1),
             ];
             let [a, b, c] = pick.map(|k| returns[sample[k]].at(0.0, vo));
-            let n = cross(sub(b, a), sub(c, a));
-            let len = norm(n);
-            if len < 1e-6 {
+            let Some(normal) = (b - a).cross(&(c - a)).try_normalize(1e-6) else {
                 continue;
-            }
-            let normal = n.map(|v| v / len);
+            };
             let plane = Plane {
                 normal,
-                distance: dot(normal, a),
+                distance: normal.dot(&a),
             };
             let n = count(&plane);
             if best.as_ref().is_none_or(|(m, _)| n > *m) {
@@ -537,7 +519,7 @@ fn solve_offsets(
         rss += plane_rss;
         rows += members.len();
         summaries.push(PlaneSummary {
-            normal: plane.normal,
+            normal: plane.normal.into(),
             distance_m: plane.distance.abs(),
             returns: members.len(),
             residual_sigma_m: (plane_rss / members.len().max(1) as f64).sqrt(),
@@ -609,21 +591,16 @@ impl PlaneSums {
     /// A return's `(g, x, y)`.
     fn row(&self, plane: &Plane, ret: &Return, vo: bool) -> (f64, [f64; 3], f64) {
         let p = ret.at(0.0, vo);
-        let x = [1.0, dot(self.tangents[0], p), dot(self.tangents[1], p)];
-        (dot(plane.normal, ret.ray), x, dot(plane.normal, p))
+        let x = [1.0, self.tangents[0].dot(&p), self.tangents[1].dot(&p)];
+        (plane.normal.dot(&ret.ray), x, plane.normal.dot(&p))
     }
 }
 
 /// Two unit vectors spanning the plane orthogonal to `n`.
 fn tangents(n: V3) -> [V3; 2] {
-    let helper = if n[2].abs() < 0.9 {
-        [0.0, 0.0, 1.0]
-    } else {
-        [1.0, 0.0, 0.0]
-    };
-    let a = cross(n, helper);
-    let a = a.map(|v| v / norm(a));
-    [a, cross(n, a)]
+    let helper = if n[2].abs() < 0.9 { V3::z() } else { V3::x() };
+    let a = n.cross(&helper).normalize();
+    [a, n.cross(&a)]
 }
 
 fn dot3(a: [f64; 3], b: [f64; 3]) -> f64 {
@@ -637,17 +614,11 @@ fn median(values: &[f64]) -> f64 {
     v.get(v.len() / 2).copied().unwrap_or(0.0)
 }
 
-/// Sigma from the median absolute deviation.
+/// Sigma from the median absolute deviation (0 for no values).
 fn robust_sigma(values: &[f64]) -> f64 {
-    if values.is_empty() {
-        return 0.0;
-    }
-    let mut v: Vec<f64> = values.to_vec();
-    v.sort_by(f64::total_cmp);
-    let median = v[v.len() / 2];
-    let mut dev: Vec<f64> = v.iter().map(|x| (x - median).abs()).collect();
-    dev.sort_by(f64::total_cmp);
-    1.4826 * dev[dev.len() / 2]
+    let centre = median(values);
+    let deviations: Vec<f64> = values.iter().map(|x| (x - centre).abs()).collect();
+    1.4826 * median(&deviations)
 }
 
 /// The smallest arc holding all the azimuths, radians.
@@ -659,8 +630,7 @@ fn azimuth_span(azimuths: impl Iterator<Item = f64>) -> f64 {
             (a.rem_euclid(std::f64::consts::TAU) / std::f64::consts::TAU * BINS as f64) as usize;
         seen[k.min(BINS - 1)] = true;
     }
-    let occupied = seen.iter().filter(|&&s| s).count();
-    if occupied == 0 {
+    if !seen.contains(&true) {
         return 0.0;
     }
     // The longest run of empty bins (cyclic) is the gap; the span is the rest.
@@ -675,26 +645,6 @@ fn azimuth_span(azimuths: impl Iterator<Item = f64>) -> f64 {
         }
     }
     (BINS - longest) as f64 / BINS as f64 * std::f64::consts::TAU
-}
-
-fn dot(a: V3, b: V3) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-
-fn sub(a: V3, b: V3) -> V3 {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-
-fn cross(a: V3, b: V3) -> V3 {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
-}
-
-fn norm(a: V3) -> f64 {
-    dot(a, a).sqrt()
 }
 
 /// A small seeded generator (splitmix64) for the plane search: the same points give the same
