@@ -48,6 +48,7 @@
 
 mod edge;
 mod envelope;
+mod faces;
 mod geom;
 mod ground;
 pub mod profiles;
@@ -879,6 +880,17 @@ fn classify(
     );
     counts.outliers_below_envelope = env.outliers_below;
     let mut samples = env.samples;
+    // The faces left out of the modes keep their lowest edges (a mud flap is its own witness).
+    let free_edges = faces::face_bottoms(
+        &band_points,
+        &across,
+        &samples,
+        axles_x_m,
+        noise_sigma_m,
+        bin_m,
+        config.min_support,
+    );
+    samples.extend(free_edges);
     samples.sort_by(|a, b| a.x_m.total_cmp(&b.x_m));
     Body {
         samples,
