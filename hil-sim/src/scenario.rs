@@ -16,6 +16,8 @@
 //! distance_m = 7.5           # wheel distance of the run (sets the default duration)
 //! slip = 0.0                 # true distance = (1 - slip) * wheel distance
 //! height_m = 0.16            # robot top; the run is rejected if the vehicle hangs lower
+//! still_s = 0.0              # standing still before the start (and after the stop)
+//! stop = false               # brake to a stop after distance_m (at accel_mps2)
 //!
 //! [vibration]
 //! pitch_sigma_deg = 0.1      # RMS of the pitch oscillation
@@ -148,6 +150,13 @@ pub struct RobotRun {
     /// hangs lower anywhere over the robot's footprint.
     #[serde(default = "default_robot_height")]
     pub height_m: f64,
+    /// Seconds standing still before the start (and after the stop, with `stop`).
+    #[serde(default)]
+    pub still_s: f64,
+    /// Brake to a stop after `distance_m` (at `accel_mps2`) and stand still for `still_s`: a
+    /// drive between two parked captures, as the wheels' calibration takes it.
+    #[serde(default)]
+    pub stop: bool,
 }
 
 fn default_robot_height() -> f64 {
@@ -388,6 +397,8 @@ impl Scenario {
                 file.vibration.roll_sigma_deg.to_radians(),
                 derive_seed(file.seed, 1),
             ),
+            still_s: r.still_s,
+            stop_after_m: r.stop.then_some(r.distance_m),
         };
         let duration_s = file
             .duration_s
@@ -580,6 +591,9 @@ fn validate_run(file: &ScenarioFile) -> Result<(), (String, String)> {
     }
     if !(0.0..1.0).contains(&r.slip) {
         return bad("robot.slip", "must lie in [0, 1)");
+    }
+    if !(0.0..=60.0).contains(&r.still_s) {
+        return bad("robot.still_s", "must lie in [0, 60] s");
     }
     if r.yaw_misalignment_deg.abs() > 45.0 {
         return bad("robot.yaw_misalignment_deg", "must lie within +-45 degrees");

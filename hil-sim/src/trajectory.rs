@@ -104,12 +104,26 @@ pub struct StraightRun {
     pub slip: f64,
     /// Pitch/roll vibration.
     pub vibration: Vibration,
+    /// Seconds the robot stands still before it starts.
+    pub still_s: f64,
+    /// Wheel distance after which the robot has braked to a stop at `accel_mps2` (`None`: it
+    /// cruises on).
+    pub stop_after_m: Option<f64>,
 }
 
 impl StraightRun {
-    /// Distance commanded to the wheels after `t_s` (trapezoid profile without the stop).
+    /// Distance commanded to the wheels after `t_s`: standing still for `still_s`, then a
+    /// trapezoid profile, with the stop when `stop_after_m` is set.
     fn commanded_distance(&self, t_s: f64) -> f64 {
-        let t = t_s.max(0.0);
+        let t = (t_s - self.still_s).max(0.0);
+        match self.stop_after_m {
+            None => self.cruising_distance(t),
+            Some(d) => self.stopping_distance(t, d),
+        }
+    }
+
+    /// The profile without the stop, `t` seconds after the start.
+    fn cruising_distance(&self, t: f64) -> f64 {
         if self.accel_mps2 <= 0.0 {
             return self.speed_mps * t;
         }
@@ -121,11 +135,45 @@ impl StraightRun {
         }
     }
 
-    /// Time needed for the wheels to cover `distance_m`.
+    /// The profile braking to a stop at `d` metres, `t` seconds after the start: a trapezoid,
+    /// or a triangle when `d` is too short to reach the cruise speed.
+    fn stopping_distance(&self, t: f64, d: f64) -> f64 {
+        let (a, v) = (self.accel_mps2, self.speed_mps);
+        if a <= 0.0 {
+            return (v * t).min(d);
+        }
+        let peak = v.min((a * d).sqrt());
+        let t_ramp = peak / a;
+        let d_ramp = 0.5 * peak * t_ramp;
+        let t_cruise = (d - 2.0 * d_ramp) / peak;
+        if t < t_ramp {
+            0.5 * a * t * t
+        } else if t < t_ramp + t_cruise {
+            d_ramp + peak * (t - t_ramp)
+        } else {
+            let u = (t - t_ramp - t_cruise).min(t_ramp);
+            d - d_ramp + peak * u - 0.5 * a * u * u
+        }
+    }
+
+    /// Time from the scenario's start until the wheels have covered `distance_m` (the pause
+    /// before the start included) and, for a run that stops, until the stop plus the pause
+    /// after it.
     pub fn time_for_wheel_distance(&self, distance_m: f64) -> f64 {
         if self.speed_mps <= 0.0 {
-            return 0.0;
+            return self.still_s;
         }
+        if let Some(d) = self.stop_after_m
+            && self.accel_mps2 > 0.0
+        {
+            let peak = self.speed_mps.min((self.accel_mps2 * d).sqrt());
+            let t_ramp = peak / self.accel_mps2;
+            return 2.0 * self.still_s + 2.0 * t_ramp + (d - peak * t_ramp) / peak;
+        }
+        self.still_s + self.moving_time(distance_m)
+    }
+
+    fn moving_time(&self, distance_m: f64) -> f64 {
         if self.accel_mps2 <= 0.0 {
             return distance_m / self.speed_mps;
         }
@@ -424,7 +472,33 @@ mod tests {
             accel_mps2: 0.5,
             slip: 0.05,
             vibration: Vibration::new(0.002, 0.001, 9),
+            still_s: 0.0,
+            stop_after_m: None,
         }
+    }
+
+    #[test]
+    fn a_run_that_stops_stands_still_before_and_after() {
+        let r = StraightRun {
+            still_s: 1.0,
+            stop_after_m: Some(3.0),
+            slip: 0.0,
+            ..run()
+        };
+        assert_eq!(r.pose_at(0.9).position_m, r.pose_at(0.0).position_m);
+        let end = r.time_for_wheel_distance(3.0);
+        // 1 s still, 0.6 s ramp up, 9.4 s cruise, 0.6 s braking, 1 s still.
+        assert!((end - 12.6).abs() < 1e-9, "{end}");
+        assert!((r.wheel_distance_at(end - 1.0) - 3.0).abs() < 1e-12);
+        assert!((r.wheel_distance_at(end + 5.0) - 3.0).abs() < 1e-12);
+        let v = (r.wheel_distance_at(5.0) - r.wheel_distance_at(4.0)) / 1.0;
+        assert!((v - 0.3).abs() < 1e-12, "{v}");
+        // Too short to reach the cruise speed: a triangle, still ending at the distance.
+        let short = StraightRun {
+            stop_after_m: Some(0.1),
+            ..r
+        };
+        assert!((short.wheel_distance_at(short.time_for_wheel_distance(0.1)) - 0.1).abs() < 1e-12);
     }
 
     #[test]

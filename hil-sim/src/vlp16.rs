@@ -681,6 +681,8 @@ mod tests {
             accel_mps2: 0.0,
             slip: 0.0,
             vibration: Vibration::new(0.002, 0.002, 5),
+            still_s: 0.0,
+            stop_after_m: None,
         }
     }
 
@@ -704,6 +706,8 @@ mod tests {
         let traj = StraightRun {
             accel_mps2: 0.5,
             vibration: Vibration::new(sigma, sigma, 3),
+            still_s: 0.0,
+            stop_after_m: None,
             ..run()
         };
         let sim = Vlp16Sim::new(&scene, &traj, Vlp16Config::default(), 1);
@@ -729,6 +733,8 @@ mod tests {
         let sigma = 2f64.to_radians();
         let traj = StraightRun {
             vibration: Vibration::new(sigma, sigma, 8),
+            still_s: 0.0,
+            stop_after_m: None,
             ..run()
         };
         for (rpm, mount_rpy_deg) in [

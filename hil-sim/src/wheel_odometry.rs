@@ -276,6 +276,8 @@ mod tests {
             accel_mps2: 0.5,
             slip,
             vibration: Vibration::new(0.0, 0.0, 1),
+            still_s: 0.0,
+            stop_after_m: None,
         }
     }
 

@@ -28,6 +28,8 @@ fn run_under(v: &Vehicle) -> StraightRun {
         accel_mps2: 0.0,
         slip: 0.0,
         vibration: Vibration::new(0.003, 0.002, 17),
+        still_s: 0.0,
+        stop_after_m: None,
     }
 }
 
