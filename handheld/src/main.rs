@@ -8,6 +8,7 @@ mod lidar;
 mod replay;
 mod report;
 mod verify;
+mod wheels;
 
 use std::process::ExitCode;
 
@@ -49,6 +50,9 @@ enum Command {
     /// Write a recorded run's lab report: one self-contained HTML file (prints to PDF) with the
     /// results and U, the witnesses, tyres, floor, lab and vehicle details and every file's hash.
     Report(report::ReportArgs),
+    /// The wheels' distance scale from a recorded calibration drive between walls: prints the
+    /// line for the robot's config.
+    Wheels(wheels::WheelsArgs),
 }
 
 fn main() -> anyhow::Result<ExitCode> {
@@ -66,5 +70,6 @@ fn main() -> anyhow::Result<ExitCode> {
         Command::Export(args) => done(export::run(&args, &mut std::io::stdout().lock())),
         Command::Verify(args) => verify::run(&args, &mut std::io::stdout().lock()),
         Command::Report(args) => done(report::run(&args, &mut std::io::stdout().lock())),
+        Command::Wheels(args) => done(wheels::run(&args, &mut std::io::stdout().lock())),
     }
 }

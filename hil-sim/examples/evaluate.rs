@@ -231,6 +231,51 @@ fn calibrated_decoder(
     ))
 }
 
+/// The wheels' distance scale a calibration drive gives for the run's robot (see
+/// `--calibrate`): the drive of `scenarios/field/wheel-calibration-hall-a.toml` with the
+/// template's sensor and wheel settings and the run's seed (so its wheel errors), the lidar
+/// decoded with `decoder` (the run's range calibration); and a line on how it compares with the
+/// simulated error.
+fn calibrated_wheel_scale(
+    template: &Scenario,
+    entry: &Entry,
+    decoder: &vlp16::DecoderConfig,
+) -> anyhow::Result<(f64, String)> {
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("scenarios/field/wheel-calibration-hall-a.toml");
+    let drive = Scenario::load(&path)?;
+    let mut file = drive.file.clone();
+    file.lidar = template.file.lidar.clone();
+    file.wheel_odometry = template.file.wheel_odometry;
+    file.seed = entry.seed;
+    let scenario = Scenario::from_parts(&path, file, drive.vehicle.clone())?;
+    let scene = scenario.scene();
+    let lidar = scenario.decoded_lidar_frames_with(&scene, decoder);
+    let wheel = scenario.wheel_odometry(0.0);
+    let mut mounts = pipeline::config::MountConfig::default();
+    let lidar_mount = pose_of(&scenario.file.lidar.robot_from_lidar());
+    mounts.lidar_xyz_m = lidar_mount.translation.into();
+    mounts.lidar_rpy_rad = rpy_of(&lidar_mount.rotation).into();
+    let cal = onboard::wheel_calibration::calibrate_wheels(&lidar, &wheel, &mounts)
+        .context("wheel calibration")?;
+    let (scale_error, _) = hil_sim::wheel_odometry::constant_errors(
+        &scenario.file.wheel_odometry,
+        scenario.wheel_seed(),
+    );
+    let line = format!(
+        "wheel calibration: walls' travel {:.4} m +- {:.1} mm ({} walls), wheels {:.4} m, scale {:.5} +- {:.5}; simulated error {:+.2} % (true scale {:.4})",
+        cal.travel.distance_m,
+        1e3 * cal.travel.standard_error_m,
+        cal.travel.walls.len(),
+        cal.wheel_distance_m,
+        cal.scale,
+        cal.standard_error,
+        100.0 * scale_error,
+        1.0 / (1.0 + scale_error)
+    );
+    Ok((cal.scale, line))
+}
+
 /// CPU time of this thread, seconds (`/proc/thread-self/schedstat`).
 fn thread_cpu_s() -> f64 {
     std::fs::read_to_string("/proc/thread-self/schedstat")
@@ -377,12 +422,14 @@ fn run(
     let scene = scenario.scene();
     let mut detail = Vec::new();
     // With `--from-clouds` the calibration is in the saved clouds (`-calibrated` names).
-    let decoder = if args.calibrate && args.from_clouds.is_none() {
+    let (decoder, wheel_scale) = if args.calibrate && args.from_clouds.is_none() {
         let (config, line) = calibrated_decoder(template, entry)?;
         detail.push(line);
-        config
+        let (scale, line) = calibrated_wheel_scale(template, entry, &config)?;
+        detail.push(line);
+        (config, scale)
     } else {
-        vlp16::DecoderConfig::default()
+        (vlp16::DecoderConfig::default(), 1.0)
     };
     let (cloud, path, frames, cpu_s, x_sigma_per_m) = if let Some(dir) = &args.from_clouds {
         let (cloud, path, x_sigma_per_m) = load_cloud(dir, entry, args)?;
@@ -391,7 +438,13 @@ fn run(
         let (cloud, path, packets) = oracle_cloud(&scenario, &scene, &decoder.range_offsets_m);
         (cloud, path, packets, 0.0, 0.0)
     } else {
-        pipeline_cloud(&scenario, &scene, &decoder, args.camera, &mut detail)?
+        pipeline_cloud(
+            &scenario,
+            &scene,
+            (&decoder, wheel_scale),
+            args.camera,
+            &mut detail,
+        )?
     };
     if let Some(dir) = &args.save_clouds {
         save_cloud(dir, entry, args, (&cloud, &path, x_sigma_per_m))?;
@@ -451,12 +504,16 @@ fn run(
 fn pipeline_cloud(
     scenario: &Scenario,
     scene: &hil_sim::world::Scene,
-    decoder: &vlp16::DecoderConfig,
+    (decoder, wheel_scale): (&vlp16::DecoderConfig, f64),
     camera: Camera,
     detail: &mut Vec<String>,
 ) -> anyhow::Result<(Vec<[f64; 3]>, Vec<[f64; 3]>, usize, f64, f64)> {
     let lidar = scenario.decoded_lidar_frames_with(scene, decoder);
-    let wheel = scenario.wheel_odometry(0.2);
+    let wheel: Vec<WheelOdometry> = scenario
+        .wheel_odometry(0.2)
+        .into_iter()
+        .map(|w| w.scaled(wheel_scale))
+        .collect();
     // Every third frame of the 30 Hz stream, as the service records it (`camera.record-every`).
     let depth = if camera == Camera::None {
         Vec::new()

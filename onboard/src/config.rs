@@ -475,6 +475,16 @@ impl OnboardConfig {
                 bad(key, "must be above 0".into());
             }
         }
+        if run.parked_us >= run.checks_timeout_us {
+            bad(
+                "run.parked-us",
+                format!(
+                    "{} us is not below run.checks-timeout-us ({} us): the checks would always \
+                     time out",
+                    run.parked_us, run.checks_timeout_us
+                ),
+            );
+        }
         if accel_ok && speed_ok && self.mcu.jerk_mps3.is_finite() {
             let stop_s = self.stop_time_s();
             #[allow(clippy::cast_precision_loss)]
@@ -558,6 +568,19 @@ impl OnboardConfig {
                     "laser {laser}: {offset_m} m is not within +-{} m (a larger offset is a \
                      sensor to repair, not to calibrate)",
                     vlp16::MAX_RANGE_OFFSET_M
+                ),
+            );
+        }
+        let scale = self.processing.wheel_distance_scale;
+        let max = crate::wheel_calibration::MAX_SCALE_ERROR;
+        if !((1.0 - max)..=(1.0 + max)).contains(&scale) {
+            bad(
+                "processing.wheel-distance-scale",
+                format!(
+                    "{scale} is not within {}..{} (wheels that far off are to repair, not to \
+                     calibrate)",
+                    1.0 - max,
+                    1.0 + max
                 ),
             );
         }
@@ -815,6 +838,39 @@ mod tests {
         );
         let e = with("standards = [\"sae\"]").unwrap_err().to_string();
         assert!(e.contains("`sae`"), "{e}");
+    }
+
+    #[test]
+    fn the_parked_time_must_leave_the_checks_time_to_pass() {
+        let e = OnboardConfig::parse(
+            &format!("{MINIMAL}[run]\nparked-us = 6000000\n"),
+            Path::new("c.toml"),
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.contains("run.parked-us") && e.contains("checks-timeout-us"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn the_wheel_distance_scale_is_read_and_checked() {
+        let with = |line: &str| {
+            OnboardConfig::parse(
+                &format!("{MINIMAL}[processing]\n{line}\n"),
+                Path::new("c.toml"),
+            )
+        };
+        let c = with("wheel-distance-scale = 1.0129").unwrap();
+        assert!((c.processing.wheel_distance_scale - 1.0129).abs() < 1e-12);
+        assert!((with("").unwrap().processing.wheel_distance_scale - 1.0).abs() < 1e-12);
+        for bad in ["0.7", "nan", "1.25"] {
+            let e = with(&format!("wheel-distance-scale = {bad}"))
+                .unwrap_err()
+                .to_string();
+            assert!(e.contains("processing.wheel-distance-scale"), "{bad}: {e}");
+        }
     }
 
     #[test]

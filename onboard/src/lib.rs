@@ -17,4 +17,5 @@ pub mod run;
 #[cfg(feature = "service")]
 pub mod service;
 pub mod signed;
+pub mod wheel_calibration;
 pub use signing;

@@ -157,6 +157,12 @@ pub struct ProcessConfig {
     /// (docs/operator/run.md, "Calibrating the lidar's range"); zero (the default): the factory's
     /// calibration as it is. Each within +-0.1 m.
     pub lidar_range_offsets_m: [f32; 16],
+    /// The wheels' distance scale on this floor: true distance over the distance the wheels
+    /// report, applied to every wheel report when a run is built (the recording keeps the raw
+    /// reports). From `passangle wheels RUN_DIR` on a calibration drive (docs/operator/run.md,
+    /// "Calibrating the wheels' distance"); 1 (the default): the wheels as they report. Within
+    /// 1 +- [`crate::wheel_calibration::MAX_SCALE_ERROR`].
+    pub wheel_distance_scale: f64,
 }
 
 /// `standards`: ids as `passangle angles --standard` takes them (`all` allowed).
@@ -177,6 +183,7 @@ impl Default for ProcessConfig {
             pipeline: PipelineConfig::default(),
             standards: Standard::ALL.to_vec(),
             lidar_range_offsets_m: [0.0; 16],
+            wheel_distance_scale: 1.0,
         }
     }
 }
@@ -445,6 +452,10 @@ impl Ord for Held {
 /// (ties: wheel, depth, lidar, then arrival), exactly the order of a sorted replay.
 pub struct RunBuilder {
     pipeline: Pipeline,
+    wheel_distance_scale: f64,
+    /// With `Some`, released lidar frames and raw wheel reports go here instead of into the
+    /// pipeline ([`read_streams`]).
+    collected: Option<(Vec<LidarFrame>, Vec<WheelOdometry>)>,
     min_cloud_points: usize,
     assembler: FrameAssembler,
     t0_ns: Option<u64>,
@@ -473,6 +484,8 @@ impl RunBuilder {
         Ok(Self {
             pipeline: Pipeline::new(config.pipeline.clone())
                 .map_err(|e| format!("pipeline config: {e}"))?,
+            wheel_distance_scale: config.wheel_distance_scale,
+            collected: None,
             min_cloud_points: config.min_cloud_points,
             assembler: FrameAssembler::new(DecoderConfig {
                 range_offsets_m: config.lidar_range_offsets_m,
@@ -579,9 +592,19 @@ impl RunBuilder {
         while self.held.peek().is_some_and(|h| h.stamp_s < until_s) {
             let Some(h) = self.held.pop() else { break };
             self.released_s = self.released_s.max(h.stamp_s);
+            if let Some((lidar, wheel)) = &mut self.collected {
+                match h.item {
+                    Item::Wheel(w) => wheel.push(w),
+                    Item::Lidar(l) => lidar.push(l),
+                    Item::Depth(_) => {}
+                }
+                continue;
+            }
             // Items that break a source's ordering (a clock step) are counted and skipped.
             let pushed = match h.item {
-                Item::Wheel(w) => self.pipeline.push_wheel_odometry(w),
+                Item::Wheel(w) => self
+                    .pipeline
+                    .push_wheel_odometry(w.scaled(self.wheel_distance_scale)),
                 Item::Depth(d) => self.pipeline.push_depth_frame(d),
                 Item::Lidar(l) => self.pipeline.push_lidar_frame(l),
             };
@@ -660,11 +683,29 @@ pub fn build_cloud(dir: &Path, config: &ProcessConfig) -> Result<(Cloud, ReadCou
     ))
 }
 
-/// Reads a run directory through a [`RunBuilder`]: the pipeline's whole result (cloud,
-/// trajectory, counters) and what was read. `passangle replay` prints it.
-pub fn build_run(dir: &Path, config: &ProcessConfig) -> Result<(BuiltCloud, ReadCounts), String> {
-    let rec = Recording::open(dir).map_err(|e| e.to_string())?;
+/// A run directory's lidar frames and raw wheel reports (without `wheel-distance-scale`) on
+/// the clock a [`RunBuilder`] puts them on, in the order it releases them: what a calibration
+/// drive gives `crate::wheel_calibration::calibrate_wheels`.
+pub fn read_streams(
+    dir: &Path,
+    config: &ProcessConfig,
+) -> Result<(Vec<LidarFrame>, Vec<WheelOdometry>), String> {
     let mut builder = RunBuilder::new(config)?;
+    builder.collected = Some((Vec::new(), Vec::new()));
+    feed_recording(dir, &mut builder)?;
+    if builder.t0_ns.is_none() {
+        return Err(format!(
+            "{}: no complete lidar frame",
+            dir.join("lidar.pcap").display()
+        ));
+    }
+    builder.release(f64::NEG_INFINITY);
+    Ok(builder.collected.take().unwrap_or_default())
+}
+
+/// Feeds a run directory's lidar packets and wheel reports into `builder`.
+fn feed_recording(dir: &Path, builder: &mut RunBuilder) -> Result<(), String> {
+    let rec = Recording::open(dir).map_err(|e| e.to_string())?;
     let pcap = dir.join("lidar.pcap");
     let mut source = PcapSource::open(&pcap).map_err(|e| e.to_string())?;
     let mut buf = [0u8; PACKET_BUF_LEN];
@@ -683,6 +724,15 @@ pub fn build_run(dir: &Path, config: &ProcessConfig) -> Result<(BuiltCloud, Read
     for (wall_us, o) in &odometry {
         builder.push_odometry(*wall_us, o);
     }
+    Ok(())
+}
+
+/// Reads a run directory through a [`RunBuilder`]: the pipeline's whole result (cloud,
+/// trajectory, counters) and what was read. `passangle replay` prints it.
+pub fn build_run(dir: &Path, config: &ProcessConfig) -> Result<(BuiltCloud, ReadCounts), String> {
+    let mut builder = RunBuilder::new(config)?;
+    feed_recording(dir, &mut builder)?;
+    let pcap = dir.join("lidar.pcap");
     read_depth(dir, &mut builder)?;
     builder.finish_built().map_err(|e| {
         if e.starts_with("no complete") {

@@ -192,6 +192,9 @@ pub struct Report {
     /// The lidar's per-laser range offsets the run was built with
     /// (`processing.lidar-range-offsets-m`; zeros: none).
     pub lidar_range_offsets_m: [f32; 16],
+    /// The wheels' distance scale the run was built with (`processing.wheel-distance-scale`;
+    /// 1: none).
+    pub wheel_distance_scale: f64,
     /// The recomputation, or why there is none.
     pub recomputed: Result<Recomputed, String>,
     /// SHA-256 of `config.toml` (`None`: not in the run).
@@ -370,6 +373,7 @@ pub fn gather(inputs: &Inputs<'_>) -> anyhow::Result<Report> {
         meta: recording.meta,
         enter_at_front,
         lidar_range_offsets_m: processing.lidar_range_offsets_m,
+        wheel_distance_scale: processing.wheel_distance_scale,
         recomputed,
         config_sha256: config.map(|c| sha256_hex(&c)),
         robot_id,
@@ -734,7 +738,7 @@ fn method_section(h: &mut String, r: &Report) {
          49 CFR 523.2). Ground clearance: the lowest body point between the axles in the \
          band.</td></tr>\n\
          <tr><th>Run parameters</th><td>speed {speed:.2} m/s, distance {dist:.2} m; the robot \
-         enters under the vehicle's {end}; {lidar}</td></tr>\n\
+         enters under the vehicle's {end}; {lidar}; {wheels}</td></tr>\n\
          </table>\n</section>\n",
         speed = r.meta.speed_mps,
         dist = r.meta.distance_m,
@@ -744,6 +748,7 @@ fn method_section(h: &mut String, r: &Report) {
             "rear bumper"
         },
         lidar = lidar_calibration_text(&r.lidar_range_offsets_m),
+        wheels = wheel_calibration_text(r.wheel_distance_scale),
     );
 }
 
@@ -759,6 +764,18 @@ fn lidar_calibration_text(offsets_m: &[f32; 16]) -> String {
          (processing.lidar-range-offsets-m in config.toml)",
         set.len(),
         largest * 1e3
+    )
+}
+
+/// The wheels' distance calibration as the report states it.
+fn wheel_calibration_text(scale: f64) -> String {
+    if (scale - 1.0).abs() < f64::EPSILON {
+        return "wheel distances as the wheels report them (no distance calibration applied)"
+            .to_owned();
+    }
+    format!(
+        "wheel distance calibration applied: scale {scale:.5} (processing.wheel-distance-scale \
+         in config.toml)"
     )
 }
 
@@ -1446,6 +1463,13 @@ mod tests {
         o[8] = 0.004;
         let t = lidar_calibration_text(&o);
         assert!(t.contains("2 of 16 lasers, largest 15.9 mm"), "{t}");
+    }
+
+    #[test]
+    fn the_wheel_calibration_is_stated() {
+        assert!(wheel_calibration_text(1.0).contains("no distance calibration"));
+        let t = wheel_calibration_text(1.012_94);
+        assert!(t.contains("scale 1.01294"), "{t}");
     }
 
     #[test]

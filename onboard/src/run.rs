@@ -52,6 +52,13 @@ pub struct RunConfig {
     /// firmware's own cutoff (19.8 V, filtered) stops a robot whose pack sags below it mid-run.
     /// A firmware that does not measure the battery reports 0, and the check is skipped.
     pub min_battery_mv: u16,
+    /// The robot stands still, recorded, for at least this long before it drives (the checks
+    /// last at least this long) and after it has come to rest (before processing), us: every
+    /// run's recording begins and ends with a parked capture, between which `passangle wheels`
+    /// measures the wheels' distance scale against the walls (docs/operator/run.md,
+    /// "Calibrating the wheels' distance"). Default 1 s (ten lidar frames); below
+    /// `checks-timeout-us`.
+    pub parked_us: u64,
 }
 
 impl Default for RunConfig {
@@ -65,6 +72,7 @@ impl Default for RunConfig {
             progress_period_us: 500_000,
             drive_margin_us: 10_000_000,
             min_battery_mv: 21_000,
+            parked_us: 1_000_000,
         }
     }
 }
@@ -177,6 +185,8 @@ enum State {
         since_us: u64,
         then: AfterStop,
         reason: String,
+        /// Since when the robot has been at rest (`None`: not yet).
+        rest_since_us: Option<u64>,
     },
     Processing,
 }
@@ -328,14 +338,20 @@ impl RunMachine {
                     since_us: now_us,
                     then: AfterStop::Abort,
                     reason,
+                    rest_since_us: None,
                 };
                 self.progress_now(now_us, &mut out);
             }
-            State::Stopping { since_us, .. } => {
+            State::Stopping {
+                since_us,
+                rest_since_us,
+                ..
+            } => {
                 self.state = State::Stopping {
                     since_us,
                     then: AfterStop::Abort,
                     reason,
+                    rest_since_us,
                 };
             }
             State::Processing => {
@@ -406,9 +422,23 @@ impl RunMachine {
                 since_us,
                 then,
                 reason,
+                rest_since_us,
             } => {
                 if obs.at_rest {
-                    self.after_stop(now_us, then, reason, &mut out);
+                    // A run to process stays recorded while parked for `parked-us`; an aborted
+                    // one ends at once.
+                    let rest_us = rest_since_us.unwrap_or(now_us);
+                    let parked = now_us.saturating_sub(rest_us) >= c.parked_us;
+                    if parked || matches!(then, AfterStop::Abort) {
+                        self.after_stop(now_us, then, reason, &mut out);
+                    } else {
+                        self.state = State::Stopping {
+                            since_us,
+                            then,
+                            reason,
+                            rest_since_us: Some(rest_us),
+                        };
+                    }
                 } else if now_us.saturating_sub(since_us) > c.stop_timeout_us {
                     out.insert(0, Action::Motion(MotionIntent::StopNow));
                     let reason = format!(
@@ -455,6 +485,10 @@ impl RunMachine {
             ));
         }
         if missing.is_empty() {
+            // Parked and recorded for `parked-us` first.
+            if now_us.saturating_sub(since_us) < self.config.parked_us {
+                return;
+            }
             let Some(a) = &self.active else { return };
             let vx_mps = a.params.speed_mps;
             self.state = State::Driving {
@@ -524,6 +558,7 @@ impl RunMachine {
             since_us: now_us,
             then,
             reason,
+            rest_since_us: None,
         };
         self.progress_now(now_us, out);
     }
@@ -628,6 +663,43 @@ mod tests {
         }
     }
 
+    /// The default limits without the parked captures, so that a test drives on its first tick.
+    fn unparked() -> RunConfig {
+        RunConfig {
+            parked_us: 0,
+            ..RunConfig::default()
+        }
+    }
+
+    #[test]
+    fn the_robot_stays_parked_and_recorded_before_the_drive_and_after_the_stop() {
+        let mut m = RunMachine::new(RunConfig::default(), 3);
+        m.start(0, params(0.2, 0.5), 1);
+        let mut obs = healthy();
+        m.tick(500_000, &obs);
+        assert_eq!(m.phase(), Phase::Checks, "parked for 1 s first");
+        assert!(!m.robot_may_move());
+        let acts = m.tick(1_000_000, &obs);
+        assert_eq!(m.phase(), Phase::Driving);
+        assert!(motions(&acts).contains(&MotionIntent::Drive { vx_mps: 0.2 }));
+        obs.at_rest = false;
+        obs.odometry_xy_m = Some([1.6, 0.0]);
+        m.tick(3_600_000, &obs);
+        assert_eq!(m.phase(), Phase::Stopping);
+        obs.at_rest = true;
+        for now in [3_700_000, 4_200_000, 4_690_000] {
+            let acts = m.tick(now, &obs);
+            assert_eq!(m.phase(), Phase::Stopping, "at {now} us: {acts:?}");
+        }
+        // At rest since 3.7 s: processing starts 1 s later, not before.
+        let acts = m.tick(4_700_000, &obs);
+        assert!(
+            acts.iter()
+                .any(|a| matches!(a, Action::StartProcessing { run_id: 3, .. })),
+            "{acts:?}"
+        );
+    }
+
     fn motions(actions: &[Action]) -> Vec<MotionIntent> {
         actions
             .iter()
@@ -715,7 +787,7 @@ mod tests {
 
     #[test]
     fn busy_and_bad_parameters_are_refused_naming_the_field() {
-        let mut m = RunMachine::new(RunConfig::default(), 1);
+        let mut m = RunMachine::new(unparked(), 1);
         let a = m.start(0, params(2.0, 1.0), 5);
         assert!(
             matches!(&a[0], Action::Refuse { seq: 5, reason: RefuseReason::InvalidParameter, detail } if detail.contains("speed_mps"))
@@ -739,7 +811,7 @@ mod tests {
 
     /// A machine driving its run since 10 ms, and its observations (robot moving).
     fn driving() -> (RunMachine, Observations) {
-        let mut m = RunMachine::new(RunConfig::default(), 1);
+        let mut m = RunMachine::new(unparked(), 1);
         m.start(0, params(0.2, 5.0), 1);
         let mut obs = healthy();
         m.tick(10_000, &obs);
@@ -799,7 +871,7 @@ mod tests {
 
     #[test]
     fn handheld_silence_while_driving_stops_the_robot() {
-        let mut m = RunMachine::new(RunConfig::default(), 1);
+        let mut m = RunMachine::new(unparked(), 1);
         m.start(0, params(0.2, 5.0), 1);
         let mut obs = healthy();
         m.tick(10_000, &obs);
@@ -817,7 +889,7 @@ mod tests {
 
     #[test]
     fn failed_checks_name_what_is_missing_and_never_drive() {
-        let mut m = RunMachine::new(RunConfig::default(), 1);
+        let mut m = RunMachine::new(unparked(), 1);
         m.start(0, params(0.2, 5.0), 1);
         let mut obs = healthy();
         obs.camera_ok = false;
@@ -836,7 +908,7 @@ mod tests {
 
     #[test]
     fn a_low_battery_fails_the_checks_by_voltage_and_never_drives() {
-        let mut m = RunMachine::new(RunConfig::default(), 1);
+        let mut m = RunMachine::new(unparked(), 1);
         m.start(0, params(0.2, 5.0), 1);
         let mut obs = healthy();
         obs.battery_mv = 20_400;
@@ -851,7 +923,7 @@ mod tests {
                 if r.contains("battery 20.4 V below 21.0 V")
         )));
         // Unmeasured (0) is not "low": the firmware's own cutoff still protects the pack.
-        let mut m = RunMachine::new(RunConfig::default(), 1);
+        let mut m = RunMachine::new(unparked(), 1);
         m.start(0, params(0.2, 5.0), 1);
         obs.battery_mv = 0;
         let a = m.tick(100_000, &obs);
@@ -860,7 +932,7 @@ mod tests {
 
     #[test]
     fn stop_timeout_zeroes_currents_and_fails() {
-        let mut m = RunMachine::new(RunConfig::default(), 1);
+        let mut m = RunMachine::new(unparked(), 1);
         m.start(0, params(0.2, 5.0), 1);
         let mut obs = healthy();
         m.tick(10_000, &obs);

@@ -124,6 +124,20 @@ impl WheelOdometry {
             wz_radps: f64::from(msg.wz_radps),
         }
     }
+
+    /// This report with its position and speeds times `scale` (a calibrated distance scale:
+    /// the increment between any two reports, all the pipeline takes from the wheels, is then
+    /// `scale` times as long); heading and yaw rate unchanged.
+    #[must_use]
+    pub fn scaled(self, scale: f64) -> Self {
+        Self {
+            x_m: self.x_m * scale,
+            y_m: self.y_m * scale,
+            vx_mps: self.vx_mps * scale,
+            vy_mps: self.vy_mps * scale,
+            ..self
+        }
+    }
 }
 
 /// The pose estimated for one lidar frame.

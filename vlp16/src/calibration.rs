@@ -122,7 +122,7 @@ impl Return {
     }
 
     /// The return's position with `offset_m` taken off its range.
-    fn at(&self, offset_m: f64, vertical_offset: bool) -> V3 {
+    pub(crate) fn at(&self, offset_m: f64, vertical_offset: bool) -> V3 {
         self.origin(vertical_offset) + self.ray * (self.range_m - offset_m)
     }
 }
@@ -333,19 +333,19 @@ fn reselect(
 
 /// A plane `n . x = d` with a unit normal.
 #[derive(Debug, Clone, Copy)]
-struct Plane {
-    normal: V3,
-    distance: f64,
+pub(crate) struct Plane {
+    pub(crate) normal: V3,
+    pub(crate) distance: f64,
 }
 
 impl Plane {
-    fn residual(&self, p: V3) -> f64 {
+    pub(crate) fn residual(&self, p: V3) -> f64 {
         self.normal.dot(&p) - self.distance
     }
 }
 
 /// Total least squares plane through the points.
-fn fit_plane(points: impl Iterator<Item = V3> + Clone) -> Option<Plane> {
+pub(crate) fn fit_plane(points: impl Iterator<Item = V3> + Clone) -> Option<Plane> {
     let (c, cov) = centroid_covariance(points)?;
     let (values, vectors) = symmetric_eigen3(&cov)?;
     let k = (0..3)
@@ -359,7 +359,7 @@ fn fit_plane(points: impl Iterator<Item = V3> + Clone) -> Option<Plane> {
 }
 
 /// Near-vertical planes, largest first: each the indices of its returns.
-fn find_planes(returns: &[Return], vo: bool) -> Vec<(Vec<usize>, bool)> {
+pub(crate) fn find_planes(returns: &[Return], vo: bool) -> Vec<(Vec<usize>, bool)> {
     let mut free: Vec<bool> = vec![true; returns.len()];
     let mut rng = SplitMix64(0x5eed_ca1b);
     let mut planes = Vec::new();
@@ -608,7 +608,7 @@ fn dot3(a: [f64; 3], b: [f64; 3]) -> f64 {
 }
 
 /// The median (the upper one of an even count).
-fn median(values: &[f64]) -> f64 {
+pub(crate) fn median(values: &[f64]) -> f64 {
     let mut v = values.to_vec();
     v.sort_by(f64::total_cmp);
     v.get(v.len() / 2).copied().unwrap_or(0.0)

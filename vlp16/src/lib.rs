@@ -15,6 +15,7 @@ pub mod packet;
 pub mod pcap;
 pub mod position;
 pub mod source;
+pub mod travel;
 
 pub use decoder::{
     AzimuthInterpolation, ConfigError, DecodeError, DecodeStats, DecoderConfig, Frame,
