@@ -154,8 +154,7 @@ pub fn travel_between(
     expected_m: f64,
 ) -> Result<Travel, TravelError> {
     let u = V3::from(direction);
-    // Matched walls: (start, end, normal, change of distance, weight).
-    let mut matched = Vec::new();
+    let mut matched: Vec<Matched> = Vec::new();
     for a in start {
         let na = V3::from(a.normal);
         let predicted = a.distance_m - na.dot(&u) * expected_m;
@@ -204,30 +203,52 @@ pub fn travel_between(
     })
 }
 
-/// The travel `t` (sensor frame, in the plane of the sensor's x and y: the robot drives on its
-/// floor) by weighted least squares over the matched walls, `n . t = d - d'`: both components
-/// where the walls determine them (walls ahead or behind and walls beside the path), else only
-/// the part along `u` (walls ahead or behind alone: the sideways part is the wheels', zero).
-fn solve_travel(matched: &[(PlaneSummary, PlaneSummary, V3, f64, f64)], u: V3) -> V3 {
+/// A matched wall: (start, end, mean normal, change of distance `d - d'`, weight).
+type Matched = (PlaneSummary, PlaneSummary, V3, f64, f64);
+
+/// The weighted normal matrix of `n . t = d - d'` over the walls' x and y components, and
+/// whether it determines both components of `t`: the weaker direction holds at least a
+/// hundredth of the stronger's information (a side wall seen over a few thousand returns).
+fn normal_matrix(matched: &[Matched]) -> ([[f64; 2]; 2], bool) {
     let mut ata = [[0.0; 2]; 2];
-    let mut atb = [0.0; 2];
-    for (_, _, n, dd, w) in matched {
+    for (_, _, n, _, w) in matched {
         let a = [n[0], n[1]];
         for i in 0..2 {
             for j in 0..2 {
                 ata[i][j] += w * a[i] * a[j];
             }
-            atb[i] += w * a[i] * dd;
         }
     }
     let det = ata[0][0] * ata[1][1] - ata[0][1] * ata[1][0];
     let trace = ata[0][0] + ata[1][1];
-    // Both directions determined when the weaker holds a hundredth of the stronger's
-    // information (a side wall seen over a few thousand returns).
-    if det > 1e-2 * (0.5 * trace).powi(2) {
-        let x = (ata[1][1] * atb[0] - ata[0][1] * atb[1]) / det;
-        let y = (ata[0][0] * atb[1] - ata[1][0] * atb[0]) / det;
-        return V3::new(x, y, 0.0);
+    (ata, det > 1e-2 * (0.5 * trace).powi(2))
+}
+
+/// The inverse of a 2 x 2 matrix whose determinant is not zero.
+fn inverse2(m: [[f64; 2]; 2]) -> [[f64; 2]; 2] {
+    let det = m[0][0] * m[1][1] - m[0][1] * m[1][0];
+    [
+        [m[1][1] / det, -m[0][1] / det],
+        [-m[1][0] / det, m[0][0] / det],
+    ]
+}
+
+/// The travel `t` (sensor frame, in the plane of the sensor's x and y: the robot drives on its
+/// floor) by weighted least squares over the matched walls, `n . t = d - d'`: both components
+/// where the walls determine them (walls ahead or behind and walls beside the path), else only
+/// the part along `u` (walls ahead or behind alone: the sideways part is the wheels', zero).
+fn solve_travel(matched: &[Matched], u: V3) -> V3 {
+    let (ata, both) = normal_matrix(matched);
+    if both {
+        let atb = matched.iter().fold([0.0; 2], |acc, (_, _, n, dd, w)| {
+            [acc[0] + w * n[0] * dd, acc[1] + w * n[1] * dd]
+        });
+        let inv = inverse2(ata);
+        return V3::new(
+            inv[0][0] * atb[0] + inv[0][1] * atb[1],
+            inv[1][0] * atb[0] + inv[1][1] * atb[1],
+            0.0,
+        );
     }
     let (num, den) = matched
         .iter()
@@ -240,28 +261,11 @@ fn solve_travel(matched: &[(PlaneSummary, PlaneSummary, V3, f64, f64)], u: V3) -
 
 /// Information on the travel's length (along `along`) and the degrees of freedom left, for the
 /// solve [`solve_travel`] made.
-fn information_along(
-    matched: &[(PlaneSummary, PlaneSummary, V3, f64, f64)],
-    u: V3,
-    along: V3,
-) -> (f64, usize) {
-    let mut ata = [[0.0; 2]; 2];
-    for (_, _, n, _, w) in matched {
-        let a = [n[0], n[1]];
-        for i in 0..2 {
-            for j in 0..2 {
-                ata[i][j] += w * a[i] * a[j];
-            }
-        }
-    }
-    let det = ata[0][0] * ata[1][1] - ata[0][1] * ata[1][0];
-    let trace = ata[0][0] + ata[1][1];
-    if det > 1e-2 * (0.5 * trace).powi(2) {
+fn information_along(matched: &[Matched], u: V3, along: V3) -> (f64, usize) {
+    let (ata, both) = normal_matrix(matched);
+    if both {
         // var(along . t) = along^T (A^T W A)^-1 along.
-        let inv = [
-            [ata[1][1] / det, -ata[0][1] / det],
-            [-ata[1][0] / det, ata[0][0] / det],
-        ];
+        let inv = inverse2(ata);
         let v = [along[0], along[1]];
         let var: f64 = (0..2)
             .map(|i| (0..2).map(|j| v[i] * inv[i][j] * v[j]).sum::<f64>())
