@@ -456,6 +456,8 @@ pub struct RunBuilder {
     /// With `Some`, released lidar frames and raw wheel reports go here instead of into the
     /// pipeline ([`read_streams`]).
     collected: Option<(Vec<LidarFrame>, Vec<WheelOdometry>)>,
+    /// Host wall time (us) of a drive whose lidar frames are not collected (`read_streams`).
+    skip_us: Option<(u64, u64)>,
     min_cloud_points: usize,
     assembler: FrameAssembler,
     t0_ns: Option<u64>,
@@ -486,6 +488,7 @@ impl RunBuilder {
                 .map_err(|e| format!("pipeline config: {e}"))?,
             wheel_distance_scale: config.wheel_distance_scale,
             collected: None,
+            skip_us: None,
             min_cloud_points: config.min_cloud_points,
             assembler: FrameAssembler::new(DecoderConfig {
                 range_offsets_m: config.lidar_range_offsets_m,
@@ -595,7 +598,16 @@ impl RunBuilder {
             if let Some((lidar, wheel)) = &mut self.collected {
                 match h.item {
                     Item::Wheel(w) => wheel.push(w),
-                    Item::Lidar(l) => lidar.push(l),
+                    Item::Lidar(l) => {
+                        let t0_us = self.t0_ns.unwrap_or(0) as f64 * 1e-3;
+                        let wall_us = l.stamp_s * 1e6 + t0_us;
+                        let driving = self
+                            .skip_us
+                            .is_some_and(|(a, b)| wall_us > a as f64 && wall_us < b as f64);
+                        if !driving {
+                            lidar.push(l);
+                        }
+                    }
                     Item::Depth(_) => {}
                 }
                 continue;
@@ -683,15 +695,32 @@ pub fn build_cloud(dir: &Path, config: &ProcessConfig) -> Result<(Cloud, ReadCou
     ))
 }
 
-/// A run directory's lidar frames and raw wheel reports (without `wheel-distance-scale`) on
-/// the clock a [`RunBuilder`] puts them on, in the order it releases them: what a calibration
-/// drive gives `crate::wheel_calibration::calibrate_wheels`.
+/// A run directory's raw wheel reports (without `wheel-distance-scale`) and its lidar frames
+/// while parked, on the clock a [`RunBuilder`] puts them on, in the order it releases them: what
+/// a calibration drive gives `crate::wheel_calibration::calibrate_wheels`. The frames from
+/// [`SKIP_MARGIN_US`] after the wheels start moving to that before they stop are left out, so
+/// that memory holds the parked captures, not the drive (a frame is about 0.7 MB).
 pub fn read_streams(
     dir: &Path,
     config: &ProcessConfig,
 ) -> Result<(Vec<LidarFrame>, Vec<WheelOdometry>), String> {
     let mut builder = RunBuilder::new(config)?;
     builder.collected = Some((Vec::new(), Vec::new()));
+    let (odometry, _) = Recording::open(dir)
+        .and_then(|rec| rec.odometry())
+        .map_err(|e| e.to_string())?;
+    let moving = |o: &&(u64, Odometry)| {
+        f64::from(o.1.vx_mps).hypot(f64::from(o.1.vy_mps)) > crate::wheel_calibration::PARKED_MPS
+    };
+    if let (Some(first), Some(last)) = (
+        odometry.iter().find(moving),
+        odometry.iter().rev().find(moving),
+    ) {
+        builder.skip_us = Some((
+            first.0 + SKIP_MARGIN_US,
+            last.0.saturating_sub(SKIP_MARGIN_US),
+        ));
+    }
     feed_recording(dir, &mut builder)?;
     if builder.t0_ns.is_none() {
         return Err(format!(
@@ -702,6 +731,11 @@ pub fn read_streams(
     builder.release(f64::NEG_INFINITY);
     Ok(builder.collected.take().unwrap_or_default())
 }
+
+/// How far into the drive [`read_streams`] still keeps lidar frames, us: the wheel reports'
+/// arrival jitter (tens of milliseconds) and a frame's length, with room to spare; the
+/// calibration itself takes only the frames that end before the wheels move.
+pub const SKIP_MARGIN_US: u64 = 500_000;
 
 /// Feeds a run directory's lidar packets and wheel reports into `builder`.
 fn feed_recording(dir: &Path, builder: &mut RunBuilder) -> Result<(), String> {
