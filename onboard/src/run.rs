@@ -53,7 +53,8 @@ pub struct RunConfig {
     /// A firmware that does not measure the battery reports 0, and the check is skipped.
     pub min_battery_mv: u16,
     /// The robot stands still, recorded, for at least this long before it drives (the checks
-    /// last at least this long) and after it has come to rest (before processing), us: every
+    /// last at least this long) and, without moving, after it has come to rest (before
+    /// processing), us: every
     /// run's recording begins and ends with a parked capture, between which `passangle wheels`
     /// measures the wheels' distance scale against the walls (docs/operator/run.md,
     /// "Calibrating the wheels' distance"). Default 1 s (ten lidar frames); below
@@ -446,6 +447,14 @@ impl RunMachine {
                         c.stop_timeout_us / 1000
                     );
                     self.end(now_us, Outcome::Failed(reason), &mut out);
+                } else if rest_since_us.is_some() {
+                    // Moving again: the parked time starts over when it next comes to rest.
+                    self.state = State::Stopping {
+                        since_us,
+                        then,
+                        reason,
+                        rest_since_us: None,
+                    };
                 }
             }
         }
@@ -691,8 +700,15 @@ mod tests {
             let acts = m.tick(now, &obs);
             assert_eq!(m.phase(), Phase::Stopping, "at {now} us: {acts:?}");
         }
-        // At rest since 3.7 s: processing starts 1 s later, not before.
-        let acts = m.tick(4_700_000, &obs);
+        // Nudged at 4.69 s: the parked second starts over when it is at rest again.
+        obs.at_rest = false;
+        m.tick(4_695_000, &obs);
+        obs.at_rest = true;
+        m.tick(4_700_000, &obs);
+        m.tick(5_690_000, &obs);
+        assert_eq!(m.phase(), Phase::Stopping);
+        // At rest since 4.7 s: processing starts 1 s later, not before.
+        let acts = m.tick(5_700_000, &obs);
         assert!(
             acts.iter()
                 .any(|a| matches!(a, Action::StartProcessing { run_id: 3, .. })),
