@@ -253,9 +253,7 @@ fn calibrated_wheel_scale(
     let lidar = scenario.decoded_lidar_frames_with(&scene, decoder);
     let wheel = scenario.wheel_odometry(0.0);
     let mut mounts = pipeline::config::MountConfig::default();
-    let lidar_mount = pose_of(&scenario.file.lidar.robot_from_lidar());
-    mounts.lidar_xyz_m = lidar_mount.translation.into();
-    mounts.lidar_rpy_rad = rpy_of(&lidar_mount.rotation).into();
+    set_lidar_mount(&mut mounts, &scenario);
     let cal = onboard::wheel_calibration::calibrate_wheels(&lidar, &wheel, &mounts)
         .context("wheel calibration")?;
     let (scale_error, _) = hil_sim::wheel_odometry::constant_errors(
@@ -274,6 +272,13 @@ fn calibrated_wheel_scale(
         1.0 / (1.0 + scale_error)
     );
     Ok((cal.scale, line))
+}
+
+/// The scenario's VLP-16 mount in the pipeline's terms.
+fn set_lidar_mount(mounts: &mut pipeline::config::MountConfig, scenario: &Scenario) {
+    let lidar_mount = pose_of(&scenario.file.lidar.robot_from_lidar());
+    mounts.lidar_xyz_m = lidar_mount.translation.into();
+    mounts.lidar_rpy_rad = rpy_of(&lidar_mount.rotation).into();
 }
 
 /// CPU time of this thread, seconds (`/proc/thread-self/schedstat`).
@@ -331,10 +336,8 @@ fn run_pipeline(
     config.fusion.use_visual = matches!(camera, Camera::Fused | Camera::Both);
     config.visual.pixel_stride =
         ((config.visual.pixel_stride as f64 * CAMERA_SCALE).round() as usize).max(1);
-    let lidar_mount = pose_of(&scenario.file.lidar.robot_from_lidar());
+    set_lidar_mount(&mut config.mounts, scenario);
     let camera_mount = pose_of(&scenario.file.depth.robot_from_camera());
-    config.mounts.lidar_xyz_m = lidar_mount.translation.into();
-    config.mounts.lidar_rpy_rad = rpy_of(&lidar_mount.rotation).into();
     config.mounts.camera_xyz_m = camera_mount.translation.into();
     config.mounts.camera_rpy_rad = rpy_of(&camera_mount.rotation).into();
     let mut pipeline = Pipeline::new(config).context("pipeline settings")?;

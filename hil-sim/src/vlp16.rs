@@ -247,7 +247,8 @@ pub enum Datagram {
     },
 }
 
-/// pcap time of simulation time 0: 2026-01-01T00:00:00Z, seconds since the UNIX epoch.
+/// pcap time of simulation time 0, seconds since the UNIX epoch: a fixed instant, so that a
+/// simulated capture's bytes depend only on its scenario.
 pub const PCAP_EPOCH_S: u64 = 1_767_225_600;
 
 /// The simulated sensor's address (the VLP-16's factory default).

@@ -572,15 +572,13 @@ impl OnboardConfig {
             );
         }
         let scale = self.processing.wheel_distance_scale;
-        let max = crate::wheel_calibration::MAX_SCALE_ERROR;
-        if !((1.0 - max)..=(1.0 + max)).contains(&scale) {
+        let (lo, hi) = pipeline::fusion::WHEEL_SCALE_RANGE;
+        if !(lo..=hi).contains(&scale) {
             bad(
                 "processing.wheel-distance-scale",
                 format!(
-                    "{scale} is not within {}..{} (wheels that far off are to repair, not to \
-                     calibrate)",
-                    1.0 - max,
-                    1.0 + max
+                    "{scale} is not within {lo}..{hi} (wheels that far off are to repair, not \
+                     to calibrate)"
                 ),
             );
         }

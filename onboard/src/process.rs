@@ -161,7 +161,7 @@ pub struct ProcessConfig {
     /// report, applied to every wheel report when a run is built (the recording keeps the raw
     /// reports). From `passangle wheels RUN_DIR` on a calibration drive (docs/operator/run.md,
     /// "Calibrating the wheels' distance"); 1 (the default): the wheels as they report. Within
-    /// 1 +- [`crate::wheel_calibration::MAX_SCALE_ERROR`].
+    /// [`pipeline::fusion::WHEEL_SCALE_RANGE`].
     pub wheel_distance_scale: f64,
 }
 
@@ -699,29 +699,27 @@ pub fn build_cloud(dir: &Path, config: &ProcessConfig) -> Result<(Cloud, ReadCou
 /// while parked, on the clock a [`RunBuilder`] puts them on, in the order it releases them: what
 /// a calibration drive gives `crate::wheel_calibration::calibrate_wheels`. The frames from
 /// [`SKIP_MARGIN_US`] after the wheels start moving to that before they stop are left out, so
-/// that memory holds the parked captures, not the drive (a frame is about 0.7 MB).
+/// that memory holds the parked captures, not the drive (a frame holds about 29,000 points).
 pub fn read_streams(
     dir: &Path,
     config: &ProcessConfig,
 ) -> Result<(Vec<LidarFrame>, Vec<WheelOdometry>), String> {
+    let odometry = read_odometry(dir)?;
     let mut builder = RunBuilder::new(config)?;
     builder.collected = Some((Vec::new(), Vec::new()));
-    let (odometry, _) = Recording::open(dir)
-        .and_then(|rec| rec.odometry())
-        .map_err(|e| e.to_string())?;
     let moving = |o: &&(u64, Odometry)| {
         f64::from(o.1.vx_mps).hypot(f64::from(o.1.vy_mps)) > crate::wheel_calibration::PARKED_MPS
     };
     if let (Some(first), Some(last)) = (
-        odometry.iter().find(moving),
-        odometry.iter().rev().find(moving),
+        odometry.0.iter().find(moving),
+        odometry.0.iter().rev().find(moving),
     ) {
         builder.skip_us = Some((
             first.0 + SKIP_MARGIN_US,
             last.0.saturating_sub(SKIP_MARGIN_US),
         ));
     }
-    feed_recording(dir, &mut builder)?;
+    feed_recording(dir, &mut builder, &odometry)?;
     if builder.t0_ns.is_none() {
         return Err(format!(
             "{}: no complete lidar frame",
@@ -737,9 +735,21 @@ pub fn read_streams(
 /// calibration itself takes only the frames that end before the wheels move.
 pub const SKIP_MARGIN_US: u64 = 500_000;
 
-/// Feeds a run directory's lidar packets and wheel reports into `builder`.
-fn feed_recording(dir: &Path, builder: &mut RunBuilder) -> Result<(), String> {
-    let rec = Recording::open(dir).map_err(|e| e.to_string())?;
+/// A run directory's wheel reports with their arrival times, and how many lines were cut
+/// short (`Recording::odometry`).
+fn read_odometry(dir: &Path) -> Result<(Vec<(u64, Odometry)>, usize), String> {
+    Recording::open(dir)
+        .and_then(|rec| rec.odometry())
+        .map_err(|e| e.to_string())
+}
+
+/// Feeds a run directory's lidar packets and its wheel reports (`read_odometry`) into
+/// `builder`.
+fn feed_recording(
+    dir: &Path,
+    builder: &mut RunBuilder,
+    (odometry, cut): &(Vec<(u64, Odometry)>, usize),
+) -> Result<(), String> {
     let pcap = dir.join("lidar.pcap");
     let mut source = PcapSource::open(&pcap).map_err(|e| e.to_string())?;
     let mut buf = [0u8; PACKET_BUF_LEN];
@@ -753,9 +763,8 @@ fn feed_recording(dir: &Path, builder: &mut RunBuilder) -> Result<(), String> {
         );
     }
     builder.counts.lidar_cut_short = source.truncated().is_some();
-    let (odometry, cut) = rec.odometry().map_err(|e| e.to_string())?;
-    builder.counts.odometry_cut_short = cut > 0;
-    for (wall_us, o) in &odometry {
+    builder.counts.odometry_cut_short = *cut > 0;
+    for (wall_us, o) in odometry {
         builder.push_odometry(*wall_us, o);
     }
     Ok(())
@@ -764,8 +773,9 @@ fn feed_recording(dir: &Path, builder: &mut RunBuilder) -> Result<(), String> {
 /// Reads a run directory through a [`RunBuilder`]: the pipeline's whole result (cloud,
 /// trajectory, counters) and what was read. `passangle replay` prints it.
 pub fn build_run(dir: &Path, config: &ProcessConfig) -> Result<(BuiltCloud, ReadCounts), String> {
+    let odometry = read_odometry(dir)?;
     let mut builder = RunBuilder::new(config)?;
-    feed_recording(dir, &mut builder)?;
+    feed_recording(dir, &mut builder, &odometry)?;
     let pcap = dir.join("lidar.pcap");
     read_depth(dir, &mut builder)?;
     builder.finish_built().map_err(|e| {

@@ -22,6 +22,7 @@
 //! millimetres), and the standard error takes the returns as independent.
 
 use pipeline::config::MountConfig;
+use pipeline::fusion::WHEEL_SCALE_RANGE;
 use pipeline::geom::{Pose, V3};
 use pipeline::{LidarFrame, WheelOdometry};
 use vlp16::calibration::CalibrationError;
@@ -34,9 +35,6 @@ pub const MIN_PARKED_FRAMES: usize = 5;
 /// Shortest calibration drive, metres: over a shorter one a millimetre of the walls is more
 /// than 0.1 % of the distance.
 pub const MIN_DRIVE_M: f64 = 1.0;
-/// Largest scale error taken as a calibration, not as a broken wheel or a wrong recording
-/// (the pipeline's own clamp on the wheel scale, `pipeline::fusion::WHEEL_SCALE_RANGE`).
-pub const MAX_SCALE_ERROR: f64 = 0.2;
 
 /// The calibration's result.
 #[derive(Debug, Clone, PartialEq)]
@@ -79,8 +77,9 @@ pub enum WheelCalibrationError {
     Walls(TravelError),
     /// The scale is beyond any wheel's plausible error.
     #[error(
-        "the walls give {travel_m:.3} m against the wheels' {wheel_m:.3} m: more than {:.0} % apart, not a scale error (a wrong wall matched, or the wheels slipped badly)",
-        MAX_SCALE_ERROR * 100.0
+        "the walls give {travel_m:.3} m against the wheels' {wheel_m:.3} m: a scale outside {}..{}, not a scale error (a wrong wall matched, or the wheels slipped badly)",
+        WHEEL_SCALE_RANGE.0,
+        WHEEL_SCALE_RANGE.1
     )]
     Implausible {
         /// The walls' travel, metres.
@@ -104,8 +103,9 @@ pub fn calibrate_wheels(
     ) else {
         return Err(WheelCalibrationError::NoDrive { distance_m: 0.0 });
     };
-    let before = &wheel[first.saturating_sub(1)];
-    let after = &wheel[(last + 1).min(wheel.len() - 1)];
+    // The last report before the drive and the first after it.
+    let (i_before, i_after) = (first.saturating_sub(1), (last + 1).min(wheel.len() - 1));
+    let (before, after) = (&wheel[i_before], &wheel[i_after]);
     let (t_go, t_stop) = (wheel[first].stamp_s, wheel[last].stamp_s);
     let frame_end = |f: &LidarFrame| {
         f.stamp_s
@@ -127,7 +127,7 @@ pub fn calibrate_wheels(
     let (dx, dy) = (after.x_m - before.x_m, after.y_m - before.y_m);
     // The wheels' path length: their heading drifts, so their chord is shorter than what they
     // report having driven (the true path is straight).
-    let wheel_distance_m: f64 = wheel[first.saturating_sub(1)..=(last + 1).min(wheel.len() - 1)]
+    let wheel_distance_m: f64 = wheel[i_before..=i_after]
         .windows(2)
         .map(|w| (w[1].x_m - w[0].x_m).hypot(w[1].y_m - w[0].y_m))
         .sum();
@@ -158,7 +158,7 @@ pub fn calibrate_wheels(
     let travel = travel_between(&start_walls, &end_walls, direction.into(), wheel_distance_m)
         .map_err(WheelCalibrationError::Walls)?;
     let scale = travel.distance_m / wheel_distance_m;
-    if (scale - 1.0).abs() > MAX_SCALE_ERROR {
+    if !(WHEEL_SCALE_RANGE.0..=WHEEL_SCALE_RANGE.1).contains(&scale) {
         return Err(WheelCalibrationError::Implausible {
             travel_m: travel.distance_m,
             wheel_m: wheel_distance_m,

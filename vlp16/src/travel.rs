@@ -41,7 +41,7 @@ use super::calibration::{
     CalibrationError, MAX_PLANE_SIGMA_RATIO, MAX_RANGE_M, MIN_PLANE_RETURNS, MIN_RANGE_M,
     PlaneSummary, Return, find_planes, fit_plane, median,
 };
-use super::decoder::{Point, RANGE_ACCURACY_M};
+use super::decoder::RANGE_ACCURACY_M;
 
 /// Least `|n . u|` of at least one matched wall: one within 60 degrees of facing the travel.
 pub const MIN_FACING: f64 = 0.5;
@@ -78,17 +78,8 @@ pub enum TravelError {
     NoCommonWall,
 }
 
-/// The walls of one parked capture of decoded points, sensor frame, each with its normal
-/// pointing away from the sensor (step 1 of the module docs).
-pub fn walls(points: &[Point]) -> Result<Vec<PlaneSummary>, CalibrationError> {
-    let xyz: Vec<V3> = points
-        .iter()
-        .map(|p| V3::new(f64::from(p.x_m), f64::from(p.y_m), f64::from(p.z_m)))
-        .collect();
-    walls_of(&xyz)
-}
-
-/// [`walls`] of points given as positions in the sensor frame (metres).
+/// The walls of one parked capture, given as positions in the sensor frame (metres), each
+/// with its normal pointing away from the sensor (step 1 of the module docs).
 pub fn walls_of(points: &[V3]) -> Result<Vec<PlaneSummary>, CalibrationError> {
     // The planes are fitted to the points as they are: each return's ray from the sensor's
     // centre (the lasers' vertical offsets move a return by under 3 cm along a wall, not off it).
