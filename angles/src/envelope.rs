@@ -17,8 +17,12 @@
 //! toward the mean x (noise spreads points outward; with no noise the extremes are exact), heights
 //! clamped to the mode's height range. On noiseless piecewise-flat surfaces both samples lie exactly on the surface, so
 //! corners are kept to the point spacing; on noisy ones each sample averages the whole mode.
+//! Across the path the mode's height is its points' mean, which on a round part (an exhaust pipe)
+//! lies above the part's lowest line; where the modes of one part show a curve across the path,
+//! the line is lowered to the curve's vertex ([`cross_section_floor`]).
 //! Known bias (measured in the tests and docs/method/calculator.md): at a convex corner the mode mixes both
-//! faces within `w`, which lifts the envelope there by up to about `w / 2`.
+//! faces within `w`, which lifts the envelope there by up to about `w / 2`; a round part seen
+//! only from its side shows no vertex and keeps the mean, up to `w` above its lowest line.
 
 use std::collections::BTreeMap;
 
@@ -319,9 +323,13 @@ pub(crate) fn lower_envelope(points: &[V3], params: EnvelopeParams) -> Envelope 
     modes.sort_by(|a, b| a.start_m.total_cmp(&b.start_m));
     let fringe = fringe_bins(&modes, params);
     env.fringe_bins = fringe.iter().filter(|f| **f).count();
-    for (mode, is_fringe) in modes.into_iter().zip(fringe) {
+    let floors: Vec<Option<f64>> = (0..modes.len())
+        .map(|i| cross_section_floor(&modes, i, params))
+        .collect();
+    for ((mode, is_fringe), floor) in modes.iter().zip(fringe).zip(floors) {
         if !is_fringe {
-            env.samples.extend(mode.samples);
+            env.samples
+                .extend(mode.line.samples(mode.support, floor, params.noise_m));
         }
     }
     env
@@ -337,9 +345,9 @@ struct BinMode {
     width_m: f64,
     /// Points in the mode.
     support: usize,
-    /// Mean height of the mode's points.
-    z_m: f64,
-    samples: Vec<EnvelopeSample>,
+    /// The mode's points and their line along x (through their mean height).
+    points: Vec<V3>,
+    line: ModeLine,
 }
 
 impl BinMode {
@@ -374,8 +382,8 @@ fn bin_modes(
                 start_m: key as f64 * params.bin_m,
                 width_m: params.bin_m,
                 support: mode.len(),
-                z_m: mean_z(mode),
-                samples: line_samples(mode, params.noise_m),
+                line: ModeLine::of(mode),
+                points: mode.to_vec(),
             });
         } else {
             sparse_bins += 1;
@@ -469,7 +477,7 @@ fn fringe_bins(modes: &[BinMode], params: EnvelopeParams) -> Vec<bool> {
                     lo + j != i
                         && between <= gap_m
                         && o.density() >= FRINGE_RATIO as f64 * m.density()
-                        && o.z_m <= m.z_m + tol
+                        && o.line.z_m <= m.line.z_m + tol
                 })
         })
         .collect()
@@ -546,44 +554,173 @@ fn mean_z(points: &[V3]) -> f64 {
     points.iter().map(|p| p[2]).sum::<f64>() / points.len().max(1) as f64
 }
 
-/// The two samples of a bin: its mode's line at the lowest and the highest x.
-fn line_samples(mode: &[V3], noise_m: f64) -> Vec<EnvelopeSample> {
-    let n = mode.len() as f64;
-    let (mx, my, mz) = mode.iter().fold((0.0, 0.0, 0.0), |(a, b, c), p| {
-        (a + p[0], b + p[1], c + p[2])
+/// A mode's least-squares line along x, `z = z_m + slope (x - x_m)`, and its points' extent.
+#[derive(Debug, Clone, Copy)]
+struct ModeLine {
+    x_m: f64,
+    y_m: f64,
+    z_m: f64,
+    slope: f64,
+    x_range: (f64, f64),
+    y_range: (f64, f64),
+    z_range: (f64, f64),
+}
+
+impl ModeLine {
+    fn of(mode: &[V3]) -> ModeLine {
+        let n = mode.len() as f64;
+        let (mx, my, mz) = mode.iter().fold((0.0, 0.0, 0.0), |(a, b, c), p| {
+            (a + p[0], b + p[1], c + p[2])
+        });
+        let (mx, my, mz) = (mx / n, my / n, mz / n);
+        let (mut sxx, mut sxz) = (0.0, 0.0);
+        let (mut x_range, mut z_range) = ((f64::MAX, f64::MIN), (f64::MAX, f64::MIN));
+        for p in mode {
+            sxx += (p[0] - mx).powi(2);
+            sxz += (p[0] - mx) * (p[2] - mz);
+            x_range = (x_range.0.min(p[0]), x_range.1.max(p[0]));
+            z_range = (z_range.0.min(p[2]), z_range.1.max(p[2]));
+        }
+        let slope = if mode.len() >= 3 && sxx > 1e-12 {
+            sxz / sxx
+        } else {
+            0.0
+        };
+        ModeLine {
+            x_m: mx,
+            y_m: my,
+            z_m: mz,
+            slope,
+            x_range,
+            y_range: y_range(mode),
+            z_range,
+        }
+    }
+
+    /// The line's height at `x`.
+    fn at(&self, x: f64) -> f64 {
+        self.z_m + self.slope * (x - self.x_m)
+    }
+
+    /// The two samples of a bin: the line at the mode's lowest and highest x, each pulled 2
+    /// noise sigma toward the mean x, the line lowered to `floor` (at the mean x) where the
+    /// surface's cross-section puts its lowest line below the mode's mean
+    /// ([`cross_section_floor`]), heights clamped to the mode's range.
+    fn samples(&self, support: usize, floor: Option<f64>, noise_m: f64) -> Vec<EnvelopeSample> {
+        let level = floor.unwrap_or(self.z_m);
+        let at =
+            |x: f64| (level + self.slope * (x - self.x_m)).clamp(self.z_range.0, self.z_range.1);
+        let sample = |x: f64| EnvelopeSample {
+            x_m: x,
+            z_m: at(x),
+            y_m: self.y_m,
+            support,
+        };
+        let mx = self.x_m;
+        let (x_lo, x_hi) = (
+            (self.x_range.0 + 2.0 * noise_m).min(mx),
+            (self.x_range.1 - 2.0 * noise_m).max(mx),
+        );
+        if x_hi - x_lo < 1e-9 {
+            vec![sample(mx)]
+        } else {
+            vec![sample(x_lo), sample(x_hi)]
+        }
+    }
+}
+
+/// How far along x (metres) the modes of one part are pooled to see its cross-section.
+const CROSS_SECTION_REACH_M: f64 = 0.02;
+
+/// Fewest pooled points for a cross-section fit.
+const MIN_CROSS_SECTION_POINTS: usize = 30;
+
+/// The lowest height (at the mode's mean x) of the surface under mode `i` across the path, when
+/// the surface is curved there and its points show it; `None` for a flat or tilted surface, or a
+/// curve the points do not confirm.
+///
+/// Why: the mode holds the points within a window `2 w` of its lowest height, and its height is
+/// their mean. On a surface flat across the path that mean is the surface. On a round part along
+/// the path (an exhaust pipe) it is the mean over the arc the lidar sees, and a sensor beside and
+/// below the part sees mostly the side facing it: on the simulated SUV's exhaust (3 cm radius,
+/// 42 cm beside the path) the densest returns lie 1.5-2.5 cm beside the pipe's lowest line, and
+/// the modes' means read 5-9 mm above it. The side view wants the lowest line.
+///
+/// Model: across the path the surface is `a + b u + c u^2` near its lowest line (a round part's
+/// underside to second order), `u = y - y_i`. One bin holds too few points to show that curve, so
+/// the modes of the same part within [`CROSS_SECTION_REACH_M`] along x are pooled (those whose
+/// mean lies within mode `i`'s lateral extent and within `w` of its height), each point taken as
+/// its offset from its own mode's line (which removes the part's slope and the modes' own
+/// heights). The curve is used only when
+/// - `c` is positive by three standard errors (the points show a curve, not noise);
+/// - its vertex lies within the points' lateral extent;
+/// - the points within `delta` of the vertex, where the curve rises by one residual sigma, are at
+///   least `min_support`, and their mean agrees with the curve's mean over them within three
+///   standard errors. A wide surface flat in its middle and rising at its corners (a rounded
+///   bumper) also fits a positive `c`, but the parabola's vertex then lies below the flat
+///   middle, and the points there say so.
+fn cross_section_floor(modes: &[BinMode], i: usize, params: EnvelopeParams) -> Option<f64> {
+    let own = &modes[i].line;
+    // Modes are sorted by start; a mode's mean x lies within its bin, at most `MAX_BIN_M` on.
+    let first = modes.partition_point(|m| m.start_m < own.x_m - CROSS_SECTION_REACH_M - MAX_BIN_M);
+    let rows: Vec<(f64, f64)> = modes[first..]
+        .iter()
+        .take_while(|m| m.start_m <= own.x_m + CROSS_SECTION_REACH_M)
+        .filter(|m| {
+            (m.line.x_m - own.x_m).abs() <= CROSS_SECTION_REACH_M
+                && (m.line.z_m - own.z_m).abs() <= params.half_window_m
+                && (own.y_range.0..=own.y_range.1).contains(&m.line.y_m)
+        })
+        .flat_map(|m| {
+            m.points
+                .iter()
+                .map(move |p| (p[1] - own.y_m, p[2] - m.line.at(p[0])))
+        })
+        .collect();
+    if rows.len() < MIN_CROSS_SECTION_POINTS {
+        return None;
+    }
+    let mut ata = [[0.0; 3]; 3];
+    let mut atb = [0.0; 3];
+    for &(u, z) in &rows {
+        let r = [1.0, u, u * u];
+        for (j, rj) in r.iter().enumerate() {
+            atb[j] += rj * z;
+            for (k, rk) in r.iter().enumerate() {
+                ata[j][k] += rj * rk;
+            }
+        }
+    }
+    let [a, b, c] = passangle_geom::solve_spd(&ata, &atb)?;
+    let rss: f64 = rows
+        .iter()
+        .map(|&(u, z)| (z - a - b * u - c * u * u).powi(2))
+        .sum();
+    let sigma = (rss / (rows.len() - 3) as f64).sqrt();
+    let c_var = passangle_geom::solve_spd(&ata, &[0.0, 0.0, 1.0])?[2];
+    if sigma <= 0.0 || c <= 3.0 * sigma * c_var.max(0.0).sqrt() {
+        return None;
+    }
+    let vertex_u = -b / (2.0 * c);
+    let vertex = a - b * b / (4.0 * c);
+    let (u_lo, u_hi) = rows.iter().fold((f64::MAX, f64::MIN), |(lo, hi), &(u, _)| {
+        (lo.min(u), hi.max(u))
     });
-    let (mx, my, mz) = (mx / n, my / n, mz / n);
-    let (mut sxx, mut sxz) = (0.0, 0.0);
-    let (mut x_lo, mut x_hi, mut z_lo, mut z_hi) = (f64::MAX, f64::MIN, f64::MAX, f64::MIN);
-    for p in mode {
-        sxx += (p[0] - mx).powi(2);
-        sxz += (p[0] - mx) * (p[2] - mz);
-        x_lo = x_lo.min(p[0]);
-        x_hi = x_hi.max(p[0]);
-        z_lo = z_lo.min(p[2]);
-        z_hi = z_hi.max(p[2]);
+    if !(u_lo..=u_hi).contains(&vertex_u) {
+        return None;
     }
-    let slope = if mode.len() >= 3 && sxx > 1e-12 {
-        sxz / sxx
-    } else {
-        0.0
-    };
-    let at = |x: f64| (mz + slope * (x - mx)).clamp(z_lo, z_hi);
-    let sample = |x: f64| EnvelopeSample {
-        x_m: x,
-        z_m: at(x),
-        y_m: my,
-        support: mode.len(),
-    };
-    let (x_lo, x_hi) = (
-        (x_lo + 2.0 * noise_m).min(mx),
-        (x_hi - 2.0 * noise_m).max(mx),
-    );
-    if x_hi - x_lo < 1e-9 {
-        vec![sample(mx)]
-    } else {
-        vec![sample(x_lo), sample(x_hi)]
+    let delta = (sigma / c).sqrt();
+    let (n, sum) = rows
+        .iter()
+        .filter(|(u, _)| (u - vertex_u).abs() <= delta)
+        .fold((0usize, 0.0), |(n, s), &(_, z)| (n + 1, s + z));
+    if n < params.min_support.max(1) {
+        return None;
     }
+    // The curve's mean over `|u - vertex_u| <= delta`, for points spread evenly there.
+    let curve_mean = vertex + c * delta * delta / 3.0;
+    let agrees = (sum / n as f64 - curve_mean).abs() <= 3.0 * sigma / (n as f64).sqrt();
+    agrees.then_some(own.z_m + vertex)
 }
 
 #[cfg(test)]
@@ -851,6 +988,159 @@ mod tests {
         );
         let whole = lower_envelope(&pts, params);
         assert!(lowest(&whole) > 0.183, "{:?}", lowest(&whole));
+    }
+
+    /// Seeded normal deviates.
+    fn gaussian(seed: u64) -> impl FnMut(f64) -> f64 {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+        move |sigma: f64| {
+            let (u, v): (f64, f64) = (rng.random::<f64>().max(1e-12), rng.random());
+            sigma * (-2.0 * u.ln()).sqrt() * (std::f64::consts::TAU * v).cos()
+        }
+    }
+
+    /// A pipe along the path (radius 3 cm, lowest line 0.21 m up, `beside_m` beside the path)
+    /// over `x` -0.3..0, scanned from a sensor on the path 0.10 m up as it drives by: each
+    /// return comes from 0.2-1.5 m further along the path (the sensor looks ahead and behind),
+    /// on a ray evenly spaced in angle across the pipe's silhouette, moved along its ray by
+    /// range noise `range_m` (most of it along x, the rest across the pipe). The sensor sees the
+    /// arc of the pipe facing it: both sides of the lowest line when the pipe is near the path,
+    /// one side, from the lowest line up, when it is far beside it.
+    fn pipe_seen_by_a_passing_sensor(beside_m: f64, range_m: f64, seed: u64) -> Vec<V3> {
+        let (cy, cz, r): (f64, f64, f64) = (-beside_m, 0.24, 0.03);
+        let sensor = (0.0, 0.10);
+        let mut gauss = gaussian(seed);
+        let mut uniform = gaussian(seed + 1);
+        let (dy, dz) = (cy - sensor.0, cz - sensor.1);
+        let (to_centre, dist) = (dz.atan2(dy), dy.hypot(dz));
+        let half = (r / dist).asin();
+        let mut pts = Vec::new();
+        for i in 0..300 {
+            let x = -0.3 + f64::from(i) * 0.001;
+            for k in 0..25 {
+                let a = to_centre - half + 2.0 * half * (f64::from(k) + 0.5) / 25.0;
+                let (uy, uz) = (a.cos(), a.sin());
+                // Nearest intersection of the ray's projection with the circle.
+                let b = uy * dy + uz * dz;
+                let disc = b * b - (dist * dist - r * r);
+                if disc < 0.0 {
+                    continue;
+                }
+                let t = b - disc.sqrt();
+                // The ray's share across the path: its run along x is 0.2-1.5 m.
+                let along = 0.85 + 0.65 * (uniform(1.0).tanh());
+                let across = t / t.hypot(along);
+                let noise = gauss(range_m);
+                pts.push(V3::new(
+                    x + noise * along / t.hypot(along),
+                    sensor.0 + (t + noise * across) * uy,
+                    sensor.1 + (t + noise * across) * uz,
+                ));
+            }
+        }
+        pts
+    }
+
+    /// The pipe's envelope: the mean height of its samples, and of its modes' own means.
+    fn pipe_heights(pts: &[V3]) -> (f64, f64) {
+        let noise = 0.003;
+        let params = EnvelopeParams {
+            bin_m: 0.005,
+            half_window_m: 2.5 * noise,
+            min_support: 5,
+            noise_m: noise,
+        };
+        let env = lower_envelope(pts, params);
+        let floor = env.samples.iter().map(|s| s.z_m).sum::<f64>() / env.samples.len() as f64;
+        let mut modes = Vec::new();
+        bin_modes(pts, params, &mut modes, &mut Envelope::default());
+        let mode_mean = modes.iter().map(|m| m.line.z_m).sum::<f64>() / modes.len() as f64;
+        (floor, mode_mean)
+    }
+
+    #[test]
+    fn a_pipe_seen_from_below_has_its_lowest_line_below_the_mean_of_its_modes() {
+        // 15 cm beside the path: the sensor sees both sides of the lowest line, and the modes'
+        // window spans an arc that rises on both.
+        let (floor, mode_mean) = pipe_heights(&pipe_seen_by_a_passing_sensor(0.15, 0.01, 3));
+        assert!(mode_mean > 0.2125, "modes' mean {mode_mean}");
+        assert!(
+            (floor - 0.21).abs() < 0.5 * (mode_mean - 0.21),
+            "floor {floor}, modes' mean {mode_mean}"
+        );
+    }
+
+    #[test]
+    fn a_pipe_seen_from_its_side_is_left_at_the_mean_of_its_modes() {
+        // 42 cm beside the path: the points rise from the lowest line up one side only and show
+        // no vertex; the envelope keeps the modes' mean, above the lowest line (the known limit).
+        let (floor, mode_mean) = pipe_heights(&pipe_seen_by_a_passing_sensor(0.42, 0.01, 3));
+        assert!(
+            (floor - mode_mean).abs() < 5e-4,
+            "floor {floor}, modes' mean {mode_mean}"
+        );
+        assert!(floor > 0.213, "floor {floor}");
+    }
+
+    #[test]
+    fn a_flat_surface_keeps_the_mean_of_its_modes() {
+        let noise = 0.003;
+        let params = EnvelopeParams {
+            bin_m: 0.005,
+            half_window_m: 2.5 * noise,
+            min_support: 5,
+            noise_m: noise,
+        };
+        let mut gauss = gaussian(8);
+        let pts: Vec<V3> = (0..100)
+            .flat_map(|i| (0..60).map(move |j| (i, j)))
+            .map(|(i, j)| {
+                V3::new(
+                    f64::from(i) * 0.001,
+                    -0.3 + f64::from(j) * 0.005,
+                    0.25 + 0.02 * f64::from(j) * 0.005,
+                )
+            })
+            .map(|p| V3::new(p[0], p[1], p[2] + gauss(noise)))
+            .collect();
+        let mut modes = Vec::new();
+        bin_modes(&pts, params, &mut modes, &mut Envelope::default());
+        modes.sort_by(|a, b| a.start_m.total_cmp(&b.start_m));
+        for i in 0..modes.len() {
+            assert_eq!(cross_section_floor(&modes, i, params), None, "bin {i}");
+        }
+    }
+
+    #[test]
+    fn a_flat_bottom_with_rounded_corners_keeps_its_flat_height() {
+        // A bumper's lower face 1.2 m wide, flat at 0.30 m, rounded up at both corners with a
+        // 10 cm radius: a parabola over it is deepest below the flat middle, the points there
+        // refuse it.
+        let noise = 0.003;
+        let params = EnvelopeParams {
+            bin_m: 0.005,
+            half_window_m: 2.5 * noise,
+            min_support: 5,
+            noise_m: noise,
+        };
+        let mut gauss = gaussian(9);
+        let height = |y: f64| {
+            let outer = (y.abs() - 0.5).max(0.0);
+            0.30 + 0.1 - (0.1f64.powi(2) - outer.min(0.1).powi(2)).sqrt()
+        };
+        let pts: Vec<V3> = (0..100)
+            .flat_map(|i| (0..=240).map(move |j| (i, j)))
+            .map(|(i, j)| {
+                let y = -0.6 + f64::from(j) * 0.005;
+                V3::new(f64::from(i) * 0.001, y, height(y))
+            })
+            .map(|p| V3::new(p[0], p[1], p[2] + gauss(noise)))
+            .collect();
+        let env = lower_envelope(&pts, params);
+        for s in &env.samples {
+            assert!((s.z_m - 0.30).abs() < 0.0015, "{s:?}");
+        }
     }
 
     #[test]
