@@ -990,6 +990,14 @@ mod tests {
         assert!(lowest(&whole) > 0.183, "{:?}", lowest(&whole));
     }
 
+    /// The envelope's parameters for a cloud with 3 mm noise: 5 mm bins, the window 2.5 sigma.
+    const NOISE_3MM: EnvelopeParams = EnvelopeParams {
+        bin_m: 0.005,
+        half_window_m: 2.5 * 0.003,
+        min_support: 5,
+        noise_m: 0.003,
+    };
+
     /// Seeded normal deviates.
     fn gaussian(seed: u64) -> impl FnMut(f64) -> f64 {
         use rand::{Rng, SeedableRng};
@@ -1044,13 +1052,7 @@ mod tests {
 
     /// The pipe's envelope: the mean height of its samples, and of its modes' own means.
     fn pipe_heights(pts: &[V3]) -> (f64, f64) {
-        let noise = 0.003;
-        let params = EnvelopeParams {
-            bin_m: 0.005,
-            half_window_m: 2.5 * noise,
-            min_support: 5,
-            noise_m: noise,
-        };
+        let params = NOISE_3MM;
         let env = lower_envelope(pts, params);
         let floor = env.samples.iter().map(|s| s.z_m).sum::<f64>() / env.samples.len() as f64;
         let mut modes = Vec::new();
@@ -1085,13 +1087,7 @@ mod tests {
 
     #[test]
     fn a_flat_surface_keeps_the_mean_of_its_modes() {
-        let noise = 0.003;
-        let params = EnvelopeParams {
-            bin_m: 0.005,
-            half_window_m: 2.5 * noise,
-            min_support: 5,
-            noise_m: noise,
-        };
+        let (noise, params) = (NOISE_3MM.noise_m, NOISE_3MM);
         let mut gauss = gaussian(8);
         let pts: Vec<V3> = (0..100)
             .flat_map(|i| (0..60).map(move |j| (i, j)))
@@ -1117,13 +1113,7 @@ mod tests {
         // A bumper's lower face 1.2 m wide, flat at 0.30 m, rounded up at both corners with a
         // 10 cm radius: a parabola over it is deepest below the flat middle, the points there
         // refuse it.
-        let noise = 0.003;
-        let params = EnvelopeParams {
-            bin_m: 0.005,
-            half_window_m: 2.5 * noise,
-            min_support: 5,
-            noise_m: noise,
-        };
+        let (noise, params) = (NOISE_3MM.noise_m, NOISE_3MM);
         let mut gauss = gaussian(9);
         let height = |y: f64| {
             let outer = (y.abs() - 0.5).max(0.0);
