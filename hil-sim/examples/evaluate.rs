@@ -967,10 +967,14 @@ fn main() -> anyhow::Result<()> {
         || "hil-sim/evaluation.toml".to_owned(),
         |p| p.display().to_string(),
     );
-    let protocol_path = args
-        .protocol
-        .clone()
-        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("evaluation.toml"));
+    // Absolute, so that the vehicle and world paths it gives each run do not resolve again
+    // against the template's directory (a relative `--protocol evaluation.toml` found no worlds).
+    let protocol_path = std::path::absolute(
+        args.protocol
+            .clone()
+            .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("evaluation.toml")),
+    )
+    .context("the protocol's path")?;
     let text = std::fs::read_to_string(&protocol_path)
         .with_context(|| protocol_path.display().to_string())?;
     let protocol: Protocol =
