@@ -138,14 +138,12 @@ impl StraightRun {
     /// The profile braking to a stop at `d` metres, `t` seconds after the start: a trapezoid,
     /// or a triangle when `d` is too short to reach the cruise speed.
     fn stopping_distance(&self, t: f64, d: f64) -> f64 {
-        let (a, v) = (self.accel_mps2, self.speed_mps);
+        let a = self.accel_mps2;
         if a <= 0.0 {
-            return (v * t).min(d);
+            return (self.speed_mps * t).min(d);
         }
-        let peak = v.min((a * d).sqrt());
-        let t_ramp = peak / a;
+        let (peak, t_ramp, t_cruise) = self.stop_profile(d);
         let d_ramp = 0.5 * peak * t_ramp;
-        let t_cruise = (d - 2.0 * d_ramp) / peak;
         if t < t_ramp {
             0.5 * a * t * t
         } else if t < t_ramp + t_cruise {
@@ -154,6 +152,14 @@ impl StraightRun {
             let u = (t - t_ramp - t_cruise).min(t_ramp);
             d - d_ramp + peak * u - 0.5 * a * u * u
         }
+    }
+
+    /// A stop at `d` metres (`accel_mps2` > 0): the peak speed (the cruise speed, or less when
+    /// `d` is too short to reach it), the time of each ramp and the time at the peak.
+    fn stop_profile(&self, d: f64) -> (f64, f64, f64) {
+        let peak = self.speed_mps.min((self.accel_mps2 * d).sqrt());
+        let t_ramp = peak / self.accel_mps2;
+        (peak, t_ramp, (d - peak * t_ramp) / peak)
     }
 
     /// Time from the scenario's start until the wheels have covered `distance_m` (the pause
@@ -166,9 +172,8 @@ impl StraightRun {
         if let Some(d) = self.stop_after_m
             && self.accel_mps2 > 0.0
         {
-            let peak = self.speed_mps.min((self.accel_mps2 * d).sqrt());
-            let t_ramp = peak / self.accel_mps2;
-            return 2.0 * self.still_s + 2.0 * t_ramp + (d - peak * t_ramp) / peak;
+            let (_, t_ramp, t_cruise) = self.stop_profile(d);
+            return 2.0 * self.still_s + 2.0 * t_ramp + t_cruise;
         }
         self.still_s + self.moving_time(distance_m)
     }

@@ -707,8 +707,6 @@ mod tests {
         let traj = StraightRun {
             accel_mps2: 0.5,
             vibration: Vibration::new(sigma, sigma, 3),
-            still_s: 0.0,
-            stop_after_m: None,
             ..run()
         };
         let sim = Vlp16Sim::new(&scene, &traj, Vlp16Config::default(), 1);
@@ -734,8 +732,6 @@ mod tests {
         let sigma = 2f64.to_radians();
         let traj = StraightRun {
             vibration: Vibration::new(sigma, sigma, 8),
-            still_s: 0.0,
-            stop_after_m: None,
             ..run()
         };
         for (rpm, mount_rpy_deg) in [

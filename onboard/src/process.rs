@@ -453,11 +453,8 @@ impl Ord for Held {
 pub struct RunBuilder {
     pipeline: Pipeline,
     wheel_distance_scale: f64,
-    /// With `Some`, released lidar frames and raw wheel reports go here instead of into the
-    /// pipeline ([`read_streams`]).
-    collected: Option<(Vec<LidarFrame>, Vec<WheelOdometry>)>,
-    /// Host wall time (us) of a drive whose lidar frames are not collected (`read_streams`).
-    skip_us: Option<(u64, u64)>,
+    /// With `Some`, released items go here instead of into the pipeline ([`read_streams`]).
+    collected: Option<Collected>,
     min_cloud_points: usize,
     assembler: FrameAssembler,
     t0_ns: Option<u64>,
@@ -488,7 +485,6 @@ impl RunBuilder {
                 .map_err(|e| format!("pipeline config: {e}"))?,
             wheel_distance_scale: config.wheel_distance_scale,
             collected: None,
-            skip_us: None,
             min_cloud_points: config.min_cloud_points,
             assembler: FrameAssembler::new(DecoderConfig {
                 range_offsets_m: config.lidar_range_offsets_m,
@@ -595,17 +591,17 @@ impl RunBuilder {
         while self.held.peek().is_some_and(|h| h.stamp_s < until_s) {
             let Some(h) = self.held.pop() else { break };
             self.released_s = self.released_s.max(h.stamp_s);
-            if let Some((lidar, wheel)) = &mut self.collected {
+            if let Some(c) = &mut self.collected {
                 match h.item {
-                    Item::Wheel(w) => wheel.push(w),
+                    Item::Wheel(w) => c.wheel.push(w),
                     Item::Lidar(l) => {
                         let t0_us = self.t0_ns.unwrap_or(0) as f64 * 1e-3;
                         let wall_us = l.stamp_s * 1e6 + t0_us;
-                        let driving = self
+                        let driving = c
                             .skip_us
                             .is_some_and(|(a, b)| wall_us > a as f64 && wall_us < b as f64);
                         if !driving {
-                            lidar.push(l);
+                            c.lidar.push(l);
                         }
                     }
                     Item::Depth(_) => {}
@@ -706,19 +702,20 @@ pub fn read_streams(
 ) -> Result<(Vec<LidarFrame>, Vec<WheelOdometry>), String> {
     let odometry = read_odometry(dir)?;
     let mut builder = RunBuilder::new(config)?;
-    builder.collected = Some((Vec::new(), Vec::new()));
+    let mut collected = Collected::default();
     let moving = |o: &&(u64, Odometry)| {
-        f64::from(o.1.vx_mps).hypot(f64::from(o.1.vy_mps)) > crate::wheel_calibration::PARKED_MPS
+        crate::wheel_calibration::moving(f64::from(o.1.vx_mps), f64::from(o.1.vy_mps))
     };
     if let (Some(first), Some(last)) = (
         odometry.0.iter().find(moving),
         odometry.0.iter().rev().find(moving),
     ) {
-        builder.skip_us = Some((
+        collected.skip_us = Some((
             first.0 + SKIP_MARGIN_US,
             last.0.saturating_sub(SKIP_MARGIN_US),
         ));
     }
+    builder.collected = Some(collected);
     feed_recording(dir, &mut builder, &odometry)?;
     if builder.t0_ns.is_none() {
         return Err(format!(
@@ -727,7 +724,17 @@ pub fn read_streams(
         ));
     }
     builder.release(f64::NEG_INFINITY);
-    Ok(builder.collected.take().unwrap_or_default())
+    let c = builder.collected.take().unwrap_or_default();
+    Ok((c.lidar, c.wheel))
+}
+
+/// What [`read_streams`] collects from a [`RunBuilder`]: its lidar frames, except those whose
+/// host wall time (us) lies within `skip_us` (the drive), and its raw wheel reports.
+#[derive(Default)]
+struct Collected {
+    lidar: Vec<LidarFrame>,
+    wheel: Vec<WheelOdometry>,
+    skip_us: Option<(u64, u64)>,
 }
 
 /// How far into the drive [`read_streams`] still keeps lidar frames, us: the wheel reports'

@@ -425,36 +425,29 @@ impl RunMachine {
                 reason,
                 rest_since_us,
             } => {
-                if obs.at_rest {
+                // Since when the robot has been at rest; moving again starts it over.
+                let rest_since = obs.at_rest.then(|| rest_since_us.unwrap_or(now_us));
+                if let State::Stopping { rest_since_us, .. } = &mut self.state {
+                    *rest_since_us = rest_since;
+                }
+                match rest_since {
                     // A run to process stays recorded while parked for `parked-us`; an aborted
                     // one ends at once.
-                    let rest_us = rest_since_us.unwrap_or(now_us);
-                    let parked = now_us.saturating_sub(rest_us) >= c.parked_us;
-                    if parked || matches!(then, AfterStop::Abort) {
+                    Some(rest_us)
+                        if now_us.saturating_sub(rest_us) >= c.parked_us
+                            || matches!(then, AfterStop::Abort) =>
+                    {
                         self.after_stop(now_us, then, reason, &mut out);
-                    } else {
-                        self.state = State::Stopping {
-                            since_us,
-                            then,
-                            reason,
-                            rest_since_us: Some(rest_us),
-                        };
                     }
-                } else if now_us.saturating_sub(since_us) > c.stop_timeout_us {
-                    out.insert(0, Action::Motion(MotionIntent::StopNow));
-                    let reason = format!(
-                        "robot not at rest {} ms after stop; {reason}",
-                        c.stop_timeout_us / 1000
-                    );
-                    self.end(now_us, Outcome::Failed(reason), &mut out);
-                } else if rest_since_us.is_some() {
-                    // Moving again: the parked time starts over when it next comes to rest.
-                    self.state = State::Stopping {
-                        since_us,
-                        then,
-                        reason,
-                        rest_since_us: None,
-                    };
+                    None if now_us.saturating_sub(since_us) > c.stop_timeout_us => {
+                        out.insert(0, Action::Motion(MotionIntent::StopNow));
+                        let reason = format!(
+                            "robot not at rest {} ms after stop; {reason}",
+                            c.stop_timeout_us / 1000
+                        );
+                        self.end(now_us, Outcome::Failed(reason), &mut out);
+                    }
+                    _ => {}
                 }
             }
         }

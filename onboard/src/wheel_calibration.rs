@@ -18,8 +18,9 @@
 //!    lidar's frame by the mount, is the expected direction of travel.
 //! 3. **Travel**: [`vlp16::travel::travel_between`] of the two captures' walls.
 //!
-//! Approximate: the sideways part of the drive is neglected (a straight drive keeps it to
-//! millimetres), and the standard error takes the returns as independent.
+//! Approximate: with walls ahead or behind only, the sideways part of the drive is neglected (a
+//! straight drive keeps it to millimetres); the standard error takes the returns as
+//! independent.
 
 use pipeline::config::MountConfig;
 use pipeline::fusion::WHEEL_SCALE_RANGE;
@@ -30,6 +31,12 @@ use vlp16::travel::{Travel, TravelError, travel_between, walls_of};
 
 /// Wheel speed below which the robot is parked, m/s.
 pub const PARKED_MPS: f64 = 0.005;
+
+/// Whether wheels reporting these speeds are moving (faster than [`PARKED_MPS`]).
+#[must_use]
+pub fn moving(vx_mps: f64, vy_mps: f64) -> bool {
+    vx_mps.hypot(vy_mps) > PARKED_MPS
+}
 /// Fewest frames of each parked capture (half a second at 600 rpm).
 pub const MIN_PARKED_FRAMES: usize = 5;
 /// Shortest calibration drive, metres: over a shorter one a millimetre of the walls is more
@@ -96,10 +103,10 @@ pub fn calibrate_wheels(
     wheel: &[WheelOdometry],
     mounts: &MountConfig,
 ) -> Result<WheelCalibration, WheelCalibrationError> {
-    let moving = |w: &WheelOdometry| w.vx_mps.hypot(w.vy_mps) > PARKED_MPS;
+    let is_moving = |w: &WheelOdometry| moving(w.vx_mps, w.vy_mps);
     let (Some(first), Some(last)) = (
-        wheel.iter().position(moving),
-        wheel.iter().rposition(moving),
+        wheel.iter().position(is_moving),
+        wheel.iter().rposition(is_moving),
     ) else {
         return Err(WheelCalibrationError::NoDrive { distance_m: 0.0 });
     };

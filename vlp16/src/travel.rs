@@ -34,7 +34,7 @@
 //!    than unknowns, the residuals' scatter if that is larger (a wall that is not flat, a
 //!    sideways drift the model neglects). Approximate: returns taken as independent.
 
-use passangle_geom::V3;
+use passangle_geom::{V3, solve_spd};
 use thiserror::Error;
 
 use super::calibration::{
@@ -165,18 +165,19 @@ pub fn travel_between(
     if !matched.iter().any(|m| m.2.dot(&u).abs() >= MIN_FACING) {
         return Err(TravelError::NoCommonWall);
     }
-    let t = solve_travel(&matched, u);
+    let Solve {
+        t,
+        information,
+        dof,
+    } = solve_travel(&matched, u);
     let distance_m = t.norm();
     let along = t / distance_m.max(1e-12);
     // Each wall's residual against the solved travel, for the scatter.
-    let residuals: Vec<f64> = matched.iter().map(|m| m.2.dot(&t) - m.3).collect();
-    let (information, dof) = information_along(&matched, u, along);
-    let propagated = information.recip().sqrt();
     let chi2: f64 = matched
         .iter()
-        .zip(&residuals)
-        .map(|(m, r)| m.4 * r * r)
+        .map(|m| m.4 * (m.2.dot(&t) - m.3).powi(2))
         .sum();
+    let propagated = information.recip().sqrt();
     let scatter = if dof > 0 {
         (chi2 / dof as f64 / information).sqrt()
     } else {
@@ -197,14 +198,29 @@ pub fn travel_between(
 /// A matched wall: (start, end, mean normal, change of distance `d - d'`, weight).
 type Matched = (PlaneSummary, PlaneSummary, V3, f64, f64);
 
-/// The weighted normal matrix of `n . t = d - d'` over the walls' x and y components, and
-/// whether it determines both components of `t`: the weaker direction holds at least a
-/// hundredth of the stronger's information (a side wall seen over a few thousand returns).
-fn normal_matrix(matched: &[Matched]) -> ([[f64; 2]; 2], bool) {
+/// The weighted least squares of `n . t = d - d'` over the matched walls (module docs), solved
+/// once.
+struct Solve {
+    /// The travel, sensor frame, in the plane of the sensor's x and y.
+    t: V3,
+    /// Information (inverse variance) on the travel's length, along `t`.
+    information: f64,
+    /// Walls beyond the unknowns.
+    dof: usize,
+}
+
+/// The travel `t` (in the plane of the sensor's x and y: the robot drives on its floor) by
+/// weighted least squares over the matched walls: both components where the walls determine
+/// them (walls ahead or behind and walls beside the path: the weaker direction holds at least a
+/// hundredth of the stronger's information), else only the part along `u` (walls ahead or
+/// behind alone: the sideways part is the wheels', zero).
+fn solve_travel(matched: &[Matched], u: V3) -> Solve {
     let mut ata = [[0.0; 2]; 2];
-    for (_, _, n, _, w) in matched {
+    let mut atb = [0.0; 2];
+    for (_, _, n, dd, w) in matched {
         let a = [n[0], n[1]];
         for i in 0..2 {
+            atb[i] += w * a[i] * dd;
             for j in 0..2 {
                 ata[i][j] += w * a[i] * a[j];
             }
@@ -212,34 +228,19 @@ fn normal_matrix(matched: &[Matched]) -> ([[f64; 2]; 2], bool) {
     }
     let det = ata[0][0] * ata[1][1] - ata[0][1] * ata[1][0];
     let trace = ata[0][0] + ata[1][1];
-    (ata, det > 1e-2 * (0.5 * trace).powi(2))
-}
-
-/// The inverse of a 2 x 2 matrix whose determinant is not zero.
-fn inverse2(m: [[f64; 2]; 2]) -> [[f64; 2]; 2] {
-    let det = m[0][0] * m[1][1] - m[0][1] * m[1][0];
-    [
-        [m[1][1] / det, -m[0][1] / det],
-        [-m[1][0] / det, m[0][0] / det],
-    ]
-}
-
-/// The travel `t` (sensor frame, in the plane of the sensor's x and y: the robot drives on its
-/// floor) by weighted least squares over the matched walls, `n . t = d - d'`: both components
-/// where the walls determine them (walls ahead or behind and walls beside the path), else only
-/// the part along `u` (walls ahead or behind alone: the sideways part is the wheels', zero).
-fn solve_travel(matched: &[Matched], u: V3) -> V3 {
-    let (ata, both) = normal_matrix(matched);
-    if both {
-        let atb = matched.iter().fold([0.0; 2], |acc, (_, _, n, dd, w)| {
-            [acc[0] + w * n[0] * dd, acc[1] + w * n[1] * dd]
-        });
-        let inv = inverse2(ata);
-        return V3::new(
-            inv[0][0] * atb[0] + inv[0][1] * atb[1],
-            inv[1][0] * atb[0] + inv[1][1] * atb[1],
-            0.0,
-        );
+    if det > 1e-2 * (0.5 * trace).powi(2)
+        && let Some([tx, ty]) = solve_spd(&ata, &atb)
+    {
+        let t = V3::new(tx, ty, 0.0);
+        let along = t / t.norm().max(1e-12);
+        // var(along . t) = along^T (A^T W A)^-1 along.
+        let variance = solve_spd(&ata, &[along[0], along[1]])
+            .map_or(f64::INFINITY, |x| x[0] * along[0] + x[1] * along[1]);
+        return Solve {
+            t,
+            information: variance.recip(),
+            dof: matched.len().saturating_sub(2),
+        };
     }
     let (num, den) = matched
         .iter()
@@ -247,27 +248,11 @@ fn solve_travel(matched: &[Matched], u: V3) -> V3 {
             let f = n.dot(&u);
             (num + w * f * dd, den + w * f * f)
         });
-    u * (num / den)
-}
-
-/// Information on the travel's length (along `along`) and the degrees of freedom left, for the
-/// solve [`solve_travel`] made.
-fn information_along(matched: &[Matched], u: V3, along: V3) -> (f64, usize) {
-    let (ata, both) = normal_matrix(matched);
-    if both {
-        // var(along . t) = along^T (A^T W A)^-1 along.
-        let inv = inverse2(ata);
-        let v = [along[0], along[1]];
-        let var: f64 = (0..2)
-            .map(|i| (0..2).map(|j| v[i] * inv[i][j] * v[j]).sum::<f64>())
-            .sum();
-        return (var.recip(), matched.len().saturating_sub(2));
+    Solve {
+        t: u * (num / den),
+        information: den,
+        dof: matched.len().saturating_sub(1),
     }
-    let den: f64 = matched
-        .iter()
-        .map(|(_, _, n, _, w)| w * n.dot(&u).powi(2))
-        .sum();
-    (den, matched.len().saturating_sub(1))
 }
 
 #[cfg(test)]
@@ -285,12 +270,9 @@ mod tests {
 
     #[test]
     fn the_walls_ahead_and_behind_give_the_travel() {
-        // Driving 3 m along -x: the wall behind (normal -x... seen ahead at +x) comes nearer.
+        // Driving 3.03 m along -x: the wall at +x recedes, the wall at -x comes nearer.
         let start = [wall([1.0, 0.0, 0.0], 8.0), wall([-1.0, 0.0, 0.0], 4.0)];
-        let end = [
-            wall([1.0, 0.0, 0.0], 11.03),
-            wall([-1.0, 0.0, 0.0], 0.97 + 0.0),
-        ];
+        let end = [wall([1.0, 0.0, 0.0], 11.03), wall([-1.0, 0.0, 0.0], 0.97)];
         let t = travel_between(&start, &end, [-1.0, 0.0, 0.0], 2.95).unwrap();
         assert!((t.distance_m - 3.03).abs() < 1e-9, "{t:?}");
         assert_eq!(t.walls.len(), 2);
