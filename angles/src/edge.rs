@@ -392,6 +392,7 @@ mod tests {
             half_window_m: 0.005,
             min_support: 5,
             noise_m,
+            scan_line: None,
         };
         let mut samples = lower_envelope(points, params).samples;
         samples.sort_by(|a, b| a.x_m.total_cmp(&b.x_m));
@@ -447,6 +448,7 @@ mod tests {
             half_window_m: 0.002,
             min_support: 5,
             noise_m: 0.0,
+            scan_line: None,
         };
         let mut samples = lower_envelope(&points, params).samples;
         let before = samples.clone();

@@ -176,7 +176,8 @@ pub struct AnglesConfig {
     /// What the scanner could see from each position of [`Self::scan_path_in_cloud`]; `None`:
     /// not known. With it and the path, an approach or departure witness's part may reach beyond
     /// it only as far as the scanner did not see empty, and the angle and its uncertainty say so
-    /// (`visibility`).
+    /// (`visibility`); and the envelope takes a part's lowest line across the path from the
+    /// returns' ray angles (`envelope::cross_section_floor`).
     pub scanner_view: Option<ScannerView>,
 }
 
@@ -567,11 +568,15 @@ pub fn compute_angles(
     let band_y_m = band(&fits, config.band, &mut warnings);
     // The overhangs, where faces across the path are left out of the envelope's modes.
     let (front_x, rear_x) = zone_limits(front, rear, Zone::Axle);
+    let scan_path = path_in_frame(&frame, config);
     let body = classify(
         &settled.in_frame,
         &fits,
         (rear_x, front_x),
         config,
+        config.scanner_view.and_then(|v| {
+            envelope::ScanLine::new(&scan_path, (v.elevation_min_rad, v.elevation_max_rad))
+        }),
         noise_m,
         band_y_m,
         &mut counts,
@@ -794,12 +799,15 @@ fn body_floor_m(config: &AnglesConfig, noise_sigma_m: f64) -> f64 {
     (1.5 * config.ground_threshold_m).max(4.0 * noise_sigma_m)
 }
 
-/// Split points into ground, tyre and body; build the body's lower envelope inside the band.
+/// Split points into ground, tyre and body; build the body's lower envelope inside the band,
+/// seen from `scan_line` where it is known.
+#[allow(clippy::too_many_arguments)]
 fn classify(
     in_frame: &[V3],
     fits: &[(TyrePosition, TyreFit)],
     axles_x_m: (f64, f64),
     config: &AnglesConfig,
+    scan_line: Option<envelope::ScanLine>,
     noise_sigma_m: f64,
     band_y_m: (f64, f64),
     counts: &mut PointCounts,
@@ -863,6 +871,7 @@ fn classify(
         half_window_m,
         min_support: config.min_support,
         noise_m: noise_sigma_m,
+        scan_line,
     };
     // Between the axles the underside is seen from below, its noise is vertical, and a lower
     // part beside a wider surface within the window (a sill 1 cm below the floor pan) must keep
@@ -1050,6 +1059,17 @@ fn fit_tyres(
         }
     }
     Ok(out)
+}
+
+/// The scan path's positions in `frame`, sorted by x.
+fn path_in_frame(frame: &VehicleFrame, config: &AnglesConfig) -> Vec<V3> {
+    let mut path: Vec<V3> = config
+        .scan_path_in_cloud
+        .iter()
+        .map(|&p| frame.vehicle_from_cloud(p))
+        .collect();
+    path.sort_by(|a, b| a[0].total_cmp(&b[0]));
+    path
 }
 
 /// The scan path's positions in `frame`, `(x, y)`.
