@@ -328,9 +328,15 @@ pub(crate) fn lower_envelope(points: &[V3], params: EnvelopeParams) -> Envelope 
     let fringe = fringe_bins(&modes, params);
     env.fringe_bins = fringe.iter().filter(|f| **f).count();
     let extent_y_m = y_range(points);
-    let floors: Vec<Option<f64>> = (0..modes.len())
-        .map(|i| cross_section_floor(&modes, i, params, extent_y_m))
-        .collect();
+    let floors: Vec<Option<f64>> = match params.scan_line {
+        Some(line) => {
+            let rays = line.rays(&modes);
+            (0..modes.len())
+                .map(|i| cross_section_floor(&modes, &rays, i, params, extent_y_m))
+                .collect()
+        }
+        None => vec![None; modes.len()],
+    };
     for ((mode, is_fringe), floor) in modes.iter().zip(fringe).zip(floors) {
         if !is_fringe {
             env.samples
@@ -578,6 +584,11 @@ struct ModeLine {
     x_range: (f64, f64),
     y_range: (f64, f64),
     z_range: (f64, f64),
+    /// Points, and their sums of squares and products about the means (x x, x z): what pools
+    /// lines ([`pooled_line`]).
+    n: usize,
+    sxx: f64,
+    sxz: f64,
 }
 
 impl ModeLine {
@@ -595,25 +606,18 @@ impl ModeLine {
             x_range = (x_range.0.min(p[0]), x_range.1.max(p[0]));
             z_range = (z_range.0.min(p[2]), z_range.1.max(p[2]));
         }
-        let slope = if mode.len() >= 3 && sxx > 1e-12 {
-            sxz / sxx
-        } else {
-            0.0
-        };
         ModeLine {
             x_m: mx,
             y_m: my,
             z_m: mz,
-            slope,
+            slope: slope_of(mode.len(), sxx, sxz),
             x_range,
             y_range: y_range(mode),
             z_range,
+            n: mode.len(),
+            sxx,
+            sxz,
         }
-    }
-
-    /// The line's height at `x`.
-    fn at(&self, x: f64) -> f64 {
-        self.z_m + self.slope * (x - self.x_m)
     }
 
     /// The two samples of a bin: the line at the mode's lowest and highest x, each pulled 2
@@ -643,6 +647,33 @@ impl ModeLine {
     }
 }
 
+/// A least-squares slope from `n` points' sums about their means; 0 for fewer than 3 points or
+/// no spread along x.
+fn slope_of(n: usize, sxx: f64, sxz: f64) -> f64 {
+    if n >= 3 && sxx > 1e-12 {
+        sxz / sxx
+    } else {
+        0.0
+    }
+}
+
+/// The least-squares line `(x_mean, z_mean, slope)` through all the points of `lines`, from
+/// their sums (no point is visited).
+fn pooled_line<'a>(lines: impl Iterator<Item = &'a ModeLine> + Clone) -> (f64, f64, f64) {
+    let n: usize = lines.clone().map(|l| l.n).sum();
+    let weight = |l: &ModeLine| l.n as f64 / n.max(1) as f64;
+    let mx: f64 = lines.clone().map(|l| weight(l) * l.x_m).sum();
+    let mz: f64 = lines.clone().map(|l| weight(l) * l.z_m).sum();
+    let (sxx, sxz) = lines.fold((0.0, 0.0), |(sxx, sxz), l| {
+        let (dx, dz) = (l.x_m - mx, l.z_m - mz);
+        (
+            sxx + l.sxx + l.n as f64 * dx * dx,
+            sxz + l.sxz + l.n as f64 * dx * dz,
+        )
+    });
+    (mx, mz, slope_of(n, sxx, sxz))
+}
+
 /// How far along x (metres) the modes of one part are pooled to see its cross-section.
 const CROSS_SECTION_REACH_M: f64 = 0.02;
 
@@ -651,8 +682,8 @@ const MIN_CROSS_SECTION_POINTS: usize = 30;
 
 /// The lowest height (at the mode's mean x) of the surface under mode `i` across the path, when
 /// the points show that part of the surface lies clearly below the mode's mean; `None` when no
-/// part of it does (a surface flat across the path, or too few points to tell), or the scan
-/// line is not known (`params.scan_line`).
+/// part of it does (a surface flat across the path, or too few points to tell). `rays` are the
+/// modes' points whose rays from the scan line may run mostly across the path ([`ScanLine::ray`]).
 ///
 /// Why: the mode holds the points within a window `2 w` of its lowest height, and its height is
 /// their mean. On a surface flat across the path that mean is the surface. On a round part along
@@ -673,7 +704,7 @@ const MIN_CROSS_SECTION_POINTS: usize = 30;
 /// [`CROSS_SECTION_REACH_M`] along x are pooled (those whose mean lies within mode `i`'s lateral
 /// extent and within `w` of its height), each point taken as its offset from the pool's own
 /// least-squares line along x (which removes the part's slope along x). Only the points whose
-/// ray may run mostly across the path take part ([`ScanLine::row`]). They are ordered by ray
+/// ray may run mostly across the path take part (`rays`). They are ordered by ray
 /// angle and split into consecutive groups, as many as each group has points (the square root
 /// of their number: resolution across the section against each group's standard error).
 /// Groups near the points' lateral limits are left out (see `clear` below). The lowest group's
@@ -682,35 +713,41 @@ const MIN_CROSS_SECTION_POINTS: usize = 30;
 /// more than three of its standard errors below the pool's line, and below the mode's mean.
 fn cross_section_floor(
     modes: &[BinMode],
+    rays: &[Vec<Ray>],
     i: usize,
     params: EnvelopeParams,
     extent_y_m: (f64, f64),
 ) -> Option<f64> {
-    let line = params.scan_line?;
     let own = &modes[i].line;
     // Modes are sorted by start; a mode's mean x lies within its bin, at most `MAX_BIN_M` on.
     let first = modes.partition_point(|m| m.start_m < own.x_m - CROSS_SECTION_REACH_M - MAX_BIN_M);
-    let pool: Vec<V3> = modes[first..]
-        .iter()
-        .take_while(|m| m.start_m <= own.x_m + CROSS_SECTION_REACH_M)
-        .filter(|m| {
-            (m.line.x_m - own.x_m).abs() <= CROSS_SECTION_REACH_M
-                && (m.line.z_m - own.z_m).abs() <= params.half_window_m
-                && (own.y_range.0..=own.y_range.1).contains(&m.line.y_m)
+    let pool: Vec<usize> = (first..modes.len())
+        .take_while(|&k| modes[k].start_m <= own.x_m + CROSS_SECTION_REACH_M)
+        .filter(|&k| {
+            let m = &modes[k].line;
+            (m.x_m - own.x_m).abs() <= CROSS_SECTION_REACH_M
+                && (m.z_m - own.z_m).abs() <= params.half_window_m
+                && (own.y_range.0..=own.y_range.1).contains(&m.y_m)
         })
-        .flat_map(|m| m.points.iter().copied())
         .collect();
+    if pool.iter().map(|&k| rays[k].len()).sum::<usize>() < MIN_CROSS_SECTION_POINTS {
+        return None;
+    }
     // The pool's own line along x: one level for the part over the pool's length, so that a
     // mode whose mean one bin's mix of points lifted takes the part's lowest line, not its own
     // mean minus the pool's depth.
-    let pool_line = ModeLine::of(&pool);
+    let (mx, mz, slope) = pooled_line(pool.iter().map(|&k| &modes[k].line));
+    let pool_at = |x: f64| mz + slope * (x - mx);
     let mut rows: Vec<Row> = pool
         .iter()
-        .filter_map(|p| line.row(p, p[2] - pool_line.at(p[0])))
+        .flat_map(|&k| &rays[k])
+        .map(|r| Row {
+            across: r.across,
+            range: r.range,
+            y: r.point[1],
+            dz: r.point[2] - pool_at(r.point[0]),
+        })
         .collect();
-    if rows.len() < MIN_CROSS_SECTION_POINTS {
-        return None;
-    }
     rows.sort_by(|a, b| a.across.total_cmp(&b.across));
     let n_groups = (rows.len() as f64).sqrt() as usize;
     let groups: Vec<Group> = (0..n_groups)
@@ -743,11 +780,20 @@ fn cross_section_floor(
             (n + g.n, s + g.dz_mean * g.n as f64)
         });
     let level = sum / n as f64;
-    let floor = pool_line.at(own.x_m) + level;
+    let floor = pool_at(own.x_m) + level;
     (n >= params.min_support.max(1) && level < -3.0 * se(n) && floor < own.z_m).then_some(floor)
 }
 
-/// A mode point in [`cross_section_floor`].
+/// A mode point whose ray may run mostly across the path ([`ScanLine::ray`]).
+pub(crate) struct Ray {
+    /// Ray angle in the cross-section, radians from up toward +y.
+    across: f64,
+    /// Distance from the scan line in the cross-section.
+    range: f64,
+    point: V3,
+}
+
+/// A pooled point in [`cross_section_floor`].
 struct Row {
     /// Ray angle in the cross-section, radians from up toward +y.
     across: f64,
@@ -814,15 +860,23 @@ impl<'a> ScanLine<'a> {
         })
     }
 
-    /// `p`'s row in the cross-section through it, `dz` its height above its mode's line, when
-    /// the scanner's ray to it may lie mostly across the path. A beam that reaches at most
-    /// `e` above (below) the horizontal sees a point `dz` above (below) it and `dy` beside the
-    /// path from at least `sqrt((dz / tan e)^2 - dy^2)` along the path; when that exceeds the
-    /// ray's run across the path, `hypot(dy, dz)`, most of the point's range noise lies along
-    /// the path, where the bins and the parts' ends select the points, and the cross-section
-    /// does not describe it (a bumper straight above the path is seen from a metre or more
-    /// ahead or behind it). `None` for such a point.
-    fn row(&self, p: &V3, dz: f64) -> Option<Row> {
+    /// Each mode's points' [`Self::ray`]s.
+    fn rays(&self, modes: &[BinMode]) -> Vec<Vec<Ray>> {
+        modes
+            .iter()
+            .map(|m| m.points.iter().filter_map(|p| self.ray(p)).collect())
+            .collect()
+    }
+
+    /// `p`'s ray in the cross-section through it, when the scanner's ray to it may lie mostly
+    /// across the path. A beam that reaches at most `e` above (below) the horizontal sees a
+    /// point `dz` above (below) it and `dy` beside the path from at least
+    /// `sqrt((dz / tan e)^2 - dy^2)` along the path; when that exceeds the ray's run across the
+    /// path, `hypot(dy, dz)`, most of the point's range noise lies along the path, where the
+    /// bins and the parts' ends select the points, and the cross-section does not describe it
+    /// (a bumper straight above the path is seen from a metre or more ahead or behind it).
+    /// `None` for such a point.
+    fn ray(&self, p: &V3) -> Option<Ray> {
         let (y, z) = self.at(p[0]);
         let (dy, dh) = (p[1] - y, p[2] - z);
         let tan_e = if dh >= 0.0 {
@@ -839,11 +893,10 @@ impl<'a> ScanLine<'a> {
             (dh / tan_e).powi(2) - dy * dy
         };
         let across_sq = dy * dy + dh * dh;
-        (along_sq <= across_sq).then(|| Row {
+        (along_sq <= across_sq).then(|| Ray {
             across: dy.atan2(dh),
             range: across_sq.sqrt(),
-            y: p[1],
-            dz,
+            point: *p,
         })
     }
 
@@ -1253,6 +1306,17 @@ mod tests {
         assert!((unknown - mode_mean).abs() < 5e-4, "{unknown} {mode_mean}");
     }
 
+    /// [`cross_section_floor`] of mode `i`, the rays taken from `params`' scan line.
+    fn floor_of(
+        modes: &[BinMode],
+        i: usize,
+        params: EnvelopeParams,
+        extent_y_m: (f64, f64),
+    ) -> Option<f64> {
+        let rays = params.scan_line.unwrap().rays(modes);
+        cross_section_floor(modes, &rays, i, params, extent_y_m)
+    }
+
     /// `height(y)` over x 0..0.1 m and `y` in `ys`, points 1 mm x 5 mm apart, each moved along
     /// its ray from a sensor 0.10 m up at `sensor_y` by range noise `sigma_m`.
     fn scanned_beside(
@@ -1288,7 +1352,7 @@ mod tests {
             modes.sort_by(|a, b| a.start_m.total_cmp(&b.start_m));
             for i in 0..modes.len() {
                 assert_eq!(
-                    cross_section_floor(&modes, i, params, y_range(&pts)),
+                    floor_of(&modes, i, params, y_range(&pts)),
                     None,
                     "seed {seed} bin {i}"
                 );
@@ -1316,7 +1380,7 @@ mod tests {
         // The groups within three standard errors of the lowest are pooled with it: on a tilt
         // they reach a little way up it.
         for i in 0..modes.len() {
-            let floor = cross_section_floor(&modes, i, params, extent);
+            let floor = floor_of(&modes, i, params, extent);
             assert!(floor.is_some_and(|z| z > 0.2495 && z < 0.252), "{floor:?}");
         }
         // With the band's edge at the lower edge, the lowest groups lost the returns that noise
@@ -1326,7 +1390,7 @@ mod tests {
         bin_modes(&pts, params, &mut modes, &mut Envelope::default());
         modes.sort_by(|a, b| a.start_m.total_cmp(&b.start_m));
         for i in 0..modes.len() {
-            let floor = cross_section_floor(&modes, i, params, y_range(&pts));
+            let floor = floor_of(&modes, i, params, y_range(&pts));
             assert!(floor.is_none_or(|z| z > 0.2505), "{floor:?}");
         }
     }
