@@ -1306,6 +1306,42 @@ mod tests {
         assert!((unknown - mode_mean).abs() < 5e-4, "{unknown} {mode_mean}");
     }
 
+    #[test]
+    fn a_round_parts_bins_share_its_lowest_line() {
+        // Along the pipe seen from its side, each bin's mode mean scatters with its own mix of
+        // returns; the lowest line is the pool's, so the samples scatter less than the modes.
+        let pts = pipe_seen_by_a_passing_sensor(0.42, 0.01, 5);
+        let params = EnvelopeParams {
+            scan_line: vlp16_line(&PIPE_SENSOR_PATH),
+            ..NOISE_3MM
+        };
+        let sd = |v: &[f64]| {
+            let m = v.iter().sum::<f64>() / v.len() as f64;
+            (v.iter().map(|z| (z - m).powi(2)).sum::<f64>() / (v.len() - 1) as f64).sqrt()
+        };
+        // Away from the pipe's ends, where the pool is whole.
+        let inner = |x: f64| (-0.27..-0.03).contains(&x);
+        let mut modes = Vec::new();
+        bin_modes(&pts, params, &mut modes, &mut Envelope::default());
+        let mode_means: Vec<f64> = modes
+            .iter()
+            .filter(|m| inner(m.line.x_m))
+            .map(|m| m.line.z_m)
+            .collect();
+        let samples: Vec<f64> = lower_envelope(&pts, params)
+            .samples
+            .iter()
+            .filter(|s| inner(s.x_m))
+            .map(|s| s.z_m)
+            .collect();
+        assert!(
+            sd(&samples) < 0.7 * sd(&mode_means),
+            "samples' sd {}, modes' sd {}",
+            sd(&samples),
+            sd(&mode_means)
+        );
+    }
+
     /// [`cross_section_floor`] of mode `i`, the rays taken from `params`' scan line.
     fn floor_of(
         modes: &[BinMode],
