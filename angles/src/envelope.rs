@@ -785,7 +785,7 @@ fn cross_section_floor(
 }
 
 /// A mode point whose ray may run mostly across the path ([`ScanLine::ray`]).
-pub(crate) struct Ray {
+struct Ray {
     /// Ray angle in the cross-section, radians from up toward +y.
     across: f64,
     /// Distance from the scan line in the cross-section.
@@ -800,7 +800,7 @@ struct Row {
     /// Distance from the scan line in the cross-section.
     range: f64,
     y: f64,
-    /// Height above its own mode's line.
+    /// Height above the pool's line.
     dz: f64,
 }
 
