@@ -1342,6 +1342,14 @@ mod tests {
         );
     }
 
+    /// The modes of `pts`, sorted by x as [`lower_envelope`] sorts them.
+    fn sorted_modes(pts: &[V3], params: EnvelopeParams) -> Vec<BinMode> {
+        let mut modes = Vec::new();
+        bin_modes(pts, params, &mut modes, &mut Envelope::default());
+        modes.sort_by(|a, b| a.start_m.total_cmp(&b.start_m));
+        modes
+    }
+
     /// [`cross_section_floor`] of mode `i`, the rays taken from `params`' scan line.
     fn floor_of(
         modes: &[BinMode],
@@ -1383,9 +1391,7 @@ mod tests {
         };
         for seed in 0..4 {
             let pts = scanned_beside(|_| 0.25, -60..0, 0.5, 0.01, seed);
-            let mut modes = Vec::new();
-            bin_modes(&pts, params, &mut modes, &mut Envelope::default());
-            modes.sort_by(|a, b| a.start_m.total_cmp(&b.start_m));
+            let modes = sorted_modes(&pts, params);
             for i in 0..modes.len() {
                 assert_eq!(
                     floor_of(&modes, i, params, y_range(&pts)),
@@ -1400,7 +1406,7 @@ mod tests {
     fn a_surface_tilted_across_the_path_reads_its_lower_edge() {
         // 30 cm wide, rising 6 mm from its lower edge (0.25 m, 0.8 m beside the path) to its
         // upper one: the side view's lowest line is the lower edge; the modes' means lie 3 mm
-        // up. The band goes on beyond the lower edge (a point far out at the edge's height).
+        // up. The band reaches 30 cm beyond the lower edge (`extent`).
         let path = path_beside(0.5);
         let params = EnvelopeParams {
             scan_line: vlp16_line(&path),
@@ -1422,9 +1428,7 @@ mod tests {
         // With the band's edge at the lower edge, the lowest groups lost the returns that noise
         // carried out of the band and are left out: the floor reads higher.
         pts.retain(|p| p[1] >= -0.3);
-        let mut modes = Vec::new();
-        bin_modes(&pts, params, &mut modes, &mut Envelope::default());
-        modes.sort_by(|a, b| a.start_m.total_cmp(&b.start_m));
+        let modes = sorted_modes(&pts, params);
         for i in 0..modes.len() {
             let floor = floor_of(&modes, i, params, y_range(&pts));
             assert!(floor.is_none_or(|z| z > 0.2505), "{floor:?}");
