@@ -16,7 +16,7 @@ use angles::{
     AngleFinding, AnglesConfig, AnglesResult, Band, ExclusionBox, Quantity, Uncertainty, V3, Zone,
     compute_angles, side_view_svg,
 };
-use anyhow::{Context, bail};
+use anyhow::{Context, anyhow, bail};
 use cloud_io::{ParseLimits, ReadStats, read_cloud_with};
 use serde_json::{Value, json};
 
@@ -50,6 +50,12 @@ pub struct AnglesArgs {
     /// to a tyre count as the tyre's (default: 3 noise sigma).
     #[arg(long, value_name = "M")]
     pub range_accuracy: Option<f64>,
+    /// A robot run's `scan.toml` (beside its `cloud.ply`): the lidar's path and the trajectory's
+    /// error the robot's service gave the calculator. With it the calculator checks the scan's
+    /// coverage and the lidar's view, and takes the returns' rays, as the robot did (a VLP-16;
+    /// `--range-accuracy` defaults to its 0.03 m).
+    #[arg(long, value_name = "SCAN_TOML")]
+    pub scan: Option<PathBuf>,
     /// Print one JSON object instead of the table.
     #[arg(long)]
     pub json: bool,
@@ -187,7 +193,7 @@ fn config_from(args: &AnglesArgs) -> anyhow::Result<AnglesConfig> {
         .enumerate()
         .map(|(i, s)| parse_box(s).with_context(|| format!("--exclude #{}", i + 1)))
         .collect::<anyhow::Result<Vec<_>>>()?;
-    Ok(AnglesConfig {
+    let config = AnglesConfig {
         front_is_positive_x,
         zone,
         band: parse_band(&args.band)?,
@@ -196,6 +202,18 @@ fn config_from(args: &AnglesArgs) -> anyhow::Result<AnglesConfig> {
         noise_m: args.noise,
         range_accuracy_m: args.range_accuracy,
         ..AnglesConfig::default()
+    };
+    let Some(path) = &args.scan else {
+        return Ok(config);
+    };
+    let scan =
+        onboard::scan_file::ScanRecord::read_file(path).map_err(|e| anyhow!("--scan: {e}"))?;
+    Ok(AnglesConfig {
+        scan_path_in_cloud: scan.path_m.iter().map(|&p| p.into()).collect(),
+        trajectory_x_sigma_per_m: scan.trajectory_x_sigma_per_m,
+        scanner_view: Some(angles::ScannerView::VLP16),
+        range_accuracy_m: args.range_accuracy.or(Some(vlp16::RANGE_ACCURACY_M)),
+        ..config
     })
 }
 

@@ -254,3 +254,43 @@ fn an_undetermined_angle_prints_the_table_and_fails() {
     );
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// `--scan`: a run's `scan.toml` gives the calculator the robot's path. A path under the whole
+/// box gives its angles; one that stops short of the rear axle is refused with the coverage
+/// reason; a broken file is refused, naming it. Both refusals exit non-zero.
+#[test]
+fn a_scan_file_gives_the_path_and_a_broken_one_is_named() {
+    let (dir, ply) = box_ply("angles-cli-scan");
+    let scan = dir.join("scan.toml");
+    let run = |scan_text: &str| {
+        std::fs::write(&scan, scan_text).unwrap();
+        Command::new(env!("CARGO_BIN_EXE_passangle"))
+            .args(["angles", "--json", "--standard", "none", "--scan"])
+            .arg(&scan)
+            .arg(&ply)
+            .output()
+            .unwrap()
+    };
+    let path_to = |x_end: f64| onboard::scan_file::ScanRecord {
+        trajectory_x_sigma_per_m: 0.005,
+        path_m: (0..=60)
+            .map(|i| [2.8 + (x_end - 2.8) * f64::from(i) / 60.0, 0.0, 0.12])
+            .collect(),
+    };
+    let out = run(&path_to(-2.8).to_toml());
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert!(v["approach_deg"].as_f64().is_some() && v["departure_deg"].as_f64().is_some());
+    let out = run(&path_to(-0.2).to_toml());
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("was not covered"), "{err}");
+    let out = run("trajectory_x_sigma_per_m = 0.005\npath_m = [[1.0, 0.0]]\n");
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("--scan") && err.contains("scan.toml"), "{err}");
+}

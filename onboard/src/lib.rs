@@ -14,6 +14,7 @@ pub mod process;
 pub mod recorder;
 pub mod report;
 pub mod run;
+pub mod scan_file;
 #[cfg(feature = "service")]
 pub mod service;
 pub mod signed;

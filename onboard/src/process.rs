@@ -29,6 +29,7 @@ use serde::Deserialize;
 
 use crate::mcu_clock::McuClockMap;
 use crate::recorder::{Intrinsics, Recording};
+use crate::scan_file::ScanRecord;
 use crate::signed::Signer;
 use angles::profiles::{ProfileResult, Standard, compute_profiles};
 use angles::{self, AnglesConfig, AnglesResult, Zone, compute_angles, side_view_svg};
@@ -52,7 +53,7 @@ pub struct ProcessInput {
     pub travelled_m: f32,
     /// The drive ended early.
     pub short_run: bool,
-    /// Signs `cloud.ply` and `side_view.svg` (`signing.key-file`).
+    /// Signs `cloud.ply`, `side_view.svg` and `scan.toml` (`signing.key-file`).
     pub signer: Signer,
 }
 
@@ -71,6 +72,9 @@ pub struct Processed {
     /// Every configured standard's quantities from the same cloud, for `result.json` (not sent
     /// over the radio).
     pub profiles: Vec<ProfileRecord>,
+    /// What the calculator had besides the cloud (the lidar's path, the trajectory's error), for
+    /// `scan.toml`; `None` where the processor gave it none.
+    pub scan: Option<ScanRecord>,
 }
 
 /// Builds the cloud and computes the angles of a recorded run (the service's default is
@@ -804,6 +808,10 @@ fn angles_of(
     zone: WireZone,
     short_run: bool,
 ) -> Result<Processed, String> {
+    let record = ScanRecord {
+        trajectory_x_sigma_per_m: scan.x_sigma_per_m,
+        path_m: scan.path.iter().map(|&p| p.into()).collect(),
+    };
     let angles_config = AnglesConfig {
         front_is_positive_x: !config.enter_at_front,
         zone: match zone {
@@ -845,6 +853,7 @@ fn angles_of(
         svg,
         angles: Some(Box::new(found)),
         profiles,
+        scan: Some(record),
     })
 }
 

@@ -4,8 +4,9 @@
 //!
 //! The results are the run's recorded (and, with a device key, signed) `result.json`; a quantity
 //! it did not measure shows its reason, never a number. The witnesses, tyre fits, side view and
-//! floor flatness come from running the calculator again on the run's `cloud.ply` with the
-//! service's settings; where that recomputation differs from `result.json`, the report says so.
+//! floor flatness come from running the calculator again on the run's `cloud.ply` and
+//! `scan.toml` (the scan path; [`crate::scan_file`]) with the service's settings; where that
+//! recomputation differs from `result.json`, the report says so.
 //! Provenance: robot key id, software version and git hash, the config's hash and the SHA-256 of
 //! every file of the run, with each signature's status when trusted keys are given.
 //!
@@ -28,6 +29,7 @@ use serde::Deserialize;
 use sha2::{Digest, Sha256};
 
 use crate::recorder::{RecordedOutcome, Recording, ResultRecord, RunMeta};
+use crate::scan_file::ScanRecord;
 use crate::signed::{self, Check};
 
 /// The recomputed angles may differ from `result.json` by this much before the report says so
@@ -164,6 +166,9 @@ pub struct Recomputed {
     pub points_m: Vec<V3>,
     /// The calculator's settings used.
     pub config: AnglesConfig,
+    /// The run's `scan.toml` gave the scan path and the trajectory's error (as the service
+    /// had them); false: the run has none, and the recomputation went without.
+    pub scan_known: bool,
 }
 
 /// Everything the report shows, gathered from the run directory.
@@ -355,8 +360,12 @@ pub fn gather(inputs: &Inputs<'_>) -> anyhow::Result<Report> {
         _ if !recorded.is_empty() => (recorded, "as recorded by the robot in result.json"),
         Ok(rc) => (
             compute_profiles(&rc.points_m, &rc.config, None, &Standard::ALL),
-            "recomputed from cloud.ply (this result.json predates the profiles; without the \
-             scan path, so the coverage check is the cloud's own)",
+            if rc.scan_known {
+                "recomputed from cloud.ply and scan.toml (this result.json predates the profiles)"
+            } else {
+                "recomputed from cloud.ply (this result.json predates the profiles; without the \
+                 scan path, so the coverage check is the cloud's own)"
+            },
         ),
         Err(_) => (Vec::new(), "not available"),
     };
@@ -417,14 +426,15 @@ pub fn write_on_robot(
     Ok(report.id)
 }
 
-/// The calculator on `cloud.ply` with the service's settings (`onboard::process`), less the scan
-/// path, which the cloud file does not carry.
+/// The calculator on `cloud.ply` with the service's settings (`onboard::process`) and, where the
+/// run has its `scan.toml`, the scan path and the trajectory's error the service gave it.
 fn recompute(dir: &Path, meta: &RunMeta, enter_at_front: bool) -> Result<Recomputed, String> {
     let path = dir.join("cloud.ply");
     if !path.exists() {
         return Err("the run has no cloud.ply".to_owned());
     }
     let (cloud, _) = read_cloud(&path).map_err(|e| format!("cloud.ply: {e:#}"))?;
+    let scan = ScanRecord::read(dir)?;
     let config = AnglesConfig {
         front_is_positive_x: !enter_at_front,
         zone: if meta.zone == "axle" {
@@ -434,6 +444,11 @@ fn recompute(dir: &Path, meta: &RunMeta, enter_at_front: bool) -> Result<Recompu
         },
         range_accuracy_m: Some(vlp16::RANGE_ACCURACY_M),
         scanner_view: Some(angles::ScannerView::VLP16),
+        scan_path_in_cloud: scan
+            .as_ref()
+            .map(|s| s.path_m.iter().map(|&p| V3::from(p)).collect())
+            .unwrap_or_default(),
+        trajectory_x_sigma_per_m: scan.as_ref().map_or(0.0, |s| s.trajectory_x_sigma_per_m),
         ..AnglesConfig::default()
     };
     let points_m: Vec<V3> = cloud.points_m.into_iter().map(V3::from).collect();
@@ -442,6 +457,7 @@ fn recompute(dir: &Path, meta: &RunMeta, enter_at_front: bool) -> Result<Recompu
         angles,
         points_m,
         config,
+        scan_known: scan.is_some(),
     })
 }
 
@@ -1062,7 +1078,7 @@ fn recomputed_sections(h: &mut String, r: &Report) {
     h.push_str(
         "<section class=\"pagebreak\">\n<h2>Side view</h2>\n<p class=\"small\">The witnesses, \
          tyres, side view and floor below come from running the calculator again on the run's \
-         cloud.ply with the service's settings.</p>\n",
+         cloud.ply (and scan.toml, where the run has it) with the service's settings.</p>\n",
     );
     if let Some(res) = &r.result {
         let diff = differences(res, a);
@@ -1074,13 +1090,19 @@ fn recomputed_sections(h: &mut String, r: &Report) {
                 CLEARANCE_TOLERANCE_M * 1e3
             );
         } else {
+            let why = if rc.scan_known {
+                "It had the run's cloud.ply and scan.toml, as the service did: a difference \
+                 means another calculator version, or files changed since the run."
+            } else {
+                "The service passes the robot's scan path to the calculator (which faces it saw \
+                 across its path, the returns' rays, and the trajectory's error along it); this \
+                 run has no scan.toml to carry it, so the recomputation can pick another witness \
+                 or find what the service left out."
+            };
             let _ = writeln!(
                 h,
                 "<div class=\"note\"><b>The recomputation differs from result.json</b>: {}. \
-                 The service passes the robot's scan path to the calculator (which faces it saw \
-                 across its path, and the trajectory's error along it); cloud.ply does not carry \
-                 that path, so the recomputation can pick another witness or find what the \
-                 service left out. The results above are the recorded ones.</div>",
+                 {why} The results above are the recorded ones.</div>",
                 esc(&diff.join("; "))
             );
         }

@@ -412,6 +412,15 @@ fn complete(
     ) {
         errors.push(e.to_string());
     }
+    if let Some(scan) = &processed.scan
+        && let Err(e) = signed::write_signed(
+            &run_dir.join(crate::scan_file::SCAN_FILE),
+            scan.to_toml().as_bytes(),
+            &input.signer,
+        )
+    {
+        errors.push(e.to_string());
+    }
     let _ = tx.send(WorkerMsg::Saved(errors));
 }
 

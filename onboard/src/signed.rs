@@ -72,12 +72,13 @@ pub fn write_signed(path: &Path, bytes: &[u8], signer: &Signer) -> Result<(), Re
 
 /// The whole files a robot with a device key signs in every run directory: in a directory,
 /// one of these without its `.sig` is reported as unsigned.
-pub const SIGNED_IN_A_RUN: [&str; 7] = [
+pub const SIGNED_IN_A_RUN: [&str; 8] = [
     "config.toml",
     "meta.json",
     "result.json",
     "cloud.ply",
     "side_view.svg",
+    crate::scan_file::SCAN_FILE,
     crate::report::LAB_FILE,
     crate::report::REPORT_FILE,
 ];

@@ -269,6 +269,11 @@ fn check_report(files: &[(String, Vec<u8>)], root: &Path) {
     assert!(html.contains("Written by the robot when the run closed and signed"));
     assert!(html.contains("every signed file verifies"));
     assert!(!html.contains("not available"), "a section without data");
+    // With the run's scan.toml the recomputation sees what the service saw.
+    assert!(
+        html.contains("The recomputation agrees with result.json"),
+        "the recomputation differs from the recorded result"
+    );
     let path = root.join("demo-report.html");
     std::fs::write(&path, &html).unwrap();
     browser::screenshot(&path, root);
@@ -292,6 +297,7 @@ fn check_signed(files: &[(String, Vec<u8>)]) {
         "meta.json",
         "result.json",
         "cloud.ply",
+        "scan.toml",
         "side_view.svg",
         "report.html",
     ] {

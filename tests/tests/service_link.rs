@@ -141,6 +141,7 @@ impl Processor for CountingProcessor {
             svg: "<svg/>".into(),
             angles: None,
             profiles: vec![profile()],
+            scan: None,
         })
     }
 }
