@@ -660,10 +660,10 @@ fn slope_of(n: usize, sxx: f64, sxz: f64) -> f64 {
 /// The least-squares line `(x_mean, z_mean, slope)` through all the points of `lines`, from
 /// their sums (no point is visited).
 fn pooled_line<'a>(lines: impl Iterator<Item = &'a ModeLine> + Clone) -> (f64, f64, f64) {
-    let n: usize = lines.clone().map(|l| l.n).sum();
-    let weight = |l: &ModeLine| l.n as f64 / n.max(1) as f64;
-    let mx: f64 = lines.clone().map(|l| weight(l) * l.x_m).sum();
-    let mz: f64 = lines.clone().map(|l| weight(l) * l.z_m).sum();
+    let (n, sx, sz) = lines.clone().fold((0, 0.0, 0.0), |(n, sx, sz), l| {
+        (n + l.n, sx + l.n as f64 * l.x_m, sz + l.n as f64 * l.z_m)
+    });
+    let (mx, mz) = (sx / n.max(1) as f64, sz / n.max(1) as f64);
     let (sxx, sxz) = lines.fold((0.0, 0.0), |(sxx, sxz), l| {
         let (dx, dz) = (l.x_m - mx, l.z_m - mz);
         (
@@ -741,14 +741,12 @@ fn cross_section_floor(
     let mut rows: Vec<Row> = pool
         .iter()
         .flat_map(|&k| &rays[k])
-        .map(|r| Row {
-            across: r.across,
-            range: r.range,
-            y: r.point[1],
-            dz: r.point[2] - pool_at(r.point[0]),
+        .map(|ray| Row {
+            ray,
+            dz: ray.point[2] - pool_at(ray.point[0]),
         })
         .collect();
-    rows.sort_by(|a, b| a.across.total_cmp(&b.across));
+    rows.sort_by(|a, b| a.ray.across.total_cmp(&b.ray.across));
     let n_groups = (rows.len() as f64).sqrt() as usize;
     let groups: Vec<Group> = (0..n_groups)
         .map(|g| Group::of(&rows[g * rows.len() / n_groups..(g + 1) * rows.len() / n_groups]))
@@ -794,12 +792,8 @@ struct Ray {
 }
 
 /// A pooled point in [`cross_section_floor`].
-struct Row {
-    /// Ray angle in the cross-section, radians from up toward +y.
-    across: f64,
-    /// Distance from the scan line in the cross-section.
-    range: f64,
-    y: f64,
+struct Row<'a> {
+    ray: &'a Ray,
     /// Height above the pool's line.
     dz: f64,
 }
@@ -821,14 +815,14 @@ impl Group {
     fn of(rows: &[Row]) -> Group {
         let n = rows.len();
         let mean = |f: &dyn Fn(&Row) -> f64| rows.iter().map(f).sum::<f64>() / n as f64;
-        let (dz_mean, range_mean) = (mean(&|r| r.dz), mean(&|r| r.range));
+        let (dz_mean, range_mean) = (mean(&|r| r.dz), mean(&|r| r.ray.range));
         Group {
             n,
             dz_mean,
             dz_ss: rows.iter().map(|r| (r.dz - dz_mean).powi(2)).sum(),
-            y_mean: mean(&|r| r.y),
-            range_sd: (mean(&|r| (r.range - range_mean).powi(2))).sqrt(),
-            sin_across: mean(&|r| r.across).sin(),
+            y_mean: mean(&|r| r.ray.point[1]),
+            range_sd: (mean(&|r| (r.ray.range - range_mean).powi(2))).sqrt(),
+            sin_across: mean(&|r| r.ray.across).sin(),
         }
     }
 }
@@ -879,17 +873,18 @@ impl<'a> ScanLine<'a> {
     fn ray(&self, p: &V3) -> Option<Ray> {
         let (y, z) = self.at(p[0]);
         let (dy, dh) = (p[1] - y, p[2] - z);
-        let tan_e = if dh >= 0.0 {
-            self.tan_elevation.1
-        } else {
-            self.tan_elevation.0
-        };
-        if tan_e * dh <= 0.0 && dh != 0.0 {
-            return None;
-        }
         let along_sq = if dh == 0.0 {
             0.0
         } else {
+            let tan_e = if dh > 0.0 {
+                self.tan_elevation.1
+            } else {
+                self.tan_elevation.0
+            };
+            // No beam reaches that far up (down).
+            if tan_e * dh <= 0.0 {
+                return None;
+            }
             (dh / tan_e).powi(2) - dy * dy
         };
         let across_sq = dy * dy + dh * dh;
@@ -1258,6 +1253,14 @@ mod tests {
         ScanLine::new(path, (-e, e))
     }
 
+    /// [`NOISE_3MM`] seen by a VLP-16 along `path`.
+    fn seen_along(path: &[V3]) -> EnvelopeParams<'_> {
+        EnvelopeParams {
+            scan_line: vlp16_line(path),
+            ..NOISE_3MM
+        }
+    }
+
     /// A sensor path 0.10 m up, `y_m` beside the vehicle's centreline.
     fn path_beside(y_m: f64) -> [V3; 2] {
         [V3::new(-2.0, y_m, 0.10), V3::new(2.0, y_m, 0.10)]
@@ -1311,10 +1314,7 @@ mod tests {
         // Along the pipe seen from its side, each bin's mode mean scatters with its own mix of
         // returns; the lowest line is the pool's, so the samples scatter less than the modes.
         let pts = pipe_seen_by_a_passing_sensor(0.42, 0.01, 5);
-        let params = EnvelopeParams {
-            scan_line: vlp16_line(&PIPE_SENSOR_PATH),
-            ..NOISE_3MM
-        };
+        let params = seen_along(&PIPE_SENSOR_PATH);
         let sd = |v: &[f64]| {
             let m = v.iter().sum::<f64>() / v.len() as f64;
             (v.iter().map(|z| (z - m).powi(2)).sum::<f64>() / (v.len() - 1) as f64).sqrt()
@@ -1385,10 +1385,7 @@ mod tests {
     #[test]
     fn a_flat_surface_keeps_the_mean_of_its_modes() {
         let path = path_beside(0.5);
-        let params = EnvelopeParams {
-            scan_line: vlp16_line(&path),
-            ..NOISE_3MM
-        };
+        let params = seen_along(&path);
         for seed in 0..4 {
             let pts = scanned_beside(|_| 0.25, -60..0, 0.5, 0.01, seed);
             let modes = sorted_modes(&pts, params);
@@ -1408,10 +1405,7 @@ mod tests {
         // upper one: the side view's lowest line is the lower edge; the modes' means lie 3 mm
         // up. The band reaches 30 cm beyond the lower edge (`extent`).
         let path = path_beside(0.5);
-        let params = EnvelopeParams {
-            scan_line: vlp16_line(&path),
-            ..NOISE_3MM
-        };
+        let params = seen_along(&path);
         let mut pts = scanned_beside(|y| 0.25 + 0.02 * (y + 0.3), -60..0, 0.5, 0.01, 8);
         let extent = (-0.6, 0.0);
         let mut modes = Vec::new();
@@ -1441,10 +1435,7 @@ mod tests {
         // curving up by 6 mm over their last 0.2 m (within the mode's window), seen from 0.9 m
         // beside it: the modes' means lie 0.5 mm up, the flat middle is the lowest line.
         let path = path_beside(1.5);
-        let params = EnvelopeParams {
-            scan_line: vlp16_line(&path),
-            ..NOISE_3MM
-        };
+        let params = seen_along(&path);
         let height = |y: f64| 0.30 + 0.006 * ((y.abs() - 0.4).max(0.0) / 0.2).powi(2);
         let pts = scanned_beside(height, -120..121, 1.5, 0.01, 9);
         let env = lower_envelope(&pts, params);

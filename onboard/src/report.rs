@@ -166,9 +166,14 @@ pub struct Recomputed {
     pub points_m: Vec<V3>,
     /// The calculator's settings used.
     pub config: AnglesConfig,
-    /// The run's `scan.toml` gave the scan path and the trajectory's error (as the service
-    /// had them); false: the run has none, and the recomputation went without.
-    pub scan_known: bool,
+}
+
+impl Recomputed {
+    /// The recomputation had the scan path (from the run's `scan.toml`, as the service had it);
+    /// false: the run has none, and the recomputation went without.
+    pub fn scan_known(&self) -> bool {
+        !self.config.scan_path_in_cloud.is_empty()
+    }
 }
 
 /// Everything the report shows, gathered from the run directory.
@@ -360,7 +365,7 @@ pub fn gather(inputs: &Inputs<'_>) -> anyhow::Result<Report> {
         _ if !recorded.is_empty() => (recorded, "as recorded by the robot in result.json"),
         Ok(rc) => (
             compute_profiles(&rc.points_m, &rc.config, None, &Standard::ALL),
-            if rc.scan_known {
+            if rc.scan_known() {
                 "recomputed from cloud.ply and scan.toml (this result.json predates the profiles)"
             } else {
                 "recomputed from cloud.ply (this result.json predates the profiles; without the \
@@ -457,7 +462,6 @@ fn recompute(dir: &Path, meta: &RunMeta, enter_at_front: bool) -> Result<Recompu
         angles,
         points_m,
         config,
-        scan_known: scan.is_some(),
     })
 }
 
@@ -1090,7 +1094,7 @@ fn recomputed_sections(h: &mut String, r: &Report) {
                 CLEARANCE_TOLERANCE_M * 1e3
             );
         } else {
-            let why = if rc.scan_known {
+            let why = if rc.scan_known() {
                 "It had the run's cloud.ply and scan.toml, as the service did: a difference \
                  means another calculator version, or files changed since the run."
             } else {
